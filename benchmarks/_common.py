@@ -1,0 +1,32 @@
+"""Helpers shared by the benchmarks: pin to one core, time a loop, print a figure."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+
+
+def pin_to_one_core() -> None:
+    """Run on a single core, as the targets are stated 'on one core'."""
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+
+
+def best_rate(run: Callable[[], int], repeats: int = 5) -> float:
+    """Best of ``repeats`` runs of ``run`` (which returns its work count), per second."""
+    best = 0.0
+    for _ in range(repeats):
+        start = time.perf_counter()
+        count = run()
+        best = max(best, count / (time.perf_counter() - start))
+    return best
+
+
+def report(name: str, value: float, target: float, unit: str) -> None:
+    """Print a human line and a machine-readable ``name: value`` line."""
+    verdict = "meets" if value >= target else "BELOW"
+    print(
+        f"{name}: {value:,.0f} {unit} (target {target:,.0f}, ratio {value / target:.2f}, {verdict})"
+    )
+    print(f"{name}: {value:.0f}")

@@ -1,0 +1,51 @@
+"""Physics throughput: batched RK4 steps/s (4,096 vehicles) and single-vehicle steps/s.
+
+Targets (issue 2), one core: ≥ 5,000,000 vehicle steps/s batched, ≥ 100,000 steps/s for a
+single vehicle through the Python API (``Fleet.step``).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import best_rate, pin_to_one_core, report
+
+from quadsitl.physics import PAPER, Fleet
+
+BATCH = 4096
+
+
+def main() -> None:
+    pin_to_one_core()
+    rng = np.random.default_rng(0)
+    hover = PAPER.hover_rotor_speed
+
+    batch = Fleet(BATCH, dt=0.01, ground_z=-np.inf)
+    batch_cmd = hover + rng.normal(0, 5, (BATCH, 4))
+    batch.step(batch_cmd)  # compile / warm up
+
+    def run_batch() -> int:
+        batch.reset()
+        batch.step(batch_cmd, n_substeps=50)
+        return 50 * BATCH
+
+    single = Fleet(1, dt=0.01, ground_z=-np.inf)
+    single_cmd = np.full(4, hover)
+    single.step(single_cmd)
+
+    def run_single() -> int:
+        single.reset()
+        for _ in range(20_000):
+            single.step(single_cmd)
+        return 20_000
+
+    report("physics_batch_steps_per_s", best_rate(run_batch), 5_000_000, "vehicle RK4 steps/s")
+    report("physics_single_steps_per_s", best_rate(run_single), 100_000, "steps/s")
+
+
+if __name__ == "__main__":
+    main()

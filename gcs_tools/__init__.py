@@ -1,0 +1,1 @@
+"""Ground-station side tools: scripted flights, logging, replay."""

@@ -1,0 +1,1 @@
+"""Policy-search algorithms (GAE, PPO, TRPO), training and evaluation."""

@@ -1,0 +1,208 @@
+"""The stateful face of the physics: N vehicles that hold their arrays and step.
+
+A :class:`Fleet` only holds data and checks input; the numbers come from the compiled
+kernel (or, with ``backend="reference"``, from the numpy reference it is tested
+against). A single vehicle is a fleet of one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from quadsitl.physics import kernel, reference
+from quadsitl.physics import layout as L
+from quadsitl.physics.airframe import Airframe, get_airframe
+
+BACKENDS = ("compiled", "reference")
+
+
+def initial_state(
+    n: int,
+    position: ArrayLike = (0.0, 0.0, 0.0),
+    yaw: ArrayLike = 0.0,
+    rotor_speed: ArrayLike = 0.0,
+) -> NDArray[np.float64]:
+    """(n, 17) state at rest at ``position`` (m, ENU), heading ``yaw`` (rad, ENU).
+
+    ``rotor_speed`` (rad/s) is a scalar or one value per vehicle.
+    """
+    state = np.zeros((n, L.STATE_SIZE))
+    state[:, L.POS] = position
+    half_yaw = 0.5 * np.asarray(yaw, dtype=np.float64)
+    state[:, L.I_QW] = np.cos(half_yaw)
+    state[:, L.I_QZ] = np.sin(half_yaw)
+    state[:, L.ROTORS] = np.reshape(rotor_speed, (-1, 1))
+    return state
+
+
+class Fleet:
+    """N quadrotors stepped together by one implementation of the physics.
+
+    Args:
+        n: number of vehicles.
+        airframe: preset name, an :class:`Airframe`, or one per vehicle.
+        dt: physics step, s.
+        ground_z: world height of the ground plane, m (``-inf``: no ground).
+        backend: ``"compiled"`` (numba kernel) or ``"reference"`` (numpy).
+
+    Attributes:
+        state: (n, 17) float64, layout in :mod:`quadsitl.physics.layout`.
+        params: (n, N_PARAMS) float64, one row per vehicle.
+        contact: (n,) int8, AIRBORNE / ON_GROUND / CRASHED.
+        touchdown_speed: (n,) m/s, downward speed at each vehicle's last touchdown.
+        time: simulated time, s.
+    """
+
+    def __init__(
+        self,
+        n: int = 1,
+        airframe: str | Airframe | Sequence[str | Airframe] = "paper",
+        dt: float = 0.01,
+        ground_z: float = 0.0,
+        backend: str = "compiled",
+    ) -> None:
+        if not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"n must be a positive integer, got {n!r}")
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        if backend not in BACKENDS:
+            raise ValueError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
+        if isinstance(airframe, (str, Airframe)):
+            airframes = [get_airframe(airframe)] * n
+        else:
+            airframes = [get_airframe(a) for a in airframe]
+            if len(airframes) != n:
+                raise ValueError(f"got {len(airframes)} airframes for {n} vehicles")
+        self.n = int(n)
+        self.dt = float(dt)
+        self.backend = backend
+        self.airframes = airframes
+        self.params = np.stack([a.to_params(ground_z) for a in airframes])
+        self.state = initial_state(self.n, rotor_speed=self.hover_rotor_speed)
+        self.contact = np.zeros(self.n, dtype=np.int8)
+        self.touchdown_speed = np.zeros(self.n)
+        self.time = 0.0
+
+    # --- named views of the state ---------------------------------------------------
+    @property
+    def position(self) -> NDArray[np.float64]:
+        """(n, 3) m, world ENU (a view: writing it moves the vehicles)."""
+        return self.state[:, L.POS]
+
+    @property
+    def velocity(self) -> NDArray[np.float64]:
+        """(n, 3) m/s, world ENU."""
+        return self.state[:, L.VEL]
+
+    @property
+    def quaternion(self) -> NDArray[np.float64]:
+        """(n, 4) (w, x, y, z), body FLU -> world ENU."""
+        return self.state[:, L.QUAT]
+
+    @property
+    def body_rates(self) -> NDArray[np.float64]:
+        """(n, 3) rad/s, body FLU."""
+        return self.state[:, L.RATES]
+
+    @property
+    def rotor_speeds(self) -> NDArray[np.float64]:
+        """(n, 4) rad/s."""
+        return self.state[:, L.ROTORS]
+
+    @property
+    def hover_rotor_speed(self) -> NDArray[np.float64]:
+        """(n,) rad/s, from each vehicle's own parameters."""
+        p = self.params
+        return np.sqrt(p[:, L.P_MASS] * p[:, L.P_GRAVITY] / (L.N_ROTORS * p[:, L.P_KT]))
+
+    @property
+    def max_rotor_speed(self) -> NDArray[np.float64]:
+        """(n,) rad/s."""
+        return self.params[:, L.P_OMEGA_MAX]
+
+    # --- stepping -------------------------------------------------------------------
+    def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
+        """Advance ``n_substeps`` physics steps holding commanded rotor speeds (rad/s).
+
+        ``rotor_cmd`` has shape (n, 4) (or (4,) for a fleet of one). Commands are clipped
+        to [0, Ω_max]; NaN or inf raise ValueError and leave the state untouched.
+        """
+        cmd = np.asarray(rotor_cmd, dtype=np.float64)
+        if cmd.shape != (self.n, L.N_ROTORS):
+            if self.n == 1 and cmd.shape == (L.N_ROTORS,):
+                cmd = cmd.reshape(1, L.N_ROTORS)
+            else:
+                raise ValueError(
+                    f"rotor commands must have shape ({self.n}, {L.N_ROTORS}), got {cmd.shape}"
+                )
+        if self.backend == "compiled":
+            bad = kernel.step(
+                self.state,
+                self.params,
+                cmd,
+                self.contact,
+                self.touchdown_speed,
+                self.dt,
+                n_substeps,
+            )
+            if bad >= 0:
+                raise ValueError(f"rotor command of vehicle {bad} is not finite: {cmd[bad]}")
+        else:
+            bad_rows = ~np.isfinite(cmd).all(axis=1)
+            if bad_rows.any():
+                bad = int(np.argmax(bad_rows))
+                raise ValueError(f"rotor command of vehicle {bad} is not finite: {cmd[bad]}")
+            for _ in range(n_substeps):
+                self.state, self.contact, self.touchdown_speed = reference.step(
+                    self.state, self.params, cmd, self.contact, self.touchdown_speed, self.dt
+                )
+        self.time += n_substeps * self.dt
+
+    def reset(
+        self,
+        state: ArrayLike | None = None,
+        contact: ArrayLike | int = L.AIRBORNE,
+        mask: ArrayLike | None = None,
+    ) -> None:
+        """Overwrite the state of all vehicles, or of those selected by a boolean mask.
+
+        Resetting clears a crash. Without ``state`` the vehicles are put at rest at the
+        origin, rotors at hover speed.
+        """
+        rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
+        if rows.shape != (self.n,):
+            raise ValueError(f"mask must have shape ({self.n},), got {rows.shape}")
+        if state is None:
+            new = initial_state(int(rows.sum()), rotor_speed=self.hover_rotor_speed[rows])
+        else:
+            new = np.asarray(state, dtype=np.float64)
+            count = int(rows.sum())
+            if new.shape == (L.STATE_SIZE,):
+                new = np.broadcast_to(new, (count, L.STATE_SIZE))
+            if new.shape != (count, L.STATE_SIZE):
+                raise ValueError(
+                    f"state must have shape ({count}, {L.STATE_SIZE}), got {new.shape}"
+                )
+            if not np.isfinite(new).all():
+                raise ValueError("state must be finite")
+            norms = np.linalg.norm(new[:, L.QUAT], axis=1)
+            if np.any(norms < 1e-9):
+                raise ValueError("state quaternion must be non-zero")
+            new = new.copy()
+            new[:, L.QUAT] /= norms[:, None]
+        self.state[rows] = new
+        self.contact[rows] = contact
+        self.touchdown_speed[rows] = 0.0
+
+    def set_airframe(self, airframe: str | Airframe, mask: ArrayLike | None = None) -> None:
+        """Give the selected vehicles (default all) new physical parameters."""
+        frame = get_airframe(airframe)
+        rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
+        ground_z = self.params[rows, L.P_GROUND_Z]
+        self.params[rows] = frame.to_params()
+        self.params[rows, L.P_GROUND_Z] = ground_z
+        for i in np.flatnonzero(rows):
+            self.airframes[i] = frame

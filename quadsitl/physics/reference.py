@@ -1,0 +1,163 @@
+"""The flight dynamics of the paper in plain numpy: the readable reference.
+
+Pure functions over batched arrays (layout in :mod:`quadsitl.physics.layout`):
+``derivative(state, params, rotor_cmd) -> dstate``, a generic :func:`rk4`, and
+:func:`ground_contact`. The compiled kernel (:mod:`quadsitl.physics.kernel`) computes
+the same thing fast and is tested against this module.
+
+Model (world ENU, body FLU, paper Eqs. 1-9 with the moment signs of Σ r_i × F_i):
+
+* thrust T_i = kt Ω_i² along body +z; m v̇ = R e_z ΣT_i − kd |v| v − m g e_z
+* q̇ = ½ q ⊗ (0, ω)
+* J ω̇ = Σ r_i × T_i e_z + Σ s_i kq Ω_i² e_z − km |ω| ω − ω × J ω
+* Ω̇ = k_Ω (Ω_c − Ω), Ω_c clipped to [0, Ω_max]; the rotor speeds are integrated
+  inside RK4 together with the rigid body.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quadsitl.physics import layout as L
+
+Array = NDArray[np.float64]
+
+
+def derivative(state: Array, params: Array, rotor_cmd: Array) -> Array:
+    """Time derivative of the (N, 17) state under commanded rotor speeds (N, 4) rad/s."""
+    vel = state[:, L.VEL]  # (N, 3) m/s, world
+    qw, qx, qy, qz = state[:, L.QUAT].T  # body -> world
+    rates = state[:, L.RATES]  # (N, 3) rad/s, body
+    rotors = state[:, L.ROTORS]  # (N, 4) rad/s
+    mass = params[:, L.P_MASS]
+    inertia = params[:, L.P_INERTIA]  # (N, 3)
+
+    rotor_sq = rotors * rotors
+    thrust = params[:, [L.P_KT]] * rotor_sq  # (N, 4) N per rotor
+    total_thrust = thrust.sum(axis=1)
+    body_z_in_world = np.stack(
+        [2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx), 1 - 2 * (qx * qx + qy * qy)], axis=1
+    )
+    speed = np.linalg.norm(vel, axis=1, keepdims=True)
+    force = total_thrust[:, None] * body_z_in_world - params[:, [L.P_KD]] * speed * vel
+    accel = force / mass[:, None]
+    accel[:, 2] -= params[:, L.P_GRAVITY]
+
+    wx, wy, wz = rates.T
+    quat_dot = 0.5 * np.stack(
+        [
+            -qx * wx - qy * wy - qz * wz,
+            qw * wx + qy * wz - qz * wy,
+            qw * wy - qx * wz + qz * wx,
+            qw * wz + qx * wy - qy * wx,
+        ],
+        axis=1,
+    )
+
+    rotor_x, rotor_y = params[:, L.P_ROTOR_X], params[:, L.P_ROTOR_Y]
+    moment = np.stack(
+        [
+            (rotor_y * thrust).sum(axis=1),  # r × F with F = T e_z: (y T, −x T, 0)
+            -(rotor_x * thrust).sum(axis=1),
+            params[:, L.P_KQ] * (params[:, L.P_ROTOR_YAW_SIGN] * rotor_sq).sum(axis=1),
+        ],
+        axis=1,
+    )
+    rate_norm = np.linalg.norm(rates, axis=1, keepdims=True)
+    moment -= params[:, [L.P_KM]] * rate_norm * rates
+    moment -= np.cross(rates, inertia * rates)
+    rates_dot = moment / inertia
+
+    cmd = np.clip(rotor_cmd, 0.0, params[:, [L.P_OMEGA_MAX]])
+    rotors_dot = params[:, [L.P_MOTOR_RATE]] * (cmd - rotors)
+
+    return np.concatenate([vel, accel, quat_dot, rates_dot, rotors_dot], axis=1)
+
+
+def rk4(f: Callable[[Array], Array], y: Array, dt: float) -> Array:
+    """One classical Runge-Kutta step of ``ẏ = f(y)``."""
+    k1 = f(y)
+    k2 = f(y + 0.5 * dt * k1)
+    k3 = f(y + 0.5 * dt * k2)
+    k4 = f(y + dt * k3)
+    return y + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+def ground_contact(
+    previous: Array, state: Array, params: Array, contact: NDArray[np.int8], touchdown_speed: Array
+) -> tuple[Array, NDArray[np.int8], Array]:
+    """Resolve contact with the flat ground after an integration step.
+
+    Args:
+        previous: (N, 17) state before the step (crashed vehicles stay where they were).
+        state: (N, 17) state after the free-flight step.
+        params: (N, N_PARAMS).
+        contact: (N,) contact state before the step (layout.AIRBORNE/ON_GROUND/CRASHED).
+        touchdown_speed: (N,) m/s, vertical speed at the last touchdown.
+
+    Returns:
+        The corrected state, the new contact state and the touchdown speeds.
+        A crash is sticky: the rigid body stays put until the vehicle is reset.
+    """
+    state = state.copy()
+    contact = contact.copy()
+    touchdown_speed = touchdown_speed.copy()
+    crashed = contact == L.CRASHED
+    state[crashed, : L.ROTORS.start] = previous[crashed, : L.ROTORS.start]
+
+    qw, qx, qy, qz = state[:, L.QUAT].T
+    pz, vz = state[:, L.I_PZ], state[:, L.I_VZ]
+    ground_z = params[:, L.P_GROUND_Z]
+    cos_tilt = 1 - 2 * (qx * qx + qy * qy)  # world z of the body z axis
+    # Lowest point of each rotor disc: hub height minus radius × sin(tilt).
+    hub_z = (
+        pz[:, None]
+        + 2 * (qx * qz - qw * qy)[:, None] * params[:, L.P_ROTOR_X]
+        + 2 * (qy * qz + qw * qx)[:, None] * params[:, L.P_ROTOR_Y]
+    )
+    sin_tilt = np.sqrt(np.maximum(0.0, 1.0 - cos_tilt * cos_tilt))
+    disc_low = hub_z - (params[:, L.P_ROTOR_RADIUS] * sin_tilt)[:, None]
+    strike = (disc_low < ground_z[:, None]).any(axis=1) & ~crashed
+    rest_z = ground_z + params[:, L.P_GEAR_HEIGHT]
+    below = (pz < rest_z) & ~crashed & ~strike
+    touching = below & (contact != L.ON_GROUND)
+    speed = -vz
+    too_hard = touching & (
+        (speed > params[:, L.P_MAX_TOUCHDOWN_SPEED]) | (cos_tilt < params[:, L.P_COS_MAX_TILT])
+    )
+    touchdown_speed[touching] = np.maximum(speed[touching], 0.0)
+
+    new_crash = strike | too_hard
+    resting = below & ~too_hard
+    stopped = new_crash | resting
+    state[stopped, L.I_PZ] = np.maximum(state[stopped, L.I_PZ], rest_z[stopped])
+    state[stopped, L.VEL] = 0.0
+    state[stopped, L.RATES] = 0.0
+    yaw = np.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+    level = np.zeros((int(resting.sum()), 4))
+    level[:, 0] = np.cos(0.5 * yaw[resting])
+    level[:, 3] = np.sin(0.5 * yaw[resting])
+    state[resting, L.QUAT] = level
+
+    contact[~crashed] = L.AIRBORNE
+    contact[resting] = L.ON_GROUND
+    contact[new_crash] = L.CRASHED
+    return state, contact, touchdown_speed
+
+
+def step(
+    state: Array,
+    params: Array,
+    rotor_cmd: Array,
+    contact: NDArray[np.int8],
+    touchdown_speed: Array,
+    dt: float,
+) -> tuple[Array, NDArray[np.int8], Array]:
+    """One physics step of length ``dt`` (s): RK4, renormalised attitude, ground contact."""
+    new = rk4(lambda y: derivative(y, params, rotor_cmd), state, dt)
+    new[:, L.QUAT] /= np.linalg.norm(new[:, L.QUAT], axis=1, keepdims=True)
+    new[:, L.ROTORS] = np.clip(new[:, L.ROTORS], 0.0, params[:, [L.P_OMEGA_MAX]])
+    return ground_contact(state, new, params, contact, touchdown_speed)
