@@ -1,0 +1,71 @@
+"""The Gymnasium docstring template, filled in per task from shared pieces."""
+
+from __future__ import annotations
+
+ACTION_SPACE = """## Action Space
+``Box(-Ω_h/β, (Ω_max − Ω_h)/β, (4,), float32)`` ≈ [−6.45, 2.67] for the paper airframe:
+one raw policy output per rotor. Eq. 19 maps it to a commanded rotor speed
+``Ω_c = Ω_h + β·a`` (β = 35 rad/s by default); the box is exactly the rotor range
+[0, Ω_max], and larger actions are accepted and clipped to it, as in the paper.
+Rotor order: ``paper`` plus layout 1 front, 2 left, 3 back, 4 right."""
+
+OBSERVATION_SPACE = """## Observation Space
+``Box(-inf, inf, ({size},), float32)``, frames ENU (world) and FLU (body):
+
+| index | observation | unit |
+|---|---|---|
+| 0–2 | position relative to the task origin | m |
+| 3–5, 6–8 | sin and cos of (roll, pitch, yaw) | – |
+| 9–11 | linear velocity, body frame | m/s |
+| 12–14 | body rates | rad/s |
+| 15–18 | rotor speeds Ω/Ω_max | 0–1 |
+| 19–21 | goal position − position | m |
+| 22–24, 25–27 | sin, cos of goal attitude (level) − sin, cos of attitude | – |
+| 28–30 | goal velocity − velocity, body frame | m/s |
+| 31–33 | goal rates (0) − body rates | rad/s |
+{extra}"""
+
+ARGUMENTS = """## Arguments
+Keyword arguments of ``gymnasium.make(id, **kwargs)`` (all optional; unknown names raise
+``ValueError``): ``airframe`` ("paper" | "paper-x"), ``physics_dt`` (s, 0.01),
+``control_period`` (s, 0.05, a whole number of physics steps), ``episode_seconds``
+(default {seconds} s), ``beta`` (rad/s, 35), ``init_position_noise`` (m),
+``init_attitude_noise`` (rad), ``init_velocity_noise`` (m/s), ``init_rate_noise`` (rad/s)
+(uniform half-widths added to the start; 0 = the paper's start) and
+``param_randomization`` (``{{"mass": 0.1, ...}}``: per episode, scale each named airframe
+parameter by U(1 − f, 1 + f)). ``render_mode`` must be None.
+
+Episode-end ``info`` keys: ``outcome`` (timed_out, out_of_bounds, flipped, landed,
+landed_off_pad, crashed), ``success``, ``final_distance`` (m), ``time_within_threshold``
+(s), ``reach_time`` (s, NaN if never), ``crashed``, ``episode_return``,
+``episode_length``, ``touchdown_speed`` (m/s, NaN if airborne)."""
+
+VERSION_HISTORY = """## Version History
+* v0: the paper's task, without the original code's bugs (stale distances at reset,
+  inconsistent rotor observation, inverse Euler angles, wrong crash geometry)."""
+
+
+def env_doc(
+    title: str,
+    description: str,
+    rewards: str,
+    start: str,
+    end: str,
+    seconds: float,
+    extra: str = "",
+) -> str:
+    """Assemble one env's docstring in the Gymnasium template."""
+    size = 34 + (7 if extra else 0)
+    return "\n\n".join(
+        [
+            title,
+            f"## Description\n{description}",
+            ACTION_SPACE,
+            OBSERVATION_SPACE.format(size=size, extra=extra),
+            f"## Rewards\n{rewards}",
+            f"## Starting State\n{start}",
+            f"## Episode End\n{end}",
+            ARGUMENTS.format(seconds=seconds),
+            VERSION_HISTORY,
+        ]
+    )

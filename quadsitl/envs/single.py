@@ -1,0 +1,168 @@
+"""One Gymnasium env per task: a TaskEngine with one vehicle."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from quadsitl.envs import docs
+from quadsitl.tasks import TaskEngine, TaskOptions, get_task
+
+EQ18 = (
+    "Per step (Eq. 18, Δd = previous − current distance to the goal): "
+    "{weights} − 0.01·‖a‖²{time}{bonus}."
+)
+
+
+def make_spaces(engine: TaskEngine) -> tuple[gym.spaces.Box, gym.spaces.Box]:
+    """Single-env observation and action spaces of an engine."""
+    obs = gym.spaces.Box(-np.inf, np.inf, (engine.obs_size,), np.float32)
+    act = gym.spaces.Box(
+        np.float32(engine.action_low), np.float32(engine.action_high), (4,), np.float32
+    )
+    return obs, act
+
+
+def check_no_render(render_mode: str | None) -> None:
+    if render_mode is not None:
+        raise ValueError(f"render_mode {render_mode!r} is not supported (use None)")
+
+
+class QuadEnv(gym.Env):
+    """Base of the five task envs; subclasses set ``task_name`` and the docstring."""
+
+    metadata: dict[str, Any] = {"render_modes": [], "render_fps": 20}  # noqa: RUF012
+    task_name = "hover"
+
+    def __init__(self, render_mode: str | None = None, **options: Any) -> None:
+        check_no_render(render_mode)
+        self.render_mode = render_mode
+        self.engine = TaskEngine(get_task(self.task_name), 1, TaskOptions.from_kwargs(**options))
+        self.observation_space, self.action_space = make_spaces(self.engine)
+        self._all = np.ones(1, bool)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        if options:
+            raise ValueError(f"reset options are not supported, got {sorted(options)}")
+        if seed is not None:
+            self.engine.seed([seed])
+        self.engine.reset_envs(self._all)
+        return self.engine.obs[0].copy(), {}
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        reward, terminated, truncated = self.engine.step(action)
+        info: dict[str, Any] = {}
+        if terminated[0] or truncated[0]:
+            metrics = self.engine.episode_metrics(np.zeros(1, np.int64))
+            info = {key: value[0].item() for key, value in metrics.items()}
+        return (
+            self.engine.obs[0].copy(),
+            float(reward[0]),
+            bool(terminated[0]),
+            bool(truncated[0]),
+            info,
+        )
+
+
+class HoverEnv(QuadEnv):
+    task_name = "hover"
+    __doc__ = docs.env_doc(
+        "# QuadSITL/Hover-v0",
+        "Hold position at the origin, level, heading yaw 0 (east).",
+        EQ18.format(
+            weights="100·Δd_pos + 10·Δd_att + 0.1·Δd_vel + 0.1·Δd_rate", time=" + 10", bonus=""
+        ),
+        "At the goal (origin), level, at rest, rotors at hover speed; add noise with init_*.",
+        "Terminated when any |x|, |y|, |z| > 3 m (out_of_bounds) or |roll| or |pitch| > 90° "
+        "(flipped); truncated after 5 s (100 steps). Success: flown to the end and within "
+        "0.1 m of the goal.",
+        5.0,
+    )
+
+
+class StaticWaypointEnv(QuadEnv):
+    task_name = "static_waypoint"
+    __doc__ = docs.env_doc(
+        "# QuadSITL/StaticWaypoint-v0",
+        "Fly from the origin to the waypoint (1.5, 0, 0) m and stay there.",
+        EQ18.format(
+            weights="100·Δd_pos + 10·Δd_att + 0.1·Δd_vel + 0.1·Δd_rate",
+            time=" + 0.1",
+            bonus=" + 100 while within 0.05 m of the goal",
+        ),
+        "At the origin, level, at rest, rotors at hover speed.",
+        "Terminated more than 2 m from the goal or beyond 90° roll/pitch; truncated after 3 s "
+        "(60 steps). Success: within 0.1 m at the end.",
+        3.0,
+    )
+
+
+class RandomWaypointEnv(QuadEnv):
+    task_name = "random_waypoint"
+    __doc__ = docs.env_doc(
+        "# QuadSITL/RandomWaypoint-v0",
+        "Fly to a goal drawn each episode at radius U(1, 2.5) m in a uniformly random direction.",
+        EQ18.format(
+            weights="100·Δd_pos + 10·Δd_att + 0.1·Δd_vel + 0.1·Δd_rate",
+            time=" + 0.1",
+            bonus=" + 100 while within 0.05 m of the goal",
+        ),
+        "At the origin, level, at rest, rotors at hover speed.",
+        "Terminated more than 5 m from the goal or beyond 90° roll/pitch; truncated after "
+        "3.5 s (70 steps). Success: within 0.1 m at the end.",
+        3.5,
+    )
+
+
+class LandEnv(QuadEnv):
+    task_name = "land"
+    __doc__ = docs.env_doc(
+        "# QuadSITL/Land-v0",
+        "Descend onto the pad at the origin (ground z = 0) at about 0.5 m/s without crashing.",
+        EQ18.format(
+            weights="100·Δd_pos + 10·Δd_att + 1·Δ‖v − (0, 0, −0.5)‖ + 5·Δd_rate",
+            time="",
+            bonus="; +500 on landing on the pad (within 0.5 m), −500 on a crash (rotor "
+            "strike, touchdown faster than 1 m/s or tilted more than 15°) or a descent faster "
+            "than 2 m/s",
+        ),
+        "x, y ~ U(−1.5, 1.5) m, z = 3 m, level, at rest, rotors at hover speed.",
+        "Terminated on landing (landed / landed_off_pad), crash, more than 6 m from the pad, "
+        "or beyond 90° roll/pitch; truncated after 6 s (120 steps). Success: landed on the pad.",
+        6.0,
+    )
+
+
+class TargetFollowEnv(QuadEnv):
+    task_name = "target_follow"
+    __doc__ = docs.env_doc(
+        "# QuadSITL/TargetFollow-v0",
+        "Follow a target moving at 1 m/s along chained quadratic Bézier curves through random "
+        "points in [−2, 2]³ m, staying within 2 m of it.",
+        EQ18.format(
+            weights="100·Δd_pos + 10·Δd_att + 0.1·Δd_vel + 0.1·Δd_rate (goal = the target)",
+            time="",
+            bonus=" + 5·(1 + t/T) while within 2 m (scaled up over the episode); −500 on "
+            "leaving the region",
+        ),
+        "Vehicle and target at the origin, level, at rest, rotors at hover speed.",
+        "Terminated when any |x|, |y|, |z| > 4 m or beyond 90° roll/pitch; truncated after "
+        "25 s (500 steps). Success: flown to the end, within 2 m for ≥ 80 % of it.",
+        25.0,
+        extra="| 34–36 | target − position | m |\n| 37 | distance to the target | m |\n"
+        "| 38–40 | target velocity, world | m/s |",
+    )
+
+
+ENV_CLASSES: dict[str, type[QuadEnv]] = {
+    "Hover": HoverEnv,
+    "StaticWaypoint": StaticWaypointEnv,
+    "RandomWaypoint": RandomWaypointEnv,
+    "Land": LandEnv,
+    "TargetFollow": TargetFollowEnv,
+}

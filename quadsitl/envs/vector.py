@@ -1,0 +1,100 @@
+"""The native vector env: all N vehicles of a task stepped in one batched call.
+
+Autoreset mode NEXT_STEP, by mask: the step after an env's episode ends resets that env
+(its action is ignored, its reward is 0) and returns the first observation of the new
+episode. With ``reset(seed=s)``, env i draws from a generator seeded ``s + i``, so it
+replays exactly the single env reset with ``seed=s + i``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from quadsitl.envs.single import ENV_CLASSES, check_no_render, make_spaces
+from quadsitl.tasks import TaskEngine, TaskOptions, get_task
+
+
+class QuadVectorEnv(VectorEnv):
+    """N envs of one task; subclasses set ``task_name``."""
+
+    metadata: dict[str, Any] = {  # noqa: RUF012
+        "render_modes": [],
+        "autoreset_mode": AutoresetMode.NEXT_STEP,
+    }
+    task_name = "hover"
+
+    def __init__(self, num_envs: int = 1, render_mode: str | None = None, **options: Any) -> None:
+        check_no_render(render_mode)
+        if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        self.num_envs = int(num_envs)
+        self.render_mode = render_mode
+        self.engine = TaskEngine(
+            get_task(self.task_name), self.num_envs, TaskOptions.from_kwargs(**options)
+        )
+        self.single_observation_space, self.single_action_space = make_spaces(self.engine)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._autoreset = np.zeros(self.num_envs, bool)
+        self._all = np.ones(self.num_envs, bool)
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        if options:
+            raise ValueError(f"reset options are not supported, got {sorted(options)}")
+        if isinstance(seed, (int, np.integer)):
+            self.engine.seed([int(seed) + i for i in range(self.num_envs)])
+        elif seed is not None:
+            if len(seed) != self.num_envs:
+                raise ValueError(f"got {len(seed)} seeds for {self.num_envs} envs")
+            self.engine.seed(list(seed))
+        self.engine.reset_envs(self._all)
+        self._autoreset[:] = False
+        return self.engine.obs.copy(), {}
+
+    def step(
+        self, actions: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        resetting = self._autoreset
+        actions = self.engine.check_action(np.where(resetting[:, None], 0.0, actions))
+        reward, terminated, truncated = self.engine.step(actions, active=~resetting)
+        ended = (terminated | truncated) & ~resetting
+        info: dict[str, Any] = {}
+        if ended.any():
+            rows = np.flatnonzero(ended)
+            for key, values in self.engine.episode_metrics(rows).items():
+                column = np.zeros(self.num_envs, dtype=values.dtype)
+                column[rows] = values
+                info[key] = column
+                info[f"_{key}"] = ended.copy()
+        if resetting.any():
+            self.engine.reset_envs(resetting)
+            reward[resetting] = 0.0
+            terminated[resetting] = False
+            truncated[resetting] = False
+        self._autoreset = terminated | truncated
+        return self.engine.obs.copy(), reward, terminated, truncated, info
+
+
+def _vector_class(name: str, task_name: str) -> type[QuadVectorEnv]:
+    return type(
+        f"{name}VectorEnv",
+        (QuadVectorEnv,),
+        {"task_name": task_name, "__doc__": f"Native vector env of QuadSITL/{name}-v0."},
+    )
+
+
+VECTOR_CLASSES = {name: _vector_class(name, cls.task_name) for name, cls in ENV_CLASSES.items()}
+HoverVectorEnv = VECTOR_CLASSES["Hover"]
+StaticWaypointVectorEnv = VECTOR_CLASSES["StaticWaypoint"]
+RandomWaypointVectorEnv = VECTOR_CLASSES["RandomWaypoint"]
+LandVectorEnv = VECTOR_CLASSES["Land"]
+TargetFollowVectorEnv = VECTOR_CLASSES["TargetFollow"]
+
+__all__ = ["VECTOR_CLASSES", "QuadVectorEnv"]
