@@ -27,6 +27,7 @@ test-slow: venv
 
 bench: venv
 	$(BIN)/python benchmarks/physics.py
+	$(BIN)/python benchmarks/envs.py
 
 lint: venv
 	$(BIN)/ruff check .
