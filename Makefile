@@ -32,6 +32,7 @@ bench: venv
 lint: venv
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	$(BIN)/mypy quadsitl --ignore-missing-imports
 
 format: venv
 	$(BIN)/ruff format .

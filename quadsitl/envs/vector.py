@@ -45,7 +45,7 @@ class QuadVectorEnv(VectorEnv):
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        super().reset(seed=seed)
+        super().reset(seed=seed if isinstance(seed, (int, np.integer)) else None)
         if options:
             raise ValueError(f"reset options are not supported, got {sorted(options)}")
         if isinstance(seed, (int, np.integer)):

@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -109,7 +110,7 @@ class Airframe:
         xy = np.asarray(self.rotor_xy, dtype=np.float64) * self.arm_length
         return np.column_stack([xy, np.zeros(L.N_ROTORS)])
 
-    def replace(self, **changes: float) -> Airframe:
+    def replace(self, **changes: Any) -> Airframe:
         """A copy with some fields changed (validated). Unknown names raise ValueError."""
         known = {f.name for f in dataclasses.fields(self)}
         unknown = sorted(set(changes) - known)

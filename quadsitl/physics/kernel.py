@@ -18,15 +18,12 @@ import numpy as np
 from quadsitl.physics import layout as L
 
 BLOCK = 32  # vehicles per vectorised block (measured best of 16..256)
-_JIT = {
-    "nogil": True,
-    "cache": True,
-    "error_model": "numpy",
-    "fastmath": {"contract", "arcp", "nsz"},
-}
+# FMA contraction and reciprocal division only: no fast-math NaN/inf assumptions, so
+# the finiteness check stays exact.
+_jit = numba.njit(nogil=True, cache=True, error_model="numpy", fastmath={"contract", "arcp", "nsz"})
 
 
-@numba.njit(**_JIT)
+@_jit
 def _derivative(s, p, cmd, out, m):  # pragma: no cover - compiled
     """ṡ of the first m vehicles of a block: s (17, B), p (N_PARAMS, B), cmd (4, B)."""
     for j in range(m):
@@ -78,7 +75,7 @@ def _derivative(s, p, cmd, out, m):  # pragma: no cover - compiled
         out[L.I_WZ, j] = mz / jzz
 
 
-@numba.njit(**_JIT)
+@_jit
 def _ground_contact(prev, s, p, j, contact, touchdown_speed, n):  # pragma: no cover - compiled
     """Contact resolution of block column j (vehicle n), as reference.ground_contact."""
     if contact[n] == L.CRASHED:
@@ -125,7 +122,7 @@ def _ground_contact(prev, s, p, j, contact, touchdown_speed, n):  # pragma: no c
         contact[n] = L.CRASHED
 
 
-@numba.njit(**_JIT)
+@_jit
 def first_invalid_command(rotor_cmd):  # pragma: no cover - compiled
     """Index of the first vehicle whose (4,) command holds NaN or inf, or -1."""
     for n in range(rotor_cmd.shape[0]):
@@ -135,7 +132,7 @@ def first_invalid_command(rotor_cmd):  # pragma: no cover - compiled
     return -1
 
 
-@numba.njit(**_JIT)
+@_jit
 def _axpy(out, x, a, y, m):  # pragma: no cover - compiled
     """out = x + a·y over the first m columns."""
     for k in range(out.shape[0]):
@@ -143,7 +140,7 @@ def _axpy(out, x, a, y, m):  # pragma: no cover - compiled
             out[k, j] = x[k, j] + a * y[k, j]
 
 
-@numba.njit(**_JIT)
+@_jit
 def step(state, params, rotor_cmd, contact, touchdown_speed, dt, n_substeps):  # pragma: no cover
     """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place.
 

@@ -53,10 +53,10 @@ N_DIST = 4
 GOAL_POS = slice(0, 3)
 GOAL_VEL = slice(3, 6)
 
-_JIT = {"nogil": True, "cache": True, "error_model": "numpy"}
+_jit = numba.njit(nogil=True, cache=True, error_model="numpy")
 
 
-@numba.njit(**_JIT)
+@_jit
 def observe(state, params, goal, obs, dist, tilt):  # pragma: no cover - compiled
     """Fill obs (N, ≥34), dist (N, 4) and tilt (N,) = max(|roll|, |pitch|) in rad."""
     for n in range(state.shape[0]):
@@ -118,7 +118,7 @@ def observe(state, params, goal, obs, dist, tilt):  # pragma: no cover - compile
         dist[n, 3] = math.sqrt(rate_err)
 
 
-@numba.njit(**_JIT)
+@_jit
 def shaped_reward(
     prev_dist, dist, action, weights, action_weight, time_reward, reward
 ):  # pragma: no cover
