@@ -22,6 +22,14 @@ from quadsitl.physics import layout as L
 SQRT_HALF = math.sqrt(0.5)
 
 
+def hover_rotor_speed(mass: Any, gravity: Any, thrust_coeff: Any) -> Any:
+    """Ω_h = sqrt(m g / (4 kt)), rad/s: each rotor carries a quarter of the weight.
+
+    Works on floats and on per-vehicle arrays alike.
+    """
+    return (mass * gravity / (L.N_ROTORS * thrust_coeff)) ** 0.5
+
+
 @dataclass(frozen=True)
 class Airframe:
     """Physical parameters of one quadrotor. Every field: unit, then source."""
@@ -92,8 +100,8 @@ class Airframe:
 
     @property
     def hover_rotor_speed(self) -> float:
-        """Ω_h = sqrt(m g / (4 kt)), rad/s: each rotor carries a quarter of the weight."""
-        return math.sqrt(self.weight / (L.N_ROTORS * self.thrust_coeff))
+        """Ω_h, rad/s (see :func:`hover_rotor_speed`)."""
+        return float(hover_rotor_speed(self.mass, self.gravity, self.thrust_coeff))
 
     @property
     def max_rotor_speed(self) -> float:

@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from quadsitl.physics import kernel, reference
 from quadsitl.physics import layout as L
-from quadsitl.physics.airframe import Airframe, get_airframe
+from quadsitl.physics.airframe import Airframe, get_airframe, hover_rotor_speed
 
 BACKENDS = ("compiled", "reference")
 
@@ -116,7 +116,7 @@ class Fleet:
     def hover_rotor_speed(self) -> NDArray[np.float64]:
         """(n,) rad/s, from each vehicle's own parameters."""
         p = self.params
-        return np.sqrt(p[:, L.P_MASS] * p[:, L.P_GRAVITY] / (L.N_ROTORS * p[:, L.P_KT]))
+        return hover_rotor_speed(p[:, L.P_MASS], p[:, L.P_GRAVITY], p[:, L.P_KT])
 
     @property
     def max_rotor_speed(self) -> NDArray[np.float64]:

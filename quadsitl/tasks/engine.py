@@ -175,11 +175,7 @@ class TaskEngine:
                 for name, fraction in o.param_randomization.items():
                     params[RANDOMIZABLE[name]] *= rng.uniform(1 - fraction, 1 + fraction)
                 self.fleet.params[i] = params
-        hover = np.sqrt(
-            self.fleet.params[rows, L.P_MASS]
-            * self.fleet.params[rows, L.P_GRAVITY]
-            / (L.N_ROTORS * self.fleet.params[rows, L.P_KT])
-        )
+        hover = self.fleet.hover_rotor_speed[rows]  # of each vehicle's (randomised) airframe
         states[:, L.ROTORS] = np.minimum(hover, self.fleet.params[rows, L.P_OMEGA_MAX])[:, None]
         self.fleet.reset(states, mask=mask)
         self.steps[rows] = 0
