@@ -31,7 +31,6 @@ class QuadSB3VecEnv(VecEnv):
         self._actions: np.ndarray | None = None
         self._seed = seed
         self._all = np.ones(num_envs, bool)
-        self._elapsed = 0.0
 
     def reset(self) -> np.ndarray:
         if self._seed is not None:

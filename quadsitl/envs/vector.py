@@ -62,7 +62,6 @@ class QuadVectorEnv(VectorEnv):
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         resetting = self._autoreset
-        actions = self.engine.check_action(np.where(resetting[:, None], 0.0, actions))
         reward, terminated, truncated = self.engine.step(actions, active=~resetting)
         ended = (terminated | truncated) & ~resetting
         info: dict[str, Any] = {}

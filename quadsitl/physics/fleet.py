@@ -196,13 +196,3 @@ class Fleet:
         self.state[rows] = new
         self.contact[rows] = contact
         self.touchdown_speed[rows] = 0.0
-
-    def set_airframe(self, airframe: str | Airframe, mask: ArrayLike | None = None) -> None:
-        """Give the selected vehicles (default all) new physical parameters."""
-        frame = get_airframe(airframe)
-        rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
-        ground_z = self.params[rows, L.P_GROUND_Z]
-        self.params[rows] = frame.to_params()
-        self.params[rows, L.P_GROUND_Z] = ground_z
-        for i in np.flatnonzero(rows):
-            self.airframes[i] = frame

@@ -190,14 +190,21 @@ class TaskEngine:
         self.prev_dist[rows] = self.dist[rows]
 
     # --- stepping ------------------------------------------------------------------
-    def check_action(self, action: ArrayLike) -> NDArray[np.float64]:
-        """(N, 4) float64 action; NaN/inf or a wrong shape raise ValueError."""
+    def check_action(
+        self, action: ArrayLike, active: NDArray[np.bool_] | None = None
+    ) -> NDArray[np.float64]:
+        """(N, 4) float64 action; NaN/inf or a wrong shape raise ValueError.
+
+        Actions of envs not ``active`` are ignored (replaced by 0) before the check.
+        """
         a = np.asarray(action, dtype=np.float64)
         if a.shape != (self.n, L.N_ROTORS):
             if self.n == 1 and a.shape == (L.N_ROTORS,):
                 a = a.reshape(1, L.N_ROTORS)
             else:
                 raise ValueError(f"action must have shape ({self.n}, {L.N_ROTORS}), got {a.shape}")
+        if active is not None and not active.all():
+            a = np.where(active[:, None], a, 0.0)
         if not np.isfinite(a).all():
             bad = int(np.flatnonzero(~np.isfinite(a).all(axis=1))[0])
             raise ValueError(f"action of env {bad} is not finite: {a[bad]}")
@@ -209,12 +216,12 @@ class TaskEngine:
         """Advance all envs one control period.
 
         ``active`` (default all) marks envs whose episode goes on; the others are about to
-        be reset and must not draw from their generators.
+        be reset: their actions are ignored and they must not draw from their generators.
 
         Returns:
             reward (N,), terminated (N,), truncated (N,).
         """
-        a = self.check_action(action)
+        a = self.check_action(action, active)
         # Eq. 19: Ω_c = Ω_h + β a, clipped to [0, Ω_max] by the physics.
         self.fleet.step(self.hover_speed + self.options.beta * a, n_substeps=self.substeps)
         if active is None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -73,4 +73,3 @@ class TaskSpec:
     success: Callable[[TaskEngine, np.ndarray], np.ndarray] | None = None
     extra_obs: int = 0
     fill_extra_obs: Callable[[TaskEngine], None] | None = None
-    docs: dict[str, str] = field(default_factory=dict)
