@@ -27,7 +27,95 @@ def _build_parser() -> argparse.ArgumentParser:
     demo.add_argument(
         "--print-every", type=float, default=0.5, help="seconds between table rows (default: 0.5)"
     )
+    _add_sim_parser(commands)
     return parser
+
+
+def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
+    sim = commands.add_parser(
+        "sim",
+        help="run the simulated vehicle in real time, speaking MAVLink over UDP/TCP",
+        description="Run the simulated quadrotor as a MAVLink vehicle. Ground stations "
+        "connect on the --gcs link, MAVSDK-style API clients on the --api link.",
+    )
+    sim.add_argument(
+        "--gcs", default="udpout:127.0.0.1:14550", metavar="URL",
+        help="ground-station link (default: udpout:127.0.0.1:14550, where QGroundControl "
+        "listens); 'none' disables it",
+    )
+    sim.add_argument(
+        "--api", default="udpout:127.0.0.1:14540", metavar="URL",
+        help="API/offboard link (default: udpout:127.0.0.1:14540, where MAVSDK listens "
+        "with udpin://0.0.0.0:14540); 'none' disables it",
+    )
+    sim.add_argument(
+        "--link", action="append", default=[], metavar="URL",
+        help="an extra link (repeatable): udpout:HOST:PORT, udpin:HOST:PORT or tcpin:HOST:PORT",
+    )
+    sim.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default: 1)")
+    sim.add_argument(
+        "--home", default=None, metavar="LAT,LON,ALT",
+        help="home position: degrees, degrees, metres above sea level "
+        "(default: 47.397742,8.545594,488)",
+    )
+    sim.add_argument("--airframe", default="paper", help="airframe preset (default: paper)")
+    sim.add_argument(
+        "--physics-rate", type=float, default=1000.0, help="physics steps per simulated second "
+        "(default: 1000)",
+    )
+    sim.add_argument(
+        "--control-rate", type=float, default=250.0,
+        help="onboard controller rate, Hz (default: 250)",
+    )
+    sim.add_argument(
+        "--speed", type=float, default=1.0, help="speed factor: simulated seconds per wall second "
+        "(default: 1)",
+    )
+    sim.add_argument(
+        "--logs", default="logs", metavar="DIR",
+        help="folder for the telemetry log of the run (default: logs); 'none' disables it",
+    )
+    sim.add_argument(
+        "--param", action="append", default=[], metavar="NAME=VALUE",
+        help="set a vehicle parameter at start (repeatable), e.g. MPC_XY_CRUISE=3",
+    )
+    sim.add_argument(
+        "--duration", type=float, default=None, metavar="S",
+        help="stop after S wall-clock seconds (default: run until Ctrl-C / SIGTERM)",
+    )
+    sim.add_argument("--quiet", action="store_true", help="do not print vehicle events")
+
+
+def _sim_config(args: argparse.Namespace) -> object:
+    from quadsitl.mavlink.runner import SimConfig
+    from quadsitl.vehicle.geo import Home
+
+    def url(value: str) -> str | None:
+        return None if value.lower() == "none" else value
+
+    home = Home()
+    if args.home is not None:
+        try:
+            lat, lon, alt = (float(x) for x in args.home.split(","))
+        except ValueError:
+            raise ValueError(f"--home must be LAT,LON,ALT, got {args.home!r}") from None
+        home = Home(lat, lon, alt)
+    params = {}
+    for item in args.param:
+        name, sep, value = item.partition("=")
+        try:
+            params[name.strip().upper()] = float(value)
+        except ValueError:
+            raise ValueError(f"--param must be NAME=VALUE, got {item!r}") from None
+        if not sep:
+            raise ValueError(f"--param must be NAME=VALUE, got {item!r}")
+    return SimConfig(
+        gcs_url=url(args.gcs), api_url=url(args.api), extra_urls=args.link,
+        system_id=args.sysid, home=home, airframe=args.airframe,
+        physics_rate=args.physics_rate, control_rate=args.control_rate, speed=args.speed,
+        log_dir=None if args.logs.lower() == "none" else args.logs,
+        duration=args.duration, params=params, quiet=args.quiet,
+    )  # fmt: skip
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -46,6 +134,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
         except ValueError as error:
             parser.exit(2, f"quadsitl demo: error: {error}\n")
+    if args.command == "sim":
+        from quadsitl.mavlink.runner import run_simulator
+
+        try:
+            return run_simulator(_sim_config(args))  # type: ignore[arg-type]
+        except (ValueError, OSError) as error:
+            parser.exit(2, f"quadsitl sim: error: {error}\n")
     parser.error(f"unknown command {args.command!r}")  # unreachable: argparse checks
     return 2
 

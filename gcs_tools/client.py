@@ -1,0 +1,237 @@
+"""A small ground-station client over pymavlink: connect, arm, fly, upload missions.
+
+It is independent of the simulator's code (it only speaks MAVLink), so the tests and
+the demo exercise the vehicle exactly as QGroundControl or MAVSDK would.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+os.environ.setdefault("MAVLINK20", "1")  # before pymavlink.mavutil is imported
+from pymavlink import mavutil  # noqa: E402
+
+mav = mavutil.mavlink
+
+# PX4 custom modes (main << 16 | sub << 24), as the vehicle reports them.
+MODES = {
+    "POSCTL": (3, 0), "ALTCTL": (2, 0), "OFFBOARD": (6, 0), "TAKEOFF": (4, 2),
+    "LOITER": (4, 3), "MISSION": (4, 4), "RTL": (4, 5), "LAND": (4, 6),
+}  # fmt: skip
+
+
+class ClientError(RuntimeError):
+    """The vehicle refused, or did not answer in time."""
+
+
+@dataclass
+class Waypoint:
+    """A mission waypoint relative to home: metres east, north, and up."""
+
+    east: float
+    north: float
+    up: float
+    hold: float = 0.0  # s
+
+
+@dataclass
+class Track:
+    """Positions received (LOCAL_POSITION_NED), as (time_boot s, north, east, down)."""
+
+    samples: list[tuple[float, float, float, float]] = field(default_factory=list)
+
+
+class VehicleClient:
+    """One connection to one vehicle (system id ``target``), e.g. ``udpin:0.0.0.0:14550``."""
+
+    def __init__(self, url: str, target: int = 1, source_system: int = 255) -> None:
+        self.conn = mavutil.mavlink_connection(url, source_system=source_system,
+                                               source_component=190, autoreconnect=False)  # fmt: skip
+        self.target = target
+        self.latest: dict[str, Any] = {}
+        self.texts: list[str] = []
+        self.reached: list[int] = []
+        self.track = Track()
+        self.home: Any = None
+
+    def close(self) -> None:
+        self.conn.close()
+
+    # --- receiving --------------------------------------------------------------------
+    def pump(self, timeout: float = 0.05) -> Any:
+        """Receive one message (or None after ``timeout``) and file it."""
+        msg = self.conn.recv_match(blocking=True, timeout=timeout)
+        if msg is None or msg.get_srcSystem() != self.target:
+            return None
+        kind = msg.get_type()
+        self.latest[kind] = msg
+        if kind == "STATUSTEXT":
+            self.texts.append(msg.text)
+        elif kind == "MISSION_ITEM_REACHED":
+            self.reached.append(msg.seq)
+        elif kind == "LOCAL_POSITION_NED":
+            self.track.samples.append((msg.time_boot_ms / 1000, msg.x, msg.y, msg.z))
+        elif kind == "HOME_POSITION":
+            self.home = msg
+        return msg
+
+    def wait(self, predicate: Callable[[], bool], timeout: float, what: str) -> None:
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                raise ClientError(f"timed out after {timeout:g} s waiting for {what}")
+            self.pump()
+
+    def wait_message(self, kind: str, timeout: float = 5.0, check: Callable[[Any], bool] | None = None) -> Any:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            msg = self.pump()
+            if msg is not None and msg.get_type() == kind and (check is None or check(msg)):
+                return msg
+        raise ClientError(f"no {kind} within {timeout:g} s")
+
+    def connect(self, timeout: float = 10.0) -> Any:
+        """Wait for the vehicle's heartbeat (sending ours, so udpout peers learn us)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            self.conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            try:
+                return self.wait_message("HEARTBEAT", 1.0)
+            except ClientError:
+                continue
+        raise ClientError(f"no heartbeat from system {self.target} within {timeout:g} s")
+
+    # --- state ------------------------------------------------------------------------
+    @property
+    def armed(self) -> bool:
+        hb = self.latest.get("HEARTBEAT")
+        return bool(hb and hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+
+    @property
+    def mode(self) -> str:
+        hb = self.latest.get("HEARTBEAT")
+        if hb is None:
+            return "?"
+        pair = ((hb.custom_mode >> 16) & 0xFF, (hb.custom_mode >> 24) & 0xFF)
+        return next((name for name, value in MODES.items() if value == pair), str(pair))
+
+    def position_enu(self) -> tuple[float, float, float]:
+        """Latest (east, north, up) m relative to home."""
+        p = self.latest["LOCAL_POSITION_NED"]
+        return p.y, p.x, -p.z
+
+    # --- commands ---------------------------------------------------------------------
+    def command(self, command: int, *params: float, timeout: float = 3.0, check: bool = True) -> int:
+        """COMMAND_LONG and wait for its COMMAND_ACK; returns the MAV_RESULT."""
+        values = list(params) + [0.0] * (7 - len(params))
+        for _attempt in range(3):
+            self.conn.mav.command_long_send(self.target, 1, command, 0, *values)
+            try:
+                ack = self.wait_message("COMMAND_ACK", timeout / 3, lambda m: m.command == command)
+            except ClientError:
+                continue
+            if check and ack.result != mav.MAV_RESULT_ACCEPTED:
+                last = self.texts[-1] if self.texts else ""
+                raise ClientError(f"command {command} refused (result {ack.result}): {last}")
+            return int(ack.result)
+        raise ClientError(f"no COMMAND_ACK for command {command}")
+
+    def arm(self) -> None:
+        self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+        self.wait(lambda: self.armed, 3.0, "armed heartbeat")
+
+    def disarm(self, force: bool = False) -> None:
+        self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 21196 if force else 0)
+
+    def set_mode(self, name: str) -> None:
+        main, sub = MODES[name]
+        self.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub)
+
+    def takeoff(self, altitude: float) -> None:
+        """Take off to ``altitude`` m above home (param7 is AMSL, as PX4 reads it)."""
+        home = self.home or self.request_home()
+        self.command(mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan,
+                     home.altitude / 1000 + altitude)  # fmt: skip
+
+    def land(self) -> None:
+        self.command(mav.MAV_CMD_NAV_LAND, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
+
+    def request_home(self) -> Any:
+        self.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_HOME_POSITION)
+        self.wait(lambda: self.home is not None, 3.0, "HOME_POSITION")
+        return self.home
+
+    def goto(self, east: float, north: float, up: float) -> None:
+        """DO_REPOSITION (COMMAND_INT, relative altitude) to a point relative to home."""
+        lat, lon = self.to_global(east, north)
+        self.conn.mav.command_int_send(
+            self.target, 1, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_CMD_DO_REPOSITION,
+            0, 0, -1, 0, 0, math.nan, round(lat * 1e7), round(lon * 1e7), up,
+        )  # fmt: skip
+        ack = self.wait_message("COMMAND_ACK", 3.0, lambda m: m.command == mav.MAV_CMD_DO_REPOSITION)
+        if ack.result != mav.MAV_RESULT_ACCEPTED:
+            raise ClientError(f"goto refused: {self.texts[-1:] }")
+
+    def to_global(self, east: float, north: float) -> tuple[float, float]:
+        home = self.home or self.request_home()
+        lat0, lon0 = home.latitude * 1e-7, home.longitude * 1e-7
+        radius = 6_378_137.0
+        lat = lat0 + math.degrees(north / radius)
+        lon = lon0 + math.degrees(east / (radius * math.cos(math.radians(lat0))))
+        return lat, lon
+
+    # --- parameters -------------------------------------------------------------------
+    def get_params(self, timeout: float = 5.0) -> dict[str, float]:
+        self.conn.mav.param_request_list_send(self.target, 1)
+        params: dict[str, float] = {}
+        count = None
+        deadline = time.monotonic() + timeout
+        while count is None or len(params) < count:
+            if time.monotonic() > deadline:
+                raise ClientError(f"parameter list incomplete: {len(params)} of {count}")
+            msg = self.pump()
+            if msg is not None and msg.get_type() == "PARAM_VALUE":
+                params[msg.param_id] = msg.param_value
+                count = msg.param_count
+        return params
+
+    def set_param(self, name: str, value: float) -> float:
+        """PARAM_SET; returns the value echoed back (the old one if refused)."""
+        self.conn.mav.param_set_send(self.target, 1, name.encode(), value,
+                                     mav.MAV_PARAM_TYPE_REAL32)  # fmt: skip
+        echo = self.wait_message("PARAM_VALUE", 3.0, lambda m: m.param_id == name)
+        return float(echo.param_value)
+
+    # --- missions ---------------------------------------------------------------------
+    def upload_mission(self, items: Iterable[tuple[int, float, float, float, float]]) -> int:
+        """Upload (command, east, north, up, param1) items; returns the MISSION_ACK type."""
+        items = list(items)
+        self.conn.mav.mission_count_send(self.target, 1, len(items), 0)
+        while True:
+            msg = self.wait_message("MISSION_REQUEST_INT", 5.0) if items else None
+            if msg is None:
+                break
+            command, east, north, up, param1 = items[msg.seq]
+            lat, lon = self.to_global(east, north)
+            self.conn.mav.mission_item_int_send(
+                self.target, 1, msg.seq, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, command,
+                0, 1, param1, 0, 0, math.nan, round(lat * 1e7), round(lon * 1e7), up, 0,
+            )  # fmt: skip
+            if msg.seq == len(items) - 1:
+                break
+        return int(self.wait_message("MISSION_ACK", 5.0).type)
+
+    def download_mission(self) -> list[Any]:
+        self.conn.mav.mission_request_list_send(self.target, 1, 0)
+        count = self.wait_message("MISSION_COUNT", 3.0).count
+        items = []
+        for seq in range(count):
+            self.conn.mav.mission_request_int_send(self.target, 1, seq, 0)
+            items.append(self.wait_message("MISSION_ITEM_INT", 3.0, lambda m, s=seq: m.seq == s))
+        self.conn.mav.mission_ack_send(self.target, 1, mav.MAV_MISSION_ACCEPTED, 0)
+        return items

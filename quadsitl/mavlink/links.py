@@ -1,0 +1,197 @@
+"""Links: UDP and TCP endpoints that carry MAVLink to any number of peers.
+
+URLs follow pymavlink: ``udpout:HOST:PORT`` sends to HOST:PORT (where QGroundControl,
+MAVProxy or MAVSDK listen) and also answers anyone else who writes to it;
+``udpin:HOST:PORT`` listens and answers every peer heard from; ``tcpin:HOST:PORT``
+accepts TCP clients. Each peer has its own parser, so a garbled datagram from one
+never corrupts another's frames. Sending packs a message once per link (one sequence
+number stream per link) and writes it to every live peer.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from quadsitl.mavlink import mavlink
+
+PEER_TIMEOUT = 10.0  # s without a packet before a learned UDP peer is dropped
+MAX_DATAGRAM = 65535
+
+
+def parse_url(url: str) -> tuple[str, str, int]:
+    """('udpout'|'udpin'|'tcpin', host, port); ValueError naming the problem."""
+    try:
+        kind, host, port_text = url.split(":")
+        port = int(port_text)
+    except ValueError:
+        raise ValueError(f"link {url!r}: expected KIND:HOST:PORT, e.g. udpout:127.0.0.1:14550") from None
+    if kind not in ("udpout", "udpin", "tcpin"):
+        raise ValueError(f"link {url!r}: kind must be udpout, udpin or tcpin, got {kind!r}")
+    if not 0 <= port <= 65535:
+        raise ValueError(f"link {url!r}: port {port} out of range")
+    return kind, host or "0.0.0.0", port
+
+
+class _Capture:
+    """File-like sink for pymavlink's encoder: keeps the last packed frame."""
+
+    def __init__(self) -> None:
+        self.frames: list[bytes] = []
+
+    def write(self, data: bytes) -> None:
+        self.frames.append(bytes(data))
+
+
+@dataclass
+class Peer:
+    address: Any
+    parser: Any  # a pymavlink MAVLink object used only to parse this peer's bytes
+    last_seen: float = field(default_factory=time.monotonic)
+    sock: socket.socket | None = None  # TCP only
+
+
+def _new_parser() -> Any:
+    parser = mavlink.MAVLink(None)
+    parser.robust_parsing = True  # bad frames come back as MAVLink_bad_data, not raise
+    return parser
+
+
+class Link:
+    """One endpoint; see the module docstring. ``name`` labels it in logs."""
+
+    def __init__(self, url: str, name: str, system_id: int, component_id: int) -> None:
+        self.url, self.name = url, name
+        self.kind, host, port = parse_url(url)
+        self._out = _Capture()
+        self.mav = mavlink.MAVLink(self._out, srcSystem=system_id, srcComponent=component_id)
+        self.peers: dict[Any, Peer] = {}
+        self.destination: tuple[str, int] | None = None
+        self.bad_frames = 0
+        self.sent = 0
+        try:
+            if self.kind == "tcpin":
+                self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+                self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                self.sock.bind((host, port))
+                self.sock.listen(8)
+            else:
+                self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                if self.kind == "udpin":
+                    self.sock.bind((host, port))
+                else:
+                    self.sock.bind(("0.0.0.0", 0))
+                    self.destination = (socket.gethostbyname(host), port)
+        except OSError as error:
+            raise OSError(f"link {url!r}: cannot open ({error.strerror or error})") from None
+        self.sock.setblocking(False)
+
+    @property
+    def local_port(self) -> int:
+        return int(self.sock.getsockname()[1])
+
+    def sockets(self) -> list[socket.socket]:
+        """Sockets to wait on with select()."""
+        return [self.sock] + [p.sock for p in self.peers.values() if p.sock is not None]
+
+    # --- receiving --------------------------------------------------------------------
+    def receive(self) -> list[tuple[Any, Peer]]:
+        """Every complete message now waiting, with the peer it came from."""
+        out: list[tuple[Any, Peer]] = []
+        if self.kind == "tcpin":
+            self._accept()
+            for peer in list(self.peers.values()):
+                self._read_stream(peer, out)
+        else:
+            while True:
+                try:
+                    data, address = self.sock.recvfrom(MAX_DATAGRAM)
+                except (BlockingIOError, InterruptedError):
+                    break
+                except OSError:  # e.g. ICMP port unreachable reported on a UDP socket
+                    continue
+                peer = self.peers.get(address)
+                if peer is None:
+                    peer = self.peers[address] = Peer(address, _new_parser())
+                peer.last_seen = time.monotonic()
+                self._parse(peer, data, out)
+        return out
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                conn, address = self.sock.accept()
+            except (BlockingIOError, InterruptedError):
+                return
+            conn.setblocking(False)
+            self.peers[address] = Peer(address, _new_parser(), sock=conn)
+
+    def _read_stream(self, peer: Peer, out: list[tuple[Any, Peer]]) -> None:
+        assert peer.sock is not None
+        while True:
+            try:
+                data = peer.sock.recv(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                data = b""
+            if not data:  # closed by the client
+                peer.sock.close()
+                self.peers.pop(peer.address, None)
+                return
+            peer.last_seen = time.monotonic()
+            self._parse(peer, data, out)
+
+    def _parse(self, peer: Peer, data: bytes, out: list[tuple[Any, Peer]]) -> None:
+        try:
+            messages = peer.parser.parse_buffer(data) or []
+        except Exception:  # pymavlink raises on some malformed input even when robust
+            self.bad_frames += 1
+            peer.parser = _new_parser()
+            return
+        for message in messages:
+            if message.get_type() == "BAD_DATA":
+                self.bad_frames += 1
+            else:
+                out.append((message, peer))
+
+    # --- sending ----------------------------------------------------------------------
+    def pack(self, message: Any) -> bytes:
+        """Encode ``message`` with this link's sequence numbers (and signing, if set)."""
+        self.mav.send(message)
+        return self._out.frames.pop()
+
+    def send_bytes(self, frame: bytes) -> None:
+        """Write an already packed frame to every live peer (and the fixed destination)."""
+        now = time.monotonic()
+        targets = []
+        if self.destination is not None:
+            targets.append(self.destination)
+        for address, peer in list(self.peers.items()):
+            if peer.sock is not None:
+                try:
+                    peer.sock.send(frame)
+                except (BlockingIOError, InterruptedError):
+                    pass  # a slow TCP client misses this frame rather than stall the loop
+                except OSError:
+                    peer.sock.close()
+                    self.peers.pop(address, None)
+            elif now - peer.last_seen > PEER_TIMEOUT:
+                del self.peers[address]
+            elif address != self.destination:
+                targets.append(address)
+        for target in targets:
+            try:
+                self.sock.sendto(frame, target)
+            except OSError:
+                pass  # nobody listening there (yet): UDP is fire-and-forget
+        self.sent += 1
+
+    def close(self) -> None:
+        for peer in self.peers.values():
+            if peer.sock is not None:
+                peer.sock.close()
+        self.peers.clear()
+        self.sock.close()

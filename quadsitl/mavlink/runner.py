@@ -1,0 +1,184 @@
+"""The simulator process: real-time loop, links, log, signals.
+
+Each iteration steps the physics for every step that is due on the wall clock (times
+the speed factor), lets the server send what is due, then waits in select() on all
+sockets until the next step is due. The lateness of every step against its schedule
+is recorded: that is the timing jitter the benchmark reports.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import select
+import signal
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from quadsitl.mavlink.links import Link
+from quadsitl.mavlink.server import MavlinkServer
+from quadsitl.mavlink.tlog import TlogWriter
+from quadsitl.vehicle.geo import Home
+from quadsitl.vehicle.vehicle import Vehicle
+
+MAX_LAG = 0.1  # s: further behind than this, skip ahead instead of catching up
+
+
+@dataclass
+class SimConfig:
+    """Everything ``quadsitl sim`` can be told; see ``quadsitl sim --help``."""
+
+    gcs_url: str | None = "udpout:127.0.0.1:14550"
+    api_url: str | None = "udpout:127.0.0.1:14540"
+    extra_urls: list[str] = field(default_factory=list)
+    system_id: int = 1
+    home: Home = field(default_factory=Home)
+    airframe: str = "paper"
+    physics_rate: float = 1000.0  # Hz
+    control_rate: float = 250.0  # Hz
+    speed: float = 1.0  # simulated seconds per wall second
+    log_dir: str | None = "logs"
+    duration: float | None = None  # wall seconds, None: until a signal
+    params: dict[str, float] = field(default_factory=dict)
+    quiet: bool = False
+
+    def validate(self) -> None:
+        if not 1 <= self.system_id <= 254:
+            raise ValueError(f"system id must be 1..254, got {self.system_id}")
+        if not (math.isfinite(self.physics_rate) and 100 <= self.physics_rate <= 10_000):
+            raise ValueError(f"physics rate must be 100..10000 Hz, got {self.physics_rate}")
+        if not (math.isfinite(self.control_rate) and 10 <= self.control_rate <= self.physics_rate):
+            raise ValueError(
+                f"control rate must be 10 Hz .. the physics rate, got {self.control_rate}"
+            )
+        if not (math.isfinite(self.speed) and 0.01 <= self.speed <= 100):
+            raise ValueError(f"speed factor must be 0.01..100, got {self.speed}")
+        if not [u for u in (self.gcs_url, self.api_url, *self.extra_urls) if u]:
+            raise ValueError("at least one link is needed")
+
+
+class Timing:
+    """Lateness of each physics step against its wall-clock schedule (last ~17 min)."""
+
+    def __init__(self, capacity: int = 1_000_000) -> None:
+        self._ring = np.zeros(capacity, dtype=np.float32)  # s
+        self.steps = 0
+        self.skipped_steps = 0
+
+    def record(self, lateness: float) -> None:
+        self._ring[self.steps % self._ring.size] = lateness
+        self.steps += 1
+
+    @property
+    def lateness(self) -> np.ndarray:
+        """Recorded lateness, s."""
+        return self._ring[: min(self.steps, self._ring.size)]
+
+    def summary(self) -> str:
+        if not self.steps:
+            return "timing: no steps"
+        late = self.lateness.astype(np.float64) * 1000
+        return (
+            f"timing: {late.size} steps, lateness p50 {np.percentile(late, 50):.3f} ms, "
+            f"p99 {np.percentile(late, 99):.3f} ms, max {late.max():.3f} ms, "
+            f"skipped {self.skipped_steps}"
+        )
+
+
+class Simulator:
+    def __init__(self, config: SimConfig) -> None:
+        config.validate()
+        self.config = config
+        self.vehicle = Vehicle(
+            config.airframe,
+            config.home,
+            physics_dt=1.0 / config.physics_rate,
+            control_period=1.0 / config.control_rate,
+        )
+        Vehicle(config.airframe).step()  # compile the kernels before the clock starts
+        for name, value in config.params.items():
+            self.vehicle.set_param(name, value)
+        self.links: list[Link] = []
+        try:
+            for name, url in (("gcs", config.gcs_url), ("api", config.api_url)):
+                if url:
+                    self.links.append(Link(url, name, config.system_id, 1))
+            for i, url in enumerate(config.extra_urls):
+                self.links.append(Link(url, f"link{i + 2}", config.system_id, 1))
+        except OSError:
+            self.close()
+            raise
+        self.tlog = None
+        if config.log_dir:
+            stamp = time.strftime("%Y%m%d-%H%M%S")
+            self.tlog = TlogWriter(Path(config.log_dir) / f"quadsitl-{stamp}-{os.getpid()}.tlog")
+        self.server = MavlinkServer(
+            self.vehicle, self.links, self.tlog, config.system_id, 1, echo=self._print
+        )
+        self.timing = Timing()
+        self.stopping = False
+
+    def _print(self, text: str) -> None:
+        if not self.config.quiet:
+            print(text, flush=True)
+
+    def stop(self, *_: object) -> None:
+        self.stopping = True
+
+    def run(self) -> None:
+        dt = self.vehicle.fleet.dt
+        wall_per_step = dt / self.config.speed
+        start = time.monotonic()
+        steps = 0
+        end = None if self.config.duration is None else start + self.config.duration
+        sockets = {}
+        while not self.stopping:
+            now = time.monotonic()
+            if end is not None and now >= end:
+                break
+            due = int((now - start) / wall_per_step) - steps
+            if due * wall_per_step > MAX_LAG:  # e.g. the machine was suspended
+                self.timing.skipped_steps += due - 1
+                steps += due - 1
+                due = 1
+            for _ in range(due):
+                scheduled = start + (steps + 1) * wall_per_step
+                self.timing.record(max(0.0, time.monotonic() - scheduled))
+                self.vehicle.step()
+                steps += 1
+            self.server.tick(now)
+            if self.tlog is not None:
+                self.tlog.flush()
+            sockets = {s: link for link in self.links for s in link.sockets()}
+            wait = start + (steps + 1) * wall_per_step - time.monotonic()
+            readable, _, _ = select.select(list(sockets), [], [], max(0.0, wait))
+            received_at = time.time()
+            for link in {sockets[s] for s in readable}:
+                self.server.receive(link, received_at)
+
+    def close(self) -> None:
+        for link in self.links:
+            link.close()
+        if getattr(self, "tlog", None) is not None:
+            self.tlog.close()
+
+
+def run_simulator(config: SimConfig) -> int:
+    """Run until SIGINT/SIGTERM (or ``config.duration``); returns an exit code."""
+    sim = Simulator(config)
+    signal.signal(signal.SIGINT, sim.stop)
+    signal.signal(signal.SIGTERM, sim.stop)
+    links = ", ".join(f"{link.name} {link.url} (port {link.local_port})" for link in sim.links)
+    sim._print(f"quadsitl sim: system {config.system_id}, links: {links}")
+    if sim.tlog is not None:
+        sim._print(f"quadsitl sim: telemetry log {sim.tlog.path}")
+    try:
+        sim.run()
+    finally:
+        sim.close()
+        print(sim.timing.summary(), file=sys.stderr, flush=True)
+    return 0

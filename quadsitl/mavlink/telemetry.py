@@ -1,0 +1,299 @@
+"""Telemetry: what the vehicle reports, converted to MAVLink's frames and units here.
+
+One ``build_*`` function per message. World ENU -> local NED, body FLU -> FRD, through
+:mod:`quadsitl.frames` only. Rates are per link and per message (SET_MESSAGE_INTERVAL,
+REQUEST_DATA_STREAM), paced by simulated time; the heartbeat is paced by the wall
+clock so that ground stations keep the link even when simulated time stands still.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from quadsitl import __version__, frames
+from quadsitl.mavlink import mavlink as mav
+from quadsitl.physics import layout as L
+from quadsitl.vehicle.modes import MAIN_AUTO, MAIN_OFFBOARD, MAIN_POSCTL, Mode
+from quadsitl.vehicle.vehicle import Vehicle
+
+_encoder = mav.MAVLink(None)
+
+# SYS_STATUS sensor bits reported present, enabled and healthy.
+SENSORS = (
+    mav.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mav.MAV_SYS_STATUS_SENSOR_3D_MAG
+    | mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | mav.MAV_SYS_STATUS_SENSOR_GPS
+    | mav.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+    | mav.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+    | mav.MAV_SYS_STATUS_SENSOR_YAW_POSITION
+    | mav.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+    | mav.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+    | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+    | mav.MAV_SYS_STATUS_SENSOR_BATTERY
+    | mav.MAV_SYS_STATUS_PREARM_CHECK
+)
+CAPABILITIES = (
+    mav.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
+    | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mav.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+    | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+)
+HEARTBEAT_PERIOD = 1.0  # s, wall clock
+
+
+def _version_number() -> int:
+    """AUTOPILOT_VERSION flight_sw_version: major << 24 | minor << 16 | patch << 8 | type."""
+    parts = [int(p) for p in __version__.split(".")[:3] if p.isdigit()] + [0, 0, 0]
+    return (parts[0] << 24) | (parts[1] << 16) | (parts[2] << 8) | 0xFF  # 0xFF: release
+
+
+class Snapshot:
+    """The vehicle's state in wire frames and units, computed once per telemetry tick."""
+
+    def __init__(self, vehicle: Vehicle, comm_errors: int = 0) -> None:
+        self.vehicle = vehicle
+        self.comm_errors = min(comm_errors, 65535)  # malformed frames received
+        s = vehicle.state
+        self.time_boot_ms = int(vehicle.time * 1000) & 0xFFFFFFFF
+        self.time_usec = int(vehicle.time * 1e6)
+        # Local origin: home, on the ground (the resting centre of mass is gear height up).
+        ground_level = s[L.POS] - np.array([0.0, 0.0, vehicle.airframe.gear_height])
+        self.position_ned = frames.enu_to_ned(ground_level)  # m
+        self.velocity_ned = frames.enu_to_ned(s[L.VEL])  # m/s
+        self.q_ned_frd = frames.quat_enu_flu_to_ned_frd(s[L.QUAT])  # (w, x, y, z)
+        self.roll, self.pitch, self.yaw = (float(a) for a in frames.euler_from_quat(self.q_ned_frd))
+        self.rates_frd = frames.flu_to_frd(s[L.RATES])  # rad/s
+        self.rotor_speeds = s[L.ROTORS]  # rad/s
+        up = float(s[L.I_PZ]) - vehicle.airframe.gear_height
+        self.lat, self.lon, self.alt_amsl = vehicle.home.to_global(s[L.I_PX], s[L.I_PY], up)
+        self.relative_alt = up
+        self.heading_deg = math.degrees(self.yaw) % 360.0
+        self.ground_speed = math.hypot(self.velocity_ned[0], self.velocity_ned[1])
+
+
+def build_heartbeat(v: Vehicle) -> Any:
+    main = v.mode.value[0]
+    base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_STABILIZE_ENABLED
+    if main in (MAIN_AUTO,):
+        base |= mav.MAV_MODE_FLAG_AUTO_ENABLED | mav.MAV_MODE_FLAG_GUIDED_ENABLED
+    if main in (MAIN_POSCTL, MAIN_OFFBOARD):
+        base |= mav.MAV_MODE_FLAG_GUIDED_ENABLED
+    if v.armed:
+        base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
+    if v.crashed:
+        status = mav.MAV_STATE_CRITICAL
+    else:
+        status = mav.MAV_STATE_ACTIVE if v.armed else mav.MAV_STATE_STANDBY
+    return _encoder.heartbeat_encode(
+        mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_GENERIC, base, v.mode.custom_mode, status
+    )
+
+
+def build_sys_status(s: Snapshot) -> Any:
+    v = s.vehicle
+    health = SENSORS & ~mav.MAV_SYS_STATUS_PREARM_CHECK if v.crashed else SENSORS
+    return _encoder.sys_status_encode(
+        SENSORS, SENSORS, health, 100, int(v.battery.voltage * 1000),
+        int(v.battery.current * 100), int(v.battery.remaining * 100), 0, s.comm_errors, 0, 0, 0, 0,
+    )  # fmt: skip
+
+
+def build_extended_sys_state(s: Snapshot) -> Any:
+    return _encoder.extended_sys_state_encode(
+        mav.MAV_VTOL_STATE_UNDEFINED, s.vehicle.landed_state
+    )
+
+
+def build_attitude(s: Snapshot) -> Any:
+    r = s.rates_frd
+    return _encoder.attitude_encode(s.time_boot_ms, s.roll, s.pitch, s.yaw, r[0], r[1], r[2])
+
+
+def build_attitude_quaternion(s: Snapshot) -> Any:
+    q, r = s.q_ned_frd, s.rates_frd
+    return _encoder.attitude_quaternion_encode(
+        s.time_boot_ms, q[0], q[1], q[2], q[3], r[0], r[1], r[2], [0.0] * 4
+    )
+
+
+def build_local_position_ned(s: Snapshot) -> Any:
+    p, v = s.position_ned, s.velocity_ned
+    return _encoder.local_position_ned_encode(s.time_boot_ms, p[0], p[1], p[2], v[0], v[1], v[2])
+
+
+def build_global_position_int(s: Snapshot) -> Any:
+    v = s.velocity_ned * 100.0  # cm/s
+    return _encoder.global_position_int_encode(
+        s.time_boot_ms, round(s.lat * 1e7), round(s.lon * 1e7), round(s.alt_amsl * 1000),
+        round(s.relative_alt * 1000), round(v[0]), round(v[1]), round(v[2]),
+        round(s.heading_deg * 100) % 36000,
+    )  # fmt: skip
+
+
+def build_gps_raw_int(s: Snapshot) -> Any:
+    course = round(math.degrees(math.atan2(s.velocity_ned[1], s.velocity_ned[0])) % 360 * 100)
+    return _encoder.gps_raw_int_encode(
+        s.time_usec, mav.GPS_FIX_TYPE_3D_FIX, round(s.lat * 1e7), round(s.lon * 1e7),
+        round(s.alt_amsl * 1000), 80, 120, round(s.ground_speed * 100),
+        course if s.ground_speed > 0.2 else 65535, 14,
+    )  # fmt: skip
+
+
+def build_home_position(s: Snapshot) -> Any:
+    h = s.vehicle.home
+    return _encoder.home_position_encode(
+        round(h.latitude * 1e7), round(h.longitude * 1e7), round(h.altitude * 1000),
+        0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, s.time_usec,
+    )  # fmt: skip
+
+
+def build_vfr_hud(s: Snapshot) -> Any:
+    v = s.vehicle
+    throttle = round(100 * float(np.mean(v.rotor_cmd)) / v.airframe.max_rotor_speed)
+    return _encoder.vfr_hud_encode(
+        s.ground_speed, s.ground_speed, round(s.heading_deg) % 360, throttle, s.alt_amsl,
+        -float(s.velocity_ned[2]),
+    )  # fmt: skip
+
+
+def build_battery_status(s: Snapshot) -> Any:
+    b = s.vehicle.battery
+    cells = [round(b.voltage / b.cells * 1000)] * b.cells + [65535] * (10 - b.cells)
+    return _encoder.battery_status_encode(
+        0, mav.MAV_BATTERY_FUNCTION_ALL, mav.MAV_BATTERY_TYPE_LIPO, 32767, cells,
+        round(b.current * 100), round(b.used_mah), -1, round(b.remaining * 100),
+    )  # fmt: skip
+
+
+def build_servo_output_raw(s: Snapshot) -> Any:
+    v = s.vehicle
+    pwm = [round(1000 + 1000 * c / v.airframe.max_rotor_speed) if v.armed else 1000
+           for c in v.rotor_cmd]  # fmt: skip
+    return _encoder.servo_output_raw_encode(s.time_usec & 0xFFFFFFFF, 0, *pwm, 0, 0, 0, 0)
+
+
+def build_actuator_output_status(s: Snapshot) -> Any:
+    speeds = [float(w) for w in s.rotor_speeds] + [0.0] * 28  # rad/s, measured
+    return _encoder.actuator_output_status_encode(s.time_usec, 0b1111, speeds)
+
+
+def build_system_time(s: Snapshot) -> Any:
+    return _encoder.system_time_encode(int(time.time() * 1e6), s.time_boot_ms)
+
+
+def build_mission_current(s: Snapshot) -> Any:
+    v = s.vehicle
+    state = mav.MISSION_STATE_NO_MISSION
+    if v.mission:
+        state = mav.MISSION_STATE_ACTIVE if v.mode is Mode.MISSION else mav.MISSION_STATE_PAUSED
+    return _encoder.mission_current_encode(v.mission_current, len(v.mission), state, 0)
+
+
+def build_autopilot_version(s: Snapshot) -> Any:
+    version = _version_number()
+    return _encoder.autopilot_version_encode(
+        CAPABILITIES, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x5153_4954_4C00_0001
+    )
+
+
+BUILDERS: dict[int, Callable[[Snapshot], Any]] = {
+    mav.MAVLINK_MSG_ID_SYS_STATUS: build_sys_status,
+    mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: build_extended_sys_state,
+    mav.MAVLINK_MSG_ID_ATTITUDE: build_attitude,
+    mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: build_attitude_quaternion,
+    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: build_local_position_ned,
+    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: build_global_position_int,
+    mav.MAVLINK_MSG_ID_GPS_RAW_INT: build_gps_raw_int,
+    mav.MAVLINK_MSG_ID_HOME_POSITION: build_home_position,
+    mav.MAVLINK_MSG_ID_VFR_HUD: build_vfr_hud,
+    mav.MAVLINK_MSG_ID_BATTERY_STATUS: build_battery_status,
+    mav.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: build_servo_output_raw,
+    mav.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: build_actuator_output_status,
+    mav.MAVLINK_MSG_ID_SYSTEM_TIME: build_system_time,
+    mav.MAVLINK_MSG_ID_MISSION_CURRENT: build_mission_current,
+    mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: build_autopilot_version,
+}
+
+# Default rates, Hz (the spec's typical rates; position and attitude at 50 Hz).
+DEFAULT_RATES: dict[int, float] = {
+    mav.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
+    mav.MAVLINK_MSG_ID_ATTITUDE: 50.0,
+    mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 50.0,
+    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 50.0,
+    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 50.0,
+    mav.MAVLINK_MSG_ID_GPS_RAW_INT: 5.0,
+    mav.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    mav.MAVLINK_MSG_ID_VFR_HUD: 4.0,
+    mav.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
+    mav.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 10.0,
+    mav.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: 10.0,
+    mav.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,
+    mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
+}
+
+# REQUEST_DATA_STREAM groups (ArduPilot/MAVProxy convention) -> message ids.
+DATA_STREAMS: dict[int, tuple[int, ...]] = {
+    mav.MAV_DATA_STREAM_EXTENDED_STATUS: (
+        mav.MAVLINK_MSG_ID_SYS_STATUS, mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+        mav.MAVLINK_MSG_ID_GPS_RAW_INT, mav.MAVLINK_MSG_ID_MISSION_CURRENT,
+    ),
+    mav.MAV_DATA_STREAM_RC_CHANNELS: (mav.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW,),
+    mav.MAV_DATA_STREAM_RAW_CONTROLLER: (mav.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS,),
+    mav.MAV_DATA_STREAM_POSITION: (
+        mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
+    ),
+    mav.MAV_DATA_STREAM_EXTRA1: (
+        mav.MAVLINK_MSG_ID_ATTITUDE, mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
+    ),
+    mav.MAV_DATA_STREAM_EXTRA2: (mav.MAVLINK_MSG_ID_VFR_HUD,),
+    mav.MAV_DATA_STREAM_EXTRA3: (
+        mav.MAVLINK_MSG_ID_SYSTEM_TIME, mav.MAVLINK_MSG_ID_BATTERY_STATUS,
+        mav.MAVLINK_MSG_ID_HOME_POSITION,
+    ),
+}  # fmt: skip
+DATA_STREAMS[mav.MAV_DATA_STREAM_ALL] = tuple(m for ids in DATA_STREAMS.values() for m in ids)
+
+
+class Schedule:
+    """Per-link message intervals (s of simulated time) and when each is next due."""
+
+    def __init__(self) -> None:
+        self.intervals: dict[int, float] = {m: 1.0 / hz for m, hz in DEFAULT_RATES.items()}
+        self.next_due: dict[int, float] = {}
+
+    def set_rate(self, message_id: int, hz: float | None) -> None:
+        """Rate in Hz; 0 or negative stops the message; None restores the default."""
+        if hz is None:
+            if message_id in DEFAULT_RATES:
+                self.intervals[message_id] = 1.0 / DEFAULT_RATES[message_id]
+            else:
+                self.intervals.pop(message_id, None)
+        elif hz <= 0:
+            self.intervals.pop(message_id, None)
+        else:
+            self.intervals[message_id] = 1.0 / hz
+        self.next_due.pop(message_id, None)
+
+    def due(self, now: float) -> list[int]:
+        """Message ids due at simulated time ``now``; advances their next due time."""
+        out = []
+        for message_id, interval in self.intervals.items():
+            due = self.next_due.get(message_id, now)
+            if due - now > interval:  # simulated time went back (reboot, reset)
+                due = now
+            if now >= due:
+                out.append(message_id)
+                # Keep the phase, but never queue a backlog after a pause.
+                self.next_due[message_id] = max(due + interval, now + 0.5 * interval)
+        return out

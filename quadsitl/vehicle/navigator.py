@@ -1,0 +1,153 @@
+"""Activities that turn a flight intention into controller setpoints, one tick at a time.
+
+Each activity is a small object with ``setpoint(position, velocity, t)`` and ``done``:
+hold a point, fly a straight leg, orbit, land. Modes and missions (in :mod:`.vehicle`)
+chain them. Positions are local ENU metres, yaw in ENU radians.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from quadsitl.vehicle.controller import Setpoint, Vec
+
+
+@dataclass
+class Limits:
+    """Speed limits of one activity, m/s and m/s² (from the parameters)."""
+
+    cruise_xy: float = 5.0
+    climb: float = 3.0
+    descent: float = 1.5
+    decel: float = 1.5  # planned deceleration at the end of a leg
+
+
+class Hold:
+    """Stay at ``point`` (and heading ``yaw``; None keeps the current one)."""
+
+    def __init__(self, point: Vec, yaw: float | None = None) -> None:
+        self.point = np.array(point, dtype=np.float64)
+        self.yaw = yaw
+        self.done = False
+
+    def setpoint(self, position: Vec, velocity: Vec, t: float) -> Setpoint:
+        return Setpoint(position=self.point.copy(), yaw=self.yaw)
+
+
+class Leg:
+    """Fly the straight line ``start`` -> ``end``, arriving at rest, then hold ``end``.
+
+    The setpoint is the vehicle's projection on the line (pulling it back onto the
+    line) with a feed-forward velocity along the line that ramps down as
+    sqrt(2·decel·remaining), so the vehicle stops at the end without overshoot.
+    The speed ramps up the same way from the start. ``done`` once within ``radius`` of
+    the end.
+    """
+
+    def __init__(
+        self,
+        start: Vec,
+        end: Vec,
+        limits: Limits,
+        radius: float,
+        yaw: float | None = None,
+        face_travel: bool = False,
+    ) -> None:
+        self.start = np.array(start, dtype=np.float64)
+        self.end = np.array(end, dtype=np.float64)
+        delta = self.end - self.start
+        self.length = float(np.linalg.norm(delta))
+        self.direction = delta / self.length if self.length > 1e-6 else np.zeros(3)
+        self.radius = radius
+        self.limits = limits
+        horizontal = math.hypot(delta[0], delta[1])
+        if yaw is None and face_travel and horizontal > 2.0:
+            yaw = math.atan2(delta[1], delta[0])
+        self.yaw = yaw
+        self.speed = self._line_speed()
+        self.done = False
+
+    def _line_speed(self) -> float:
+        """Largest speed along the line within the horizontal and vertical limits."""
+        d = self.direction
+        horizontal, vertical = math.hypot(d[0], d[1]), d[2]
+        speed = math.inf
+        if horizontal > 1e-9:
+            speed = self.limits.cruise_xy / horizontal
+        if vertical > 1e-9:
+            speed = min(speed, self.limits.climb / vertical)
+        elif vertical < -1e-9:
+            speed = min(speed, self.limits.descent / -vertical)
+        return 0.0 if math.isinf(speed) else speed
+
+    def remaining(self, position: Vec) -> float:
+        return float(np.linalg.norm(self.end - position))
+
+    def setpoint(self, position: Vec, velocity: Vec, t: float) -> Setpoint:
+        if self.remaining(position) <= self.radius:
+            self.done = True
+        along = float(np.clip((position - self.start) @ self.direction, 0.0, self.length))
+        to_go = self.length - along
+        braking = math.sqrt(2.0 * self.limits.decel * to_go)
+        # Ramp up as well (from a small start speed), so that all axes stay on the line.
+        ramp = 0.5 + math.sqrt(2.0 * self.limits.decel * along)
+        speed = min(self.speed, braking, ramp)
+        if to_go < 0.05:
+            return Setpoint(position=self.end.copy(), yaw=self.yaw)
+        # While braking, feed the planned deceleration forward too.
+        decel = self.limits.decel if braking < self.speed else 0.0
+        return Setpoint(
+            position=self.start + along * self.direction,
+            velocity=speed * self.direction,
+            acceleration=-decel * self.direction,
+            yaw=self.yaw,
+            max_speed_xy=self.limits.cruise_xy,
+        )
+
+
+class Orbit:
+    """Circle ``center`` ``turns`` times at ``radius`` (m); positive radius is clockwise
+    seen from above, as MAV_CMD_NAV_LOITER_TURNS defines."""
+
+    def __init__(self, center: Vec, radius: float, turns: float, speed: float, start: Vec):
+        self.center = np.array(center, dtype=np.float64)
+        self.radius = max(abs(radius), 1.0)
+        self.clockwise = radius >= 0
+        self.rate = min(speed, 3.0) / self.radius  # rad/s
+        offset = np.asarray(start, dtype=np.float64)[:2] - self.center[:2]
+        self.angle = math.atan2(offset[1], offset[0]) if np.hypot(*offset) > 0.1 else 0.0
+        self.total = 2.0 * math.pi * max(turns, 0.0)
+        self.travelled = 0.0
+        self.last_t: float | None = None
+        self.done = self.total == 0.0
+
+    def setpoint(self, position: Vec, velocity: Vec, t: float) -> Setpoint:
+        dt = 0.0 if self.last_t is None else t - self.last_t
+        self.last_t = t
+        sign = -1.0 if self.clockwise else 1.0
+        self.angle += sign * self.rate * dt
+        self.travelled += self.rate * dt
+        self.done = self.travelled >= self.total
+        c, s = math.cos(self.angle), math.sin(self.angle)
+        point = self.center + np.array([self.radius * c, self.radius * s, 0.0])
+        tangent = sign * self.rate * self.radius * np.array([-s, c, 0.0])
+        return Setpoint(position=point, velocity=tangent, yaw=math.atan2(-s, -c))
+
+
+class Land:
+    """Descend at ``speed`` (m/s) above ``point``'s horizontal position."""
+
+    def __init__(self, point: Vec, speed: float, yaw: float | None = None) -> None:
+        self.point = np.array(point, dtype=np.float64)
+        self.speed = speed
+        self.yaw = yaw
+        self.done = False  # the vehicle sets it on touchdown
+
+    def setpoint(self, position: Vec, velocity: Vec, t: float) -> Setpoint:
+        target = np.array([self.point[0], self.point[1], position[2]])
+        return Setpoint(
+            position=target, velocity=np.array([0.0, 0.0, -self.speed]), yaw=self.yaw
+        )

@@ -1,0 +1,527 @@
+"""One simulated quadrotor with its flight software: arming, modes, missions, offboard.
+
+Pure: no sockets, no files, no clocks. The MAVLink server calls the command methods
+(each returns a :class:`Result`) and :meth:`Vehicle.step`, and reads state, events and
+reached mission items back. Local frame ENU (origin at home, on the ground), SI units.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from quadsitl import frames
+from quadsitl.physics import Fleet, get_airframe
+from quadsitl.physics import layout as L
+from quadsitl.vehicle import mission as M
+from quadsitl.vehicle.battery import Battery
+from quadsitl.vehicle.controller import Autopilot, CascadedController, Setpoint, Vec
+from quadsitl.vehicle.geo import Home
+from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
+from quadsitl.vehicle.navigator import Hold, Land, Leg, Limits, Orbit
+from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
+
+# Severities of events, as MAV_SEVERITY numbers them.
+CRITICAL, ERROR, WARNING, NOTICE, INFO = 2, 3, 4, 5, 6
+# Landed states, as MAV_LANDED_STATE numbers them.
+ON_GROUND, IN_AIR, TAKING_OFF, LANDING = 1, 2, 3, 4
+
+
+class Outcome(Enum):
+    """How a command ended, mapped one to one on MAV_RESULT by the server."""
+
+    ACCEPTED = 0
+    TEMPORARILY_REJECTED = 1
+    DENIED = 2
+    UNSUPPORTED = 3
+    FAILED = 4
+
+
+@dataclass(frozen=True)
+class Result:
+    outcome: Outcome
+    reason: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.outcome is Outcome.ACCEPTED
+
+
+ACCEPTED = Result(Outcome.ACCEPTED)
+
+
+def _denied(reason: str) -> Result:
+    return Result(Outcome.DENIED, reason)
+
+
+class Vehicle:
+    """The simulated quadrotor. See the module docstring.
+
+    Args:
+        airframe: preset name (also settable with the SIM_AIRFRAME parameter).
+        home: origin of the local frame on the globe.
+        physics_dt: physics step, s.
+        control_period: onboard controller period, s (a multiple of ``physics_dt``).
+    """
+
+    def __init__(
+        self,
+        airframe: str = "paper",
+        home: Home | None = None,
+        physics_dt: float = 0.001,
+        control_period: float = 0.004,
+    ) -> None:
+        self.home = home or Home()
+        self.params = ParameterStore()
+        self.params.values["SIM_AIRFRAME"] = float(AIRFRAME_NAMES.index(get_airframe(airframe).name))
+        self.airframe = get_airframe(airframe)
+        self.fleet = Fleet(1, self.airframe, dt=physics_dt)
+        self.substeps = max(1, round(control_period / physics_dt))
+        self.control_period = self.substeps * physics_dt
+        self.controller: Autopilot = CascadedController(self.airframe)
+        self.battery = Battery()
+        self.mission: list[M.MissionItem] = []
+        self.mission_current = 0
+        self.events: deque[tuple[int, str]] = deque(maxlen=100)
+        self.items_reached: deque[int] = deque(maxlen=100)
+        self.rotor_cmd = np.zeros(L.N_ROTORS)  # rad/s, last command to the motors
+        self._apply_all_params()
+        self._reset_flight_state()
+
+    # --- state, read by telemetry -----------------------------------------------------
+    @property
+    def time(self) -> float:
+        """Simulated seconds since boot."""
+        return self.fleet.time
+
+    @property
+    def state(self) -> Vec:
+        """(17,) physics state row (layout in :mod:`quadsitl.physics.layout`)."""
+        return self.fleet.state[0]
+
+    @property
+    def position(self) -> Vec:
+        return self.fleet.state[0, L.POS]
+
+    @property
+    def crashed(self) -> bool:
+        return int(self.fleet.contact[0]) == L.CRASHED
+
+    @property
+    def on_ground(self) -> bool:
+        return int(self.fleet.contact[0]) != L.AIRBORNE
+
+    @property
+    def altitude(self) -> float:
+        """m above home ground level (centre of mass minus gear height)."""
+        return float(self.position[2]) - self.airframe.gear_height
+
+    @property
+    def landed_state(self) -> int:
+        if self.on_ground:
+            return ON_GROUND
+        if isinstance(self.activity, Land):
+            return LANDING
+        if self.mode is Mode.TAKEOFF:
+            return TAKING_OFF
+        return IN_AIR
+
+    # --- commands ---------------------------------------------------------------------
+    def arm(self, force: bool = False) -> Result:
+        if self.armed:
+            return ACCEPTED
+        if self.crashed:
+            return _denied("arming denied: vehicle crashed, reboot or reset it first")
+        if not self.on_ground and not force:
+            return _denied("arming denied: not on the ground")
+        if self.mode in NEEDS_PILOT:
+            return _denied(f"arming denied: {self.mode.name} needs a pilot (RC)")
+        self.armed = True
+        self.armed_at = self.time
+        self.flew = False
+        self.controller.reset()
+        self._enter_mode(self.mode)
+        self._event(INFO, "armed")
+        return ACCEPTED
+
+    def disarm(self, force: bool = False) -> Result:
+        if not self.armed:
+            return ACCEPTED
+        if not self.on_ground and not force:
+            return _denied("disarming denied: vehicle is flying (use force)")
+        self.armed = False
+        self._event(INFO, "disarmed")
+        return ACCEPTED
+
+    def set_mode(self, mode: Mode) -> Result:
+        if mode in NEEDS_PILOT:
+            return _denied(f"mode {mode.name} denied: needs a pilot (RC)")
+        if mode is Mode.MISSION and not self.mission:
+            return _denied("mission mode denied: no mission uploaded")
+        if mode is Mode.OFFBOARD and not self._offboard_alive():
+            return _denied("offboard denied: stream setpoints first")
+        if mode is Mode.RTL and self.on_ground:
+            return _denied("return denied: vehicle is on the ground")
+        if mode is Mode.LAND and self.on_ground and not self.armed:
+            return _denied("land denied: vehicle is on the ground")
+        if mode is not self.mode:
+            self._event(INFO, f"mode {mode.name}")
+        self._enter_mode(mode)
+        return ACCEPTED
+
+    def takeoff(self, altitude: float | None = None) -> Result:
+        """Climb above the current position to ``altitude`` m above home (None: param)."""
+        if not self.armed:
+            return _denied("take-off denied: not armed")
+        if altitude is not None and not (math.isfinite(altitude) and 0.3 <= altitude <= 500):
+            return _denied(f"take-off denied: altitude {altitude} m above home out of range")
+        self.takeoff_altitude = altitude if altitude is not None else None
+        return self.set_mode(Mode.TAKEOFF)
+
+    def land(self) -> Result:
+        return self.set_mode(Mode.LAND)
+
+    def return_to_launch(self) -> Result:
+        return self.set_mode(Mode.RTL)
+
+    def reposition(
+        self, east: float, north: float, up: float, speed: float | None, yaw: float | None
+    ) -> Result:
+        """Go to a local point (NaN keeps the current coordinate) and hold there."""
+        if not self.armed:
+            return _denied("reposition denied: not armed")
+        here = self.position
+        target = np.array(
+            [
+                here[0] if math.isnan(east) else east,
+                here[1] if math.isnan(north) else north,
+                here[2] if math.isnan(up) else up + self.airframe.gear_height,
+            ]
+        )
+        if not np.isfinite(target).all() or abs(target).max() > 50_000:
+            return _denied("reposition denied: target not finite or too far")
+        if self.mode is not Mode.LOITER:
+            self._event(INFO, "mode LOITER")
+        self.mode = Mode.LOITER
+        limits = self._limits(cruise=speed if speed and speed > 0 else None)
+        self.activity = Leg(here.copy(), target, limits, self._acceptance(), yaw, face_travel=True)
+        return ACCEPTED
+
+    def offboard_setpoint(self, setpoint: Setpoint) -> None:
+        """Latest offboard target (world ENU); kept until the next one or a timeout."""
+        self.offboard = setpoint
+        self.offboard_time = self.time
+
+    def set_param(self, name: str, value: float) -> float:
+        """Set a parameter; returns the value stored. ValueError when refused."""
+        value = self.params.check(name, value)
+        if name == "SIM_AIRFRAME" and value != self.params[name] and not self.on_ground:
+            raise ValueError("SIM_AIRFRAME can only change on the ground")
+        self.params.values[name] = value
+        self._apply_param(name)
+        return value
+
+    def set_mission(self, items: list[M.MissionItem]) -> Result:
+        for seq, item in enumerate(items):
+            problem = item.problem()
+            if problem:
+                return _denied(f"mission item {seq}: {problem}")
+        if self.mode is Mode.MISSION and self.armed:
+            self._enter_mode(Mode.LOITER)
+        self.mission = list(items)
+        self.mission_current = 0
+        return ACCEPTED
+
+    def set_mission_current(self, seq: int) -> Result:
+        if not 0 <= seq < max(len(self.mission), 1):
+            return _denied(f"mission item {seq} does not exist")
+        self.mission_current = seq
+        if self.mode is Mode.MISSION:
+            self._start_item()
+        return ACCEPTED
+
+    def reboot(self) -> None:
+        """Back to power-on: on the ground at home, disarmed, charged; mission kept."""
+        self.fleet.time = 0.0
+        self._reset_flight_state()
+        self.battery.recharge()
+        self._event(INFO, "rebooted")
+
+    # --- stepping ---------------------------------------------------------------------
+    def step(self) -> None:
+        """Advance one physics step; the controller runs every ``substeps`` of them."""
+        if self._physics_steps % self.substeps == 0:
+            self._control()
+        self._physics_steps += 1
+        contact_before = int(self.fleet.contact[0])
+        self.fleet.step(self.rotor_cmd)
+        self._watch_contact(contact_before)
+        rotors = self.fleet.state[0, L.ROTORS]
+        shaft_power = self.airframe.torque_coeff * float(np.sum(rotors**3))
+        self.battery.drain(shaft_power, self.fleet.dt)
+
+    def _control(self) -> None:
+        if not self.armed:
+            self.rotor_cmd[:] = 0.0
+            return
+        self._navigate()
+        setpoint = self._current_setpoint()
+        self.rotor_cmd[:] = self.controller.rotor_command(self.state, setpoint, self.control_period)
+
+    def _current_setpoint(self) -> Setpoint:
+        position, velocity = self.position, self.fleet.state[0, L.VEL]
+        if self.mode is Mode.OFFBOARD and self.offboard is not None:
+            return self.offboard
+        setpoint = self.activity.setpoint(position, velocity, self.time)
+        if self.on_ground and self._activity_stays_on_ground():
+            return Setpoint(idle=True)
+        return setpoint
+
+    def _activity_stays_on_ground(self) -> bool:
+        """True when the activity would not lift the vehicle (idle the rotors)."""
+        activity = self.activity
+        if isinstance(activity, Land):
+            return True
+        goal = activity.end if isinstance(activity, Leg) else getattr(activity, "point", None)
+        if goal is None:
+            goal = getattr(activity, "center", self.position)
+        return float(goal[2]) < self.airframe.gear_height + 0.3
+
+    def _navigate(self) -> None:
+        """Mode logic at the controller rate: timeouts, mission progress, landing."""
+        if self.mode is Mode.OFFBOARD and not self._offboard_alive():
+            self._event(WARNING, "offboard setpoints lost: holding position")
+            self._enter_mode(Mode.LOITER)
+        if self.on_ground and not self.crashed:
+            self._on_ground_timers()
+        if self.mode is Mode.TAKEOFF and self.activity.done:
+            self._event(INFO, "take-off complete: holding")
+            self._enter_mode(Mode.LOITER)
+        elif self.mode is Mode.RTL and self.activity.done and self.rtl_stages:
+            self.activity = self.rtl_stages.pop(0)
+        elif self.mode is Mode.MISSION:
+            self._mission_progress()
+
+    def _on_ground_timers(self) -> None:
+        landing = isinstance(self.activity, Land)
+        if landing and self.armed:
+            self.activity.done = True
+            if self.landed_at is None:
+                self.landed_at = self.time
+            if self.time - self.landed_at >= self.params["COM_DISARM_LAND"]:
+                self.disarm()
+                self._event(INFO, "landed: disarmed")
+                if self.mode is Mode.MISSION:
+                    self._mission_item_reached()
+                self._enter_mode(Mode.LOITER)
+            return
+        limit = self.params["COM_DISARM_PRFLT"]
+        if self.armed and limit > 0 and self.time - self.armed_at > limit and not self.flew:
+            self.disarm()
+            self._event(NOTICE, f"disarmed: no take-off within {limit:g} s")
+
+    def _watch_contact(self, before: int) -> None:
+        after = int(self.fleet.contact[0])
+        if after == before:
+            return
+        if after == L.CRASHED:
+            self.armed = False
+            self.rotor_cmd[:] = 0.0
+            speed = float(self.fleet.touchdown_speed[0])
+            self._event(CRITICAL, f"crashed (touchdown {speed:.1f} m/s): reboot to fly again")
+        elif after == L.ON_GROUND:
+            self.landed_at = self.time
+            self._event(INFO, "landed")
+        elif after == L.AIRBORNE:
+            self.flew = True
+            self.landed_at = None
+            self._event(INFO, "took off")
+
+    # --- modes ------------------------------------------------------------------------
+    def _enter_mode(self, mode: Mode) -> None:
+        self.mode = mode
+        here = self.position.copy()
+        yaw = float(frames.euler_from_quat(self.state[L.QUAT])[2])
+        self.rtl_stages = []
+        if mode is Mode.TAKEOFF:
+            altitude = self.takeoff_altitude or self.params["MIS_TAKEOFF_ALT"]
+            top = np.array([here[0], here[1], altitude + self.airframe.gear_height])
+            limits = self._limits(climb=self.params["MPC_TKO_SPEED"])
+            self.activity = Leg(here, top, limits, radius=0.2, yaw=yaw)
+        elif mode is Mode.LAND:
+            self.activity = Land(here, self.params["MPC_LAND_SPEED"], yaw)
+        elif mode is Mode.RTL:
+            self._plan_rtl(here, yaw)
+        elif mode is Mode.MISSION:
+            self._start_item()
+        else:  # hold modes and offboard's fallback
+            self.activity = Hold(here, yaw)
+        if mode is Mode.OFFBOARD:
+            self.controller.reset()
+
+    def _plan_rtl(self, here: Vec, yaw: float) -> None:
+        gear = self.airframe.gear_height
+        cruise_z = max(here[2], self.params["RTL_RETURN_ALT"] + gear)
+        above_home = np.array([0.0, 0.0, cruise_z])
+        climb_to = np.array([here[0], here[1], cruise_z])
+        limits, radius = self._limits(), self._acceptance()
+        self.rtl_stages = [
+            Leg(climb_to, above_home, limits, radius, face_travel=True),
+            Land(above_home, self.params["MPC_LAND_SPEED"]),
+        ]
+        self.activity = Leg(here, climb_to, limits, radius, yaw)
+        self._event(INFO, "returning to launch")
+
+    # --- missions ---------------------------------------------------------------------
+    def _start_item(self) -> None:
+        here = self.position.copy()
+        self.item_hold_until: float | None = None
+        if self.mission_current >= len(self.mission):
+            self._event(INFO, "mission finished: holding")
+            self.mode = Mode.LOITER
+            self.activity = Hold(here)
+            return
+        item = self.mission[self.mission_current]
+        gear = self.airframe.gear_height
+        east, north, up = item.target(self.home, (here[0], here[1], here[2] - gear))
+        target = np.array([east, north, up + gear])
+        yaw = None if math.isnan(item.param4) else float(frames.yaw_ned_to_enu(math.radians(item.param4)))
+        radius = item.param2 if item.command == M.NAV_WAYPOINT and item.param2 > 0 else None
+        limits = self._limits()
+        if item.command == M.NAV_TAKEOFF:
+            target[:2] = here[:2]
+            limits = self._limits(climb=self.params["MPC_TKO_SPEED"])
+            self.activity = Leg(here, target, limits, 0.2, yaw)
+        elif item.command == M.NAV_LAND:
+            target[2] = here[2]
+            start = self._previous_target(here)
+            self.activity = Leg(start, target, limits, self._acceptance(), yaw, face_travel=True)
+            self.land_after_leg = True
+        elif item.command == M.NAV_RETURN_TO_LAUNCH:
+            self._plan_rtl(here, 0.0)
+        elif item.command == M.DO_CHANGE_SPEED:
+            if item.param2 > 0:
+                self.mission_speed = item.param2
+            self._mission_item_reached()
+            return
+        else:  # waypoints and loiters fly there first
+            start = self._previous_target(here)
+            self.activity = Leg(start, target, limits, radius or self._acceptance(), yaw, True)
+        self.land_after_leg = item.command == M.NAV_LAND
+        self.item_target = target
+
+    def _previous_target(self, here: Vec) -> Vec:
+        """Where the leg starts: the last item's target if the vehicle is near it (so the
+        track follows the planned line, as PX4 does), else the vehicle's position."""
+        previous = getattr(self, "item_target", None)
+        if previous is not None and np.linalg.norm(previous - here) < 2.0:
+            return previous
+        return here
+
+    def _mission_progress(self) -> None:
+        item = self.mission[self.mission_current]
+        if item.command == M.NAV_RETURN_TO_LAUNCH:
+            if self.activity.done and self.rtl_stages:
+                self.activity = self.rtl_stages.pop(0)
+            return  # landing completes it (see _on_ground_timers)
+        if not self.activity.done or isinstance(self.activity, Land):
+            return
+        if self.land_after_leg and isinstance(self.activity, Leg):
+            self.activity = Land(self.activity.end, self.params["MPC_LAND_SPEED"], self.activity.yaw)
+            return
+        if isinstance(self.activity, Leg) and item.command == M.NAV_LOITER_TURNS:
+            self.activity = Orbit(
+                self.activity.end, item.param3, item.param1, self._limits().cruise_xy, self.position
+            )
+            return
+        hold = {M.NAV_WAYPOINT: item.param1, M.NAV_LOITER_TIME: item.param1}.get(item.command, 0)
+        if item.command == M.NAV_LOITER_UNLIM:
+            return  # holds until the mission is changed
+        if self.item_hold_until is None:
+            self.item_hold_until = self.time + max(hold, 0.0)
+            self.activity = Hold(getattr(self.activity, "end", self.position.copy()), self.activity.yaw)
+            self.activity.done = True
+        if self.time >= self.item_hold_until:
+            self._mission_item_reached()
+
+    def _mission_item_reached(self) -> None:
+        self.items_reached.append(self.mission_current)
+        self.mission_current += 1
+        if self.mission_current < len(self.mission):
+            self._start_item()
+        elif self.armed and not self.on_ground:
+            self._start_item()  # finishes the mission: hold
+        else:
+            self.mission_current = len(self.mission) - 1 if self.mission else 0
+            self._event(INFO, "mission finished")
+
+    # --- helpers ----------------------------------------------------------------------
+    def _limits(self, cruise: float | None = None, climb: float | None = None) -> Limits:
+        p = self.params
+        speed = cruise or self.mission_speed or p["MPC_XY_CRUISE"]
+        return Limits(
+            cruise_xy=min(speed, p["MPC_XY_VEL_MAX"]),
+            climb=min(climb or p["MPC_Z_VEL_MAX_UP"], p["MPC_Z_VEL_MAX_UP"]),
+            descent=p["MPC_Z_VEL_MAX_DN"],
+            decel=0.5 * p["MPC_ACC_HOR"],
+        )
+
+    def _acceptance(self) -> float:
+        return self.params["NAV_ACC_RAD"]
+
+    def _offboard_alive(self) -> bool:
+        return (
+            self.offboard is not None
+            and self.time - self.offboard_time <= self.params["COM_OF_LOSS_T"]
+        )
+
+    def _event(self, severity: int, text: str) -> None:
+        self.events.append((severity, text))
+
+    def _apply_all_params(self) -> None:
+        for spec in PARAMETERS:
+            self._apply_param(spec.name)
+
+    def _apply_param(self, name: str) -> None:
+        spec = next(p for p in PARAMETERS if p.name == name)
+        value = self.params[name]
+        if spec.gain is not None and isinstance(self.controller, CascadedController):
+            setattr(self.controller.gains, spec.gain, value)
+        elif name == "BAT_CAPACITY":
+            self.battery.capacity_mah = value
+        elif name == "SIM_AIRFRAME":
+            airframe = get_airframe(AIRFRAME_NAMES[int(value)])
+            if airframe != self.airframe:
+                self.airframe = airframe
+                self.fleet.params[0] = airframe.to_params()
+                self.fleet.airframes = [airframe]
+                if isinstance(self.controller, CascadedController):
+                    self.controller.set_airframe(airframe)
+                self._event(INFO, f"airframe {airframe.name}")
+
+    def _reset_flight_state(self) -> None:
+        rest = np.zeros(L.STATE_SIZE)
+        rest[L.I_PZ] = self.airframe.gear_height
+        rest[L.I_QW] = 1.0
+        self.fleet.reset(rest, contact=L.ON_GROUND)
+        self.armed = False
+        self.armed_at = 0.0
+        self.flew = False
+        self.landed_at: float | None = None
+        self.offboard: Setpoint | None = None
+        self.offboard_time = -math.inf
+        self.takeoff_altitude: float | None = None
+        self.mission_speed: float | None = None
+        self.land_after_leg = False
+        self.item_hold_until = None
+        self.item_target: Vec | None = None
+        self._physics_steps = 0
+        self.rotor_cmd[:] = 0.0
+        self.controller.reset()
+        self.mode = Mode.LOITER
+        self.activity: Hold | Leg | Land | Orbit = Hold(self.position.copy())
+        self.rtl_stages: list[Leg | Land] = []
