@@ -18,8 +18,17 @@ def _build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     demo = commands.add_parser(
-        "demo", help="fly a scripted take-off, hover and landing and print it as a table"
+        "demo",
+        help="start the simulator and fly a mission through MAVLink, printing the tracking "
+        "error (with --physics: a physics-only take-off, hover and landing table)",
     )
+    demo.add_argument(
+        "--physics", action="store_true", help="physics-only table, no simulator process"
+    )
+    demo.add_argument(
+        "--speed", type=float, default=4.0, help="simulator speed factor (default: 4)"
+    )
+    demo.add_argument("--logs", default="logs", help="telemetry log folder (default: logs)")
     demo.add_argument("--airframe", default="paper", help="airframe preset (default: paper)")
     demo.add_argument(
         "--altitude", type=float, default=2.0, help="hover altitude above ground, m (default: 2)"
@@ -125,6 +134,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
+    if args.command == "demo" and not args.physics:
+        from gcs_tools.demo import run_demo as run_mission_demo
+
+        return run_mission_demo(speed=args.speed, logs=args.logs)
     if args.command == "demo":
         from quadsitl.demo import run_demo
 

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import signal
+import socket
 import subprocess
 import sys
+import time
 
 from quadsitl import __version__
 
@@ -22,7 +25,7 @@ def test_version_and_help():
 
 
 def test_demo_takes_off_hovers_and_lands():
-    result = _run("demo", "--altitude", "1.5")
+    result = _run("demo", "--physics", "--altitude", "1.5")
     assert result.returncode == 0, result.stderr
     assert "final state: on_ground" in result.stdout
     altitudes = [
@@ -34,6 +37,41 @@ def test_demo_takes_off_hovers_and_lands():
 
 
 def test_demo_rejects_bad_options():
-    result = _run("demo", "--airframe", "bogus")
+    result = _run("demo", "--physics", "--airframe", "bogus")
     assert result.returncode == 2
     assert "unknown airframe" in result.stderr
+
+
+def test_mission_demo_flies_and_reports_tracking(tmp_path):
+    result = _run("demo", "--speed", "8", "--logs", str(tmp_path))
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "waypoint error" in result.stdout and "path tracking error" in result.stdout
+    assert str(tmp_path) in result.stdout and "QGroundControl" in result.stdout
+
+
+def test_sim_stops_cleanly_on_sigint_and_sigterm(tmp_path):
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        process = subprocess.Popen(
+            [sys.executable, "-m", "quadsitl.cli", "sim", "--logs", str(tmp_path)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        time.sleep(2.0)
+        process.send_signal(sig)
+        out, err = process.communicate(timeout=10)
+        assert process.returncode == 0, err
+        assert "timing:" in err and "Traceback" not in err
+
+
+def test_sim_port_in_use_is_a_clear_error():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        result = _run("sim", "--gcs", f"udpin:127.0.0.1:{port}", "--logs", "none")
+    assert result.returncode == 2
+    assert "cannot open" in result.stderr and str(port) in result.stderr
+
+
+def test_sim_rejects_bad_options():
+    assert "unknown parameter" in _run("sim", "--param", "NOPE=1", "--logs", "none").stderr
+    assert "LAT,LON,ALT" in _run("sim", "--home", "1,2", "--logs", "none").stderr
+    assert "kind must be" in _run("sim", "--gcs", "serial:x:1", "--logs", "none").stderr

@@ -71,6 +71,7 @@ class MavlinkServer:
         self.missions = MissionProtocol(vehicle, self.encoder, self.statustext)
         self.last_heartbeat = -math.inf
         self.last_state: tuple[bool, Mode, bool] | None = None
+        self._after_ack: list[Any] = []
         self.counters = {"ignored": 0, "bad_values": 0}
         self.handlers: dict[str, Callable[[Any, Link], None]] = {
             name[len("handle_") :].upper(): getattr(self, name)
@@ -224,6 +225,8 @@ class MavlinkServer:
             ),
             link,
         )
+        while self._after_ack:  # requested messages follow their ACK (MAVLink spec)
+            self.send(self._after_ack.pop(0), link)
 
     def _commands(self) -> dict[int, Callable[[Command, Link], Result]]:
         return {
@@ -314,7 +317,7 @@ class MavlinkServer:
     def _cmd_request_message(self, c: Command, link: Link) -> Result:
         message_id = _int(c.params[0], "message id")
         if message_id == mav.MAVLINK_MSG_ID_HEARTBEAT:
-            self.send(T.build_heartbeat(self.vehicle), link)
+            self._after_ack.append(T.build_heartbeat(self.vehicle))
             return ACCEPTED
         return self._send_once(message_id, link)
 
@@ -322,7 +325,7 @@ class MavlinkServer:
         builder = T.BUILDERS.get(message_id)
         if builder is None:
             return Result(Outcome.UNSUPPORTED)
-        self.send(builder(T.Snapshot(self.vehicle, self.comm_errors)), link)
+        self._after_ack.append(builder(T.Snapshot(self.vehicle, self.comm_errors)))
         return ACCEPTED
 
     def handle_request_data_stream(self, msg: Any, link: Link) -> None:

@@ -1,0 +1,50 @@
+"""Shared fixtures: a real ``quadsitl sim`` process and a pymavlink client talking to it."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections.abc import Iterator
+
+import pytest
+
+from gcs_tools.client import VehicleClient
+from gcs_tools.demo import free_udp_port
+
+
+class RunningSim:
+    def __init__(self, process: subprocess.Popen[str], port: int, log_dir: str) -> None:
+        self.process, self.port, self.log_dir = process, port, log_dir
+
+    def stop(self) -> str:
+        """SIGTERM, wait, return the combined output."""
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(10)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        return self.process.stdout.read() if self.process.stdout else ""
+
+
+@pytest.fixture
+def sim(tmp_path) -> Iterator[RunningSim]:
+    """The simulator at 5x real time, listening on a free UDP port (udpin)."""
+    port = free_udp_port()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "quadsitl.cli", "sim", "--gcs", f"udpin:127.0.0.1:{port}",
+         "--api", "none", "--speed", "5", "--logs", str(tmp_path)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    running = RunningSim(process, port, str(tmp_path))
+    yield running
+    running.stop()
+
+
+@pytest.fixture
+def client(sim: RunningSim) -> Iterator[VehicleClient]:
+    vehicle = VehicleClient(f"udpout:127.0.0.1:{sim.port}")
+    vehicle.connect(timeout=30)
+    yield vehicle
+    vehicle.close()

@@ -1,0 +1,103 @@
+"""Thousands of malformed and hostile frames at a flying vehicle: it keeps flying."""
+
+from __future__ import annotations
+
+import math
+import random
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+from pymavlink.dialects.v10 import common as mavlink1
+from pymavlink.dialects.v20 import common as mavlink2
+
+from gcs_tools.client import VehicleClient, mav
+from gcs_tools.demo import free_udp_port
+
+
+def _frames(rng: random.Random) -> list[bytes]:
+    """One round of bad input, as raw datagrams."""
+    ours = mavlink2.MAVLink(None, srcSystem=200, srcComponent=1)
+    other = mavlink2.MAVLink(None, srcSystem=201, srcComponent=1)
+    nan = math.nan
+    valid = [
+        ours.command_long_encode(1, 1, 400, 0, nan, nan, nan, nan, nan, nan, nan).pack(ours),
+        ours.command_long_encode(1, 1, 176, 0, nan, 1e30, -5, 0, 0, 0, 0).pack(ours),
+        ours.command_int_encode(1, 1, 6, 192, 0, 0, -1, 0, 0, nan, 2**31 - 1, -(2**31), nan).pack(
+            ours
+        ),
+        ours.set_position_target_local_ned_encode(
+            0, 1, 1, 1, 0, nan, math.inf, -1e9, nan, 0, 0, 0, 0, 0, nan, nan
+        ).pack(ours),
+        ours.set_attitude_target_encode(0, 1, 1, 0, [nan, 0, 0, 0], 0, 0, 0, nan).pack(ours),
+        ours.param_set_encode(1, 1, b"MPC_XY_P", nan, 9).pack(ours),
+        ours.param_set_encode(1, 1, b"NO_SUCH_PARAM", 1.0, 9).pack(ours),
+        ours.param_request_read_encode(1, 1, b"\xff\xfe", 30000).pack(ours),
+        ours.mission_count_encode(1, 1, 65535, 0).pack(ours),
+        ours.mission_item_int_encode(1, 1, 5, 99, 16, 0, 1, nan, 0, 0, 0, 0, 0, nan, 0).pack(
+            ours
+        ),
+        ours.mission_set_current_encode(1, 1, 60000).pack(ours),
+        # Addressed to another vehicle: must be ignored (a forced disarm in flight!).
+        other.command_long_encode(7, 1, 400, 0, 0, 21196, 0, 0, 0, 0, 0).pack(other),
+        ours.request_data_stream_encode(1, 1, 0, 0, 0).pack(ours)[:-3],  # truncated
+    ]
+    v1 = mavlink1.MAVLink(None, srcSystem=202, srcComponent=1)
+    valid.append(v1.heartbeat_encode(6, 8, 0, 0, 0).pack(v1))  # a MAVLink 1 frame
+    out = []
+    for frame in valid:
+        out.append(frame)
+        broken = bytearray(frame)
+        broken[-1] ^= 0xFF  # bad CRC
+        out.append(bytes(broken))
+        out.append(frame[: rng.randrange(1, len(frame))])  # truncated
+    unknown = bytearray(valid[0])
+    unknown[7:10] = (0xEE, 0xEE, 0x0E)  # an unknown message id
+    out.append(bytes(unknown))
+    out.append(bytes(rng.randrange(256) for _ in range(rng.randrange(1, 300))))  # garbage
+    out.append(b"\xfd" * 280)  # start bytes only
+    return out
+
+
+def test_fuzzed_vehicle_keeps_flying(tmp_path):
+    port = free_udp_port()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "quadsitl.cli", "sim", "--gcs", f"udpin:127.0.0.1:{port}",
+         "--api", "none", "--speed", "2", "--logs", str(tmp_path)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    client = VehicleClient(f"udpout:127.0.0.1:{port}")
+    try:
+        client.connect(timeout=30)
+        client.arm()
+        client.takeoff(3.0)
+        client.wait(lambda: client.position_enu()[2] > 2.9, 20, "take-off")
+        attacker = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        rng = random.Random(0)
+        sent = 0
+        for _ in range(300):
+            for frame in _frames(rng):
+                attacker.sendto(frame, ("127.0.0.1", port))
+                sent += 1
+            client.pump(0.002)
+        attacker.close()
+        assert sent > 10_000
+        heights = []
+        end = time.monotonic() + 2.0
+        while time.monotonic() < end:
+            if (msg := client.pump()) is not None and msg.get_type() == "LOCAL_POSITION_NED":
+                heights.append(-msg.z)
+        assert process.poll() is None, "the simulator died"
+        assert client.armed and np.all(np.abs(np.array(heights) - 3.0) < 0.3)
+        client.conn.mav.param_request_read_send(1, 1, b"MPC_XY_P", -1)
+        echo = client.wait_message("PARAM_VALUE", 3)
+        assert echo.param_value == 1.5  # the NaN set was refused
+        status = client.wait_message("SYS_STATUS", 3)
+        assert status.errors_comm > 100  # bad frames were counted
+    finally:
+        client.close()
+        process.terminate()
+        output = process.communicate(timeout=10)[0]
+    assert "Traceback" not in output and process.returncode == 0
