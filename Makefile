@@ -28,6 +28,7 @@ test-slow: venv
 bench: venv
 	$(BIN)/python benchmarks/physics.py
 	$(BIN)/python benchmarks/envs.py
+	$(BIN)/python benchmarks/sitl.py
 
 lint: venv
 	$(BIN)/ruff check .

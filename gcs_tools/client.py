@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 os.environ.setdefault("MAVLINK20", "1")  # before pymavlink.mavutil is imported
-from pymavlink import mavutil  # noqa: E402
+from pymavlink import mavutil
 
 mav = mavutil.mavlink
 
@@ -50,8 +50,9 @@ class VehicleClient:
     """One connection to one vehicle (system id ``target``), e.g. ``udpin:0.0.0.0:14550``."""
 
     def __init__(self, url: str, target: int = 1, source_system: int = 255) -> None:
-        self.conn = mavutil.mavlink_connection(url, source_system=source_system,
-                                               source_component=190, autoreconnect=False)  # fmt: skip
+        self.conn = mavutil.mavlink_connection(
+            url, source_system=source_system, source_component=190, autoreconnect=False
+        )
         self.target = target
         self.latest: dict[str, Any] = {}
         self.texts: list[str] = []
@@ -87,7 +88,9 @@ class VehicleClient:
                 raise ClientError(f"timed out after {timeout:g} s waiting for {what}")
             self.pump()
 
-    def wait_message(self, kind: str, timeout: float = 5.0, check: Callable[[Any], bool] | None = None) -> Any:
+    def wait_message(
+        self, kind: str, timeout: float = 5.0, check: Callable[[Any], bool] | None = None
+    ) -> Any:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             msg = self.pump()
@@ -126,7 +129,9 @@ class VehicleClient:
         return p.y, p.x, -p.z
 
     # --- commands ---------------------------------------------------------------------
-    def command(self, command: int, *params: float, timeout: float = 3.0, check: bool = True) -> int:
+    def command(
+        self, command: int, *params: float, timeout: float = 3.0, check: bool = True
+    ) -> int:
         """COMMAND_LONG and wait for its COMMAND_ACK; returns the MAV_RESULT."""
         values = list(params) + [0.0] * (7 - len(params))
         for _attempt in range(3):
@@ -173,9 +178,11 @@ class VehicleClient:
             self.target, 1, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_CMD_DO_REPOSITION,
             0, 0, -1, 0, 0, math.nan, round(lat * 1e7), round(lon * 1e7), up,
         )  # fmt: skip
-        ack = self.wait_message("COMMAND_ACK", 3.0, lambda m: m.command == mav.MAV_CMD_DO_REPOSITION)
+        ack = self.wait_message(
+            "COMMAND_ACK", 3.0, lambda m: m.command == mav.MAV_CMD_DO_REPOSITION
+        )
         if ack.result != mav.MAV_RESULT_ACCEPTED:
-            raise ClientError(f"goto refused: {self.texts[-1:] }")
+            raise ClientError(f"goto refused: {self.texts[-1:]}")
 
     def to_global(self, east: float, north: float) -> tuple[float, float]:
         home = self.home or self.request_home()

@@ -73,7 +73,9 @@ def run_demo(speed: float = 4.0, logs: str = "logs") -> int:
     print(f"  telemetry log: {log}")
     print("  replay it:      python -m pymavlink.tools.mavlogdump " + log + " | less")
     print("connect a ground station: run `quadsitl sim` and open QGroundControl (it listens on")
-    print("UDP 14550), or `mavproxy.py --master=udpin:0.0.0.0:14550`; MAVSDK: udpin://0.0.0.0:14540")
+    print(
+        "UDP 14550), or `mavproxy.py --master=udpin:0.0.0.0:14550`; MAVSDK: udpin://0.0.0.0:14540"
+    )
     return 0 if report.landed else 1
 
 

@@ -9,6 +9,7 @@ Tracking error, from the LOCAL_POSITION_NED stream the vehicle sends:
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -77,7 +78,9 @@ def _report(client: VehicleClient, waypoints: tuple[Waypoint, ...]) -> FlightRep
     errors = [float(np.min(np.linalg.norm(flown - p, axis=1))) for p in points]
     start = np.array([points[0, 0], points[0, 1], 0.0])
     path = np.vstack([start, points, [0.0, 0.0, points[-1, 2]], [0.0, 0.0, 0.0]])
-    distances = np.min([_segment_distance(flown, a, b) for a, b in zip(path[:-1], path[1:])], axis=0)
+    distances = np.min(
+        [_segment_distance(flown, a, b) for a, b in itertools.pairwise(path)], axis=0
+    )
     times = samples[:, 0][airborne]
     return FlightReport(
         waypoint_errors=errors,

@@ -48,48 +48,71 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         "connect on the --gcs link, MAVSDK-style API clients on the --api link.",
     )
     sim.add_argument(
-        "--gcs", default="udpout:127.0.0.1:14550", metavar="URL",
+        "--gcs",
+        default="udpout:127.0.0.1:14550",
+        metavar="URL",
         help="ground-station link (default: udpout:127.0.0.1:14550, where QGroundControl "
         "listens); 'none' disables it",
     )
     sim.add_argument(
-        "--api", default="udpout:127.0.0.1:14540", metavar="URL",
+        "--api",
+        default="udpout:127.0.0.1:14540",
+        metavar="URL",
         help="API/offboard link (default: udpout:127.0.0.1:14540, where MAVSDK listens "
         "with udpin://0.0.0.0:14540); 'none' disables it",
     )
     sim.add_argument(
-        "--link", action="append", default=[], metavar="URL",
+        "--link",
+        action="append",
+        default=[],
+        metavar="URL",
         help="an extra link (repeatable): udpout:HOST:PORT, udpin:HOST:PORT or tcpin:HOST:PORT",
     )
     sim.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default: 1)")
     sim.add_argument(
-        "--home", default=None, metavar="LAT,LON,ALT",
+        "--home",
+        default=None,
+        metavar="LAT,LON,ALT",
         help="home position: degrees, degrees, metres above sea level "
         "(default: 47.397742,8.545594,488)",
     )
     sim.add_argument("--airframe", default="paper", help="airframe preset (default: paper)")
     sim.add_argument(
-        "--physics-rate", type=float, default=1000.0, help="physics steps per simulated second "
-        "(default: 1000)",
+        "--physics-rate",
+        type=float,
+        default=1000.0,
+        help="physics steps per simulated second (default: 1000)",
     )
     sim.add_argument(
-        "--control-rate", type=float, default=250.0,
+        "--control-rate",
+        type=float,
+        default=250.0,
         help="onboard controller rate, Hz (default: 250)",
     )
     sim.add_argument(
-        "--speed", type=float, default=1.0, help="speed factor: simulated seconds per wall second "
-        "(default: 1)",
+        "--speed",
+        type=float,
+        default=1.0,
+        help="speed factor: simulated seconds per wall second (default: 1)",
     )
     sim.add_argument(
-        "--logs", default="logs", metavar="DIR",
+        "--logs",
+        default="logs",
+        metavar="DIR",
         help="folder for the telemetry log of the run (default: logs); 'none' disables it",
     )
     sim.add_argument(
-        "--param", action="append", default=[], metavar="NAME=VALUE",
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
         help="set a vehicle parameter at start (repeatable), e.g. MPC_XY_CRUISE=3",
     )
     sim.add_argument(
-        "--duration", type=float, default=None, metavar="S",
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
         help="stop after S wall-clock seconds (default: run until Ctrl-C / SIGTERM)",
     )
     sim.add_argument("--quiet", action="store_true", help="do not print vehicle events")

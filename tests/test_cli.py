@@ -57,7 +57,7 @@ def test_sim_stops_cleanly_on_sigint_and_sigterm(tmp_path):
         )  # fmt: skip
         time.sleep(2.0)
         process.send_signal(sig)
-        out, err = process.communicate(timeout=10)
+        _out, err = process.communicate(timeout=10)
         assert process.returncode == 0, err
         assert "timing:" in err and "Traceback" not in err
 

@@ -13,7 +13,7 @@ import numpy as np
 from pymavlink.dialects.v10 import common as mavlink1
 from pymavlink.dialects.v20 import common as mavlink2
 
-from gcs_tools.client import VehicleClient, mav
+from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
 
 
@@ -36,9 +36,7 @@ def _frames(rng: random.Random) -> list[bytes]:
         ours.param_set_encode(1, 1, b"NO_SUCH_PARAM", 1.0, 9).pack(ours),
         ours.param_request_read_encode(1, 1, b"\xff\xfe", 30000).pack(ours),
         ours.mission_count_encode(1, 1, 65535, 0).pack(ours),
-        ours.mission_item_int_encode(1, 1, 5, 99, 16, 0, 1, nan, 0, 0, 0, 0, 0, nan, 0).pack(
-            ours
-        ),
+        ours.mission_item_int_encode(1, 1, 5, 99, 16, 0, 1, nan, 0, 0, 0, 0, 0, nan, 0).pack(ours),
         ours.mission_set_current_encode(1, 1, 60000).pack(ours),
         # Addressed to another vehicle: must be ignored (a forced disarm in flight!).
         other.command_long_encode(7, 1, 400, 0, 0, 21196, 0, 0, 0, 0, 0).pack(other),

@@ -55,7 +55,8 @@ def test_arm_takeoff_goto_land(client):
                 "take-off to 3 m")  # fmt: skip
     client.goto(8.0, -4.0, 4.0)
     client.wait(
-        lambda: np.linalg.norm(np.subtract(client.position_enu(), (8, -4, 4))) < 0.15, 30,
+        lambda: np.linalg.norm(np.subtract(client.position_enu(), (8, -4, 4))) < 0.15,
+        30,
         "the goto target",
     )
     client.land()
@@ -109,7 +110,9 @@ def test_offboard_follows_setpoints_then_holds_when_they_stop(client):
 
 
 def test_unsupported_command_is_acknowledged_as_such(client):
-    assert client.command(mav.MAV_CMD_DO_SET_SERVO, 1, 1500, check=False) == mav.MAV_RESULT_UNSUPPORTED
+    assert (
+        client.command(mav.MAV_CMD_DO_SET_SERVO, 1, 1500, check=False) == mav.MAV_RESULT_UNSUPPORTED
+    )
 
 
 def test_message_interval_and_request_message(client):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -43,7 +44,7 @@ def test_mission_tracks_waypoints_accurately(airframe):
     track = _fly(v, 45.0)[:, 1:4]
     assert list(v.items_reached) == [0, 1, 2, 3, 4] and not v.armed
     path = np.array([(0, 0, 0), *points, (0, 0, 5), (0, 0, 0)], dtype=float)
-    distance = np.min([_segment_distance(track, a, b) for a, b in zip(path[:-1], path[1:])], 0)
+    distance = np.min([_segment_distance(track, a, b) for a, b in itertools.pairwise(path)], 0)
     waypoint_error = [np.min(np.linalg.norm(track - p, axis=1)) for p in points]
     assert max(waypoint_error) < 0.06 and distance.max() < 0.2
     assert np.linalg.norm(track[-1]) < 0.1  # landed on home

@@ -10,6 +10,7 @@ number stream per link) and writes it to every live peer.
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import time
 from dataclasses import dataclass, field
@@ -27,7 +28,9 @@ def parse_url(url: str) -> tuple[str, str, int]:
         kind, host, port_text = url.split(":")
         port = int(port_text)
     except ValueError:
-        raise ValueError(f"link {url!r}: expected KIND:HOST:PORT, e.g. udpout:127.0.0.1:14550") from None
+        raise ValueError(
+            f"link {url!r}: expected KIND:HOST:PORT, e.g. udpout:127.0.0.1:14550"
+        ) from None
     if kind not in ("udpout", "udpin", "tcpin"):
         raise ValueError(f"link {url!r}: kind must be udpout, udpin or tcpin, got {kind!r}")
     if not 0 <= port <= 65535:
@@ -112,9 +115,8 @@ class Link:
                     break
                 except OSError:  # e.g. ICMP port unreachable reported on a UDP socket
                     continue
-                peer = self.peers.get(address)
-                if peer is None:
-                    peer = self.peers[address] = Peer(address, _new_parser())
+                peer = self.peers.get(address) or Peer(address, _new_parser())
+                self.peers[address] = peer
                 peer.last_seen = time.monotonic()
                 self._parse(peer, data, out)
         return out
@@ -183,10 +185,9 @@ class Link:
             elif address != self.destination:
                 targets.append(address)
         for target in targets:
-            try:
+            # Nobody listening there (yet) is fine: UDP is fire-and-forget.
+            with contextlib.suppress(OSError):
                 self.sock.sendto(frame, target)
-            except OSError:
-                pass  # nobody listening there (yet): UDP is fire-and-forget
         self.sent += 1
 
     def close(self) -> None:

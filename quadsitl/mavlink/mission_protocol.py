@@ -77,7 +77,11 @@ class MissionProtocol:
         )  # fmt: skip
         problem = item.problem()
         if problem:
-            code = mav.MAV_MISSION_UNSUPPORTED_FRAME if "frame" in problem else mav.MAV_MISSION_UNSUPPORTED
+            code = (
+                mav.MAV_MISSION_UNSUPPORTED_FRAME
+                if "frame" in problem
+                else mav.MAV_MISSION_UNSUPPORTED
+            )
             self._fail(code, f"mission item {msg.seq}: {problem}")
             return
         up.items.append(item)

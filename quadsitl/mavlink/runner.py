@@ -112,7 +112,7 @@ class Simulator:
         except OSError:
             self.close()
             raise
-        self.tlog = None
+        self.tlog: TlogWriter | None = None
         if config.log_dir:
             stamp = time.strftime("%Y%m%d-%H%M%S")
             self.tlog = TlogWriter(Path(config.log_dir) / f"quadsitl-{stamp}-{os.getpid()}.tlog")
@@ -163,8 +163,9 @@ class Simulator:
     def close(self) -> None:
         for link in self.links:
             link.close()
-        if getattr(self, "tlog", None) is not None:
-            self.tlog.close()
+        tlog = getattr(self, "tlog", None)
+        if tlog is not None:
+            tlog.close()
 
 
 def run_simulator(config: SimConfig) -> int:

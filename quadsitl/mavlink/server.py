@@ -232,20 +232,20 @@ class MavlinkServer:
         return {
             mav.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm_disarm,
             mav.MAV_CMD_NAV_TAKEOFF: self._cmd_takeoff,
-            mav.MAV_CMD_NAV_LAND: lambda c, l: self.vehicle.land(),
-            mav.MAV_CMD_NAV_RETURN_TO_LAUNCH: lambda c, l: self.vehicle.return_to_launch(),
+            mav.MAV_CMD_NAV_LAND: lambda c, link: self.vehicle.land(),
+            mav.MAV_CMD_NAV_RETURN_TO_LAUNCH: lambda c, link: self.vehicle.return_to_launch(),
             mav.MAV_CMD_DO_SET_MODE: self._cmd_set_mode,
             mav.MAV_CMD_DO_REPOSITION: self._cmd_reposition,
             mav.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_message_interval,
             mav.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
-            mav.MAV_CMD_GET_HOME_POSITION: lambda c, l: self._send_once(
-                mav.MAVLINK_MSG_ID_HOME_POSITION, l
+            mav.MAV_CMD_GET_HOME_POSITION: lambda c, link: self._send_once(
+                mav.MAVLINK_MSG_ID_HOME_POSITION, link
             ),
-            mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: lambda c, l: self._send_once(
-                mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, l
+            mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: lambda c, link: self._send_once(
+                mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, link
             ),
             mav.MAV_CMD_MISSION_START: self._cmd_mission_start,
-            mav.MAV_CMD_DO_SET_MISSION_CURRENT: lambda c, l: self.vehicle.set_mission_current(
+            mav.MAV_CMD_DO_SET_MISSION_CURRENT: lambda c, link: self.vehicle.set_mission_current(
                 _int(c.params[0], "item")
             ),
             mav.MAV_CMD_DO_CHANGE_SPEED: self._cmd_change_speed,
@@ -274,7 +274,9 @@ class MavlinkServer:
         if not int(base) & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             return Result(Outcome.DENIED, "set mode: only custom (PX4-layout) modes are supported")
         sub = 0 if math.isnan(sub) else sub
-        return self.vehicle.set_mode(Mode.from_custom(_int(main, "main mode"), _int(sub, "sub mode")))
+        return self.vehicle.set_mode(
+            Mode.from_custom(_int(main, "main mode"), _int(sub, "sub mode"))
+        )
 
     def handle_set_mode(self, msg: Any, link: Link) -> None:
         """Deprecated SET_MODE message (MAVProxy still sends it); no ACK exists for it."""
@@ -288,9 +290,18 @@ class MavlinkServer:
             self.statustext(4, result.reason)
 
     def _cmd_reposition(self, c: Command, link: Link) -> Result:
-        speed, yaw_deg, lat, lon, alt = c.params[0], c.params[3], c.params[4], c.params[5], c.params[6]
+        speed, yaw_deg, lat, lon, alt = (
+            c.params[0],
+            c.params[3],
+            c.params[4],
+            c.params[5],
+            c.params[6],
+        )
         home = self.vehicle.home
-        relative = c.frame in (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+        relative = c.frame in (
+            mav.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+            mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+        )
         east = north = math.nan
         if math.isfinite(lat) and math.isfinite(lon):
             east, north, _ = home.to_local(lat, lon, home.altitude)
@@ -433,7 +444,7 @@ class MavlinkServer:
     def handle_set_attitude_target(self, msg: Any, link: Link) -> None:
         mask = msg.type_mask
         rates = (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate)
-        checked = list(msg.q) + [msg.thrust] + list(rates)
+        checked = [*list(msg.q), msg.thrust, *list(rates)]
         if not all(math.isfinite(x) for x in checked):
             self._bad_value("attitude setpoint with NaN or inf ignored")
             return
@@ -464,4 +475,4 @@ def _param_name(raw: Any) -> str:
 def _int(value: float, what: str) -> int:
     if not math.isfinite(value):
         raise ValueError(f"{what} must be a number, got {value}")
-    return int(round(value))
+    return round(value)

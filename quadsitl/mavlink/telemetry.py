@@ -109,9 +109,7 @@ def build_sys_status(s: Snapshot) -> Any:
 
 
 def build_extended_sys_state(s: Snapshot) -> Any:
-    return _encoder.extended_sys_state_encode(
-        mav.MAV_VTOL_STATE_UNDEFINED, s.vehicle.landed_state
-    )
+    return _encoder.extended_sys_state_encode(mav.MAV_VTOL_STATE_UNDEFINED, s.vehicle.landed_state)
 
 
 def build_attitude(s: Snapshot) -> Any:

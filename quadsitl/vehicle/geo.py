@@ -39,7 +39,9 @@ class Home:
     def to_local(self, lat: float, lon: float, alt: float) -> tuple[float, float, float]:
         """(east, north, up) m of a global point (deg, deg, m AMSL)."""
         north = math.radians(lat - self.latitude) * EARTH_RADIUS
-        east = math.radians(lon - self.longitude) * EARTH_RADIUS * math.cos(
-            math.radians(self.latitude)
+        east = (
+            math.radians(lon - self.longitude)
+            * EARTH_RADIUS
+            * math.cos(math.radians(self.latitude))
         )
         return east, north, alt - self.altitude

@@ -123,6 +123,7 @@ class Orbit:
         self.travelled = 0.0
         self.last_t: float | None = None
         self.done = self.total == 0.0
+        self.yaw: float | None = None  # faces the centre while circling
 
     def setpoint(self, position: Vec, velocity: Vec, t: float) -> Setpoint:
         dt = 0.0 if self.last_t is None else t - self.last_t
@@ -148,6 +149,7 @@ class Land:
 
     def setpoint(self, position: Vec, velocity: Vec, t: float) -> Setpoint:
         target = np.array([self.point[0], self.point[1], position[2]])
-        return Setpoint(
-            position=target, velocity=np.array([0.0, 0.0, -self.speed]), yaw=self.yaw
-        )
+        return Setpoint(position=target, velocity=np.array([0.0, 0.0, -self.speed]), yaw=self.yaw)
+
+
+Activity = Hold | Leg | Orbit | Land

@@ -22,7 +22,7 @@ from quadsitl.vehicle.battery import Battery
 from quadsitl.vehicle.controller import Autopilot, CascadedController, Setpoint, Vec
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
-from quadsitl.vehicle.navigator import Hold, Land, Leg, Limits, Orbit
+from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg, Limits, Orbit
 from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
 
 # Severities of events, as MAV_SEVERITY numbers them.
@@ -68,6 +68,22 @@ class Vehicle:
         control_period: onboard controller period, s (a multiple of ``physics_dt``).
     """
 
+    # Flight state, (re)set by _reset_flight_state.
+    armed: bool
+    armed_at: float  # s, simulated
+    flew: bool  # left the ground since arming
+    mode: Mode
+    activity: Activity
+    rtl_stages: list[Activity]
+    landed_at: float | None
+    offboard: Setpoint | None
+    offboard_time: float
+    takeoff_altitude: float | None  # m above home, of the pending take-off
+    mission_speed: float | None  # m/s, set by DO_CHANGE_SPEED
+    land_after_leg: bool
+    item_hold_until: float | None
+    item_target: Vec | None
+
     def __init__(
         self,
         airframe: str = "paper",
@@ -77,7 +93,9 @@ class Vehicle:
     ) -> None:
         self.home = home or Home()
         self.params = ParameterStore()
-        self.params.values["SIM_AIRFRAME"] = float(AIRFRAME_NAMES.index(get_airframe(airframe).name))
+        self.params.values["SIM_AIRFRAME"] = float(
+            AIRFRAME_NAMES.index(get_airframe(airframe).name)
+        )
         self.airframe = get_airframe(airframe)
         self.fleet = Fleet(1, self.airframe, dt=physics_dt)
         self.substeps = max(1, round(control_period / physics_dt))
@@ -379,7 +397,7 @@ class Vehicle:
     # --- missions ---------------------------------------------------------------------
     def _start_item(self) -> None:
         here = self.position.copy()
-        self.item_hold_until: float | None = None
+        self.item_hold_until = None
         if self.mission_current >= len(self.mission):
             self._event(INFO, "mission finished: holding")
             self.mode = Mode.LOITER
@@ -389,7 +407,11 @@ class Vehicle:
         gear = self.airframe.gear_height
         east, north, up = item.target(self.home, (here[0], here[1], here[2] - gear))
         target = np.array([east, north, up + gear])
-        yaw = None if math.isnan(item.param4) else float(frames.yaw_ned_to_enu(math.radians(item.param4)))
+        yaw = (
+            None
+            if math.isnan(item.param4)
+            else float(frames.yaw_ned_to_enu(math.radians(item.param4)))
+        )
         radius = item.param2 if item.command == M.NAV_WAYPOINT and item.param2 > 0 else None
         limits = self._limits()
         if item.command == M.NAV_TAKEOFF:
@@ -431,7 +453,9 @@ class Vehicle:
         if not self.activity.done or isinstance(self.activity, Land):
             return
         if self.land_after_leg and isinstance(self.activity, Leg):
-            self.activity = Land(self.activity.end, self.params["MPC_LAND_SPEED"], self.activity.yaw)
+            self.activity = Land(
+                self.activity.end, self.params["MPC_LAND_SPEED"], self.activity.yaw
+            )
             return
         if isinstance(self.activity, Leg) and item.command == M.NAV_LOITER_TURNS:
             self.activity = Orbit(
@@ -443,7 +467,9 @@ class Vehicle:
             return  # holds until the mission is changed
         if self.item_hold_until is None:
             self.item_hold_until = self.time + max(hold, 0.0)
-            self.activity = Hold(getattr(self.activity, "end", self.position.copy()), self.activity.yaw)
+            self.activity = Hold(
+                getattr(self.activity, "end", self.position.copy()), self.activity.yaw
+            )
             self.activity.done = True
         if self.time >= self.item_hold_until:
             self._mission_item_reached()
@@ -511,17 +537,17 @@ class Vehicle:
         self.armed = False
         self.armed_at = 0.0
         self.flew = False
-        self.landed_at: float | None = None
-        self.offboard: Setpoint | None = None
+        self.landed_at = None
+        self.offboard = None
         self.offboard_time = -math.inf
-        self.takeoff_altitude: float | None = None
-        self.mission_speed: float | None = None
+        self.takeoff_altitude = None
+        self.mission_speed = None
         self.land_after_leg = False
         self.item_hold_until = None
-        self.item_target: Vec | None = None
+        self.item_target = None
         self._physics_steps = 0
         self.rotor_cmd[:] = 0.0
         self.controller.reset()
         self.mode = Mode.LOITER
-        self.activity: Hold | Leg | Land | Orbit = Hold(self.position.copy())
-        self.rtl_stages: list[Leg | Land] = []
+        self.activity = Hold(self.position.copy())
+        self.rtl_stages = []
