@@ -28,16 +28,21 @@ class RunningSim:
         return self.process.stdout.read() if self.process.stdout else ""
 
 
-@pytest.fixture
-def sim(tmp_path) -> Iterator[RunningSim]:
-    """The simulator at 5x real time, listening on a free UDP port (udpin)."""
+def start_sim(log_dir: str, speed: float = 5.0) -> RunningSim:
+    """``quadsitl sim`` listening on a free UDP port (udpin), no API link."""
     port = free_udp_port()
     process = subprocess.Popen(
         [sys.executable, "-m", "quadsitl.cli", "sim", "--gcs", f"udpin:127.0.0.1:{port}",
-         "--api", "none", "--speed", "5", "--logs", str(tmp_path)],
+         "--api", "none", "--speed", str(speed), "--logs", log_dir],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )  # fmt: skip
-    running = RunningSim(process, port, str(tmp_path))
+    return RunningSim(process, port, log_dir)
+
+
+@pytest.fixture
+def sim(tmp_path) -> Iterator[RunningSim]:
+    """The simulator at 5x real time."""
+    running = start_sim(str(tmp_path))
     yield running
     running.stop()
 

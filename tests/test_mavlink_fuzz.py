@@ -5,8 +5,6 @@ from __future__ import annotations
 import math
 import random
 import socket
-import subprocess
-import sys
 import time
 
 import numpy as np
@@ -14,7 +12,7 @@ from pymavlink.dialects.v10 import common as mavlink1
 from pymavlink.dialects.v20 import common as mavlink2
 
 from gcs_tools.client import VehicleClient
-from gcs_tools.demo import free_udp_port
+from tests.conftest import start_sim
 
 
 def _frames(rng: random.Random) -> list[bytes]:
@@ -60,12 +58,8 @@ def _frames(rng: random.Random) -> list[bytes]:
 
 
 def test_fuzzed_vehicle_keeps_flying(tmp_path):
-    port = free_udp_port()
-    process = subprocess.Popen(
-        [sys.executable, "-m", "quadsitl.cli", "sim", "--gcs", f"udpin:127.0.0.1:{port}",
-         "--api", "none", "--speed", "2", "--logs", str(tmp_path)],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+    running = start_sim(str(tmp_path), speed=2.0)
+    process, port = running.process, running.port
     client = VehicleClient(f"udpout:127.0.0.1:{port}")
     try:
         client.connect(timeout=30)
@@ -96,6 +90,5 @@ def test_fuzzed_vehicle_keeps_flying(tmp_path):
         assert status.errors_comm > 100  # bad frames were counted
     finally:
         client.close()
-        process.terminate()
-        output = process.communicate(timeout=10)[0]
+        output = running.stop()
     assert "Traceback" not in output and process.returncode == 0

@@ -72,6 +72,7 @@ class MavlinkServer:
         self.last_heartbeat = -math.inf
         self.last_state: tuple[bool, Mode, bool] | None = None
         self._after_ack: list[Any] = []
+        self.commands = self._commands()
         self.counters = {"ignored": 0, "bad_values": 0}
         self.handlers: dict[str, Callable[[Any, Link], None]] = {
             name[len("handle_") :].upper(): getattr(self, name)
@@ -209,7 +210,7 @@ class MavlinkServer:
             self.counters["ignored"] += 1
             return
         cmd = Command(msg)
-        runner = self._commands().get(cmd.id)
+        runner = self.commands.get(cmd.id)
         if runner is None:
             result = Result(Outcome.UNSUPPORTED)
         else:
