@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 
@@ -62,6 +63,31 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         "with udpin://0.0.0.0:14540); 'none' disables it",
     )
     sim.add_argument(
+        "--hil",
+        default=None,
+        metavar="URL",
+        help="motor-command link for external controllers (HIL_ACTUATOR_CONTROLS): no "
+        "telemetry streams, not logged; e.g. udpin:127.0.0.1:4560 (default: none; motor "
+        "commands are accepted on every link)",
+    )
+    sim.add_argument(
+        "--lockstep",
+        action="store_true",
+        help="simulated time moves only with motor commands, one control period each",
+    )
+    signing = sim.add_mutually_exclusive_group()
+    signing.add_argument(
+        "--signing-key",
+        metavar="FILE",
+        help="require MAVLink 2 signing with the key in FILE (64 hex digits or 32 bytes)",
+    )
+    signing.add_argument(
+        "--signing-passphrase",
+        metavar="TEXT",
+        help="require MAVLink 2 signing with key SHA-256(TEXT), as MAVProxy's "
+        "'signing setup TEXT' (environment: QUADSITL_SIGNING_PASSPHRASE)",
+    )
+    sim.add_argument(
         "--link",
         action="append",
         default=[],
@@ -118,6 +144,15 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
     sim.add_argument("--quiet", action="store_true", help="do not print vehicle events")
 
 
+def _signing_key(args: argparse.Namespace) -> bytes | None:
+    from quadsitl.mavlink.signing import key_from_file, key_from_passphrase
+
+    if args.signing_key:
+        return key_from_file(args.signing_key)
+    passphrase = args.signing_passphrase or os.environ.get("QUADSITL_SIGNING_PASSPHRASE")
+    return key_from_passphrase(passphrase) if passphrase else None
+
+
 def _sim_config(args: argparse.Namespace) -> object:
     from quadsitl.mavlink.runner import SimConfig
     from quadsitl.vehicle.geo import Home
@@ -143,6 +178,8 @@ def _sim_config(args: argparse.Namespace) -> object:
             raise ValueError(f"--param must be NAME=VALUE, got {item!r}")
     return SimConfig(
         gcs_url=url(args.gcs), api_url=url(args.api), extra_urls=args.link,
+        hil_url=url(args.hil) if args.hil else None, lockstep=args.lockstep,
+        signing_key=_signing_key(args),
         system_id=args.sysid, home=home, airframe=args.airframe,
         physics_rate=args.physics_rate, control_rate=args.control_rate, speed=args.speed,
         log_dir=None if args.logs.lower() == "none" else args.logs,

@@ -84,6 +84,19 @@ def quat_to_matrix(q: ArrayLike) -> Array:
 def quat_rotate(q: ArrayLike, v: ArrayLike) -> Array:
     """Rotate body vector(s) ``v`` into the world frame by ``q``."""
     v = _as_vectors(v, 3, "vector")
+    q = _as_vectors(q, 4, "quaternion")
+    if q.ndim == 1 and v.ndim == 1:  # one vector (the wire's case): no array overhead
+        w, x, y, z = q.tolist()
+        a, b, c = v.tolist()
+        # v + 2w (u × v) + 2 u × (u × v), u = (x, y, z)
+        tx, ty, tz = 2 * (y * c - z * b), 2 * (z * a - x * c), 2 * (x * b - y * a)
+        return np.array(
+            [
+                a + w * tx + y * tz - z * ty,
+                b + w * ty + z * tx - x * tz,
+                c + w * tz + x * ty - y * tx,
+            ]
+        )
     return np.einsum("...ij,...j->...i", quat_to_matrix(q), v)
 
 
@@ -134,10 +147,19 @@ def wrap_angle(angle: ArrayLike) -> Array:
 # --- ENU/FLU <-> NED/FRD -------------------------------------------------------------
 
 
+_SWAP_XY = np.array([1, 0, 2])
+_FLIP_Z = np.array([1.0, 1.0, -1.0])
+_FLIP_YZ = np.array([1.0, -1.0, -1.0])
+# Attitude FLU->ENU to FRD->NED as a linear map of (w, x, y, z), applied as q @ _Q_MAP.
+_Q_MAP = _SQRT_HALF * np.array(
+    [[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 1.0, 0.0], [0.0, 1.0, -1.0, 0.0], [1.0, 0.0, 0.0, -1.0]]
+)
+
+
 def enu_to_ned(v: ArrayLike) -> Array:
     """World vector ENU -> NED: ``(y, x, -z)``. Positions and velocities alike."""
     v = _as_vectors(v, 3, "vector")
-    return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
+    return v[..., _SWAP_XY] * _FLIP_Z
 
 
 def ned_to_enu(v: ArrayLike) -> Array:
@@ -148,7 +170,7 @@ def ned_to_enu(v: ArrayLike) -> Array:
 def flu_to_frd(v: ArrayLike) -> Array:
     """Body vector FLU -> FRD: ``(x, -y, -z)``. Body rates, body velocities, forces."""
     v = _as_vectors(v, 3, "vector")
-    return np.stack([v[..., 0], -v[..., 1], -v[..., 2]], axis=-1)
+    return v * _FLIP_YZ
 
 
 def frd_to_flu(v: ArrayLike) -> Array:
@@ -159,8 +181,7 @@ def frd_to_flu(v: ArrayLike) -> Array:
 def quat_enu_flu_to_ned_frd(q: ArrayLike) -> Array:
     """Attitude FLU->ENU to attitude FRD->NED: ``√½·(w+z, x+y, x−y, w−z)``."""
     q = _as_vectors(q, 4, "quaternion")
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    return _SQRT_HALF * np.stack([w + z, x + y, x - y, w - z], axis=-1)
+    return q @ _Q_MAP  # √½·(w+z, x+y, x−y, w−z)
 
 
 def quat_ned_frd_to_enu_flu(q: ArrayLike) -> Array:

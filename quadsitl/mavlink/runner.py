@@ -4,6 +4,11 @@ Each iteration steps the physics for every step that is due on the wall clock (t
 the speed factor), lets the server send what is due, then waits in select() on all
 sockets until the next step is due. The lateness of every step against its schedule
 is recorded: that is the timing jitter the benchmark reports.
+
+In lockstep the wall clock does not move the physics: each motor command does (see
+:mod:`.motor_path`). The loop polls for 1 ms after each command (the next one is
+usually microseconds away), then sleeps in select(), waking for the heartbeat, so a
+silent client costs no CPU.
 """
 
 from __future__ import annotations
@@ -26,6 +31,9 @@ from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.vehicle import Vehicle
 
 MAX_LAG = 0.1  # s: further behind than this, skip ahead instead of catching up
+LOCKSTEP_TICK = 0.002  # wall s between telemetry/heartbeat ticks while in lockstep
+LOCKSTEP_WAIT = 0.05  # wall s, longest sleep in lockstep (heartbeat, --duration, signals)
+LOCKSTEP_SPIN = 0.001  # wall s to keep polling after a motor command before sleeping
 
 
 @dataclass
@@ -34,7 +42,10 @@ class SimConfig:
 
     gcs_url: str | None = "udpout:127.0.0.1:14550"
     api_url: str | None = "udpout:127.0.0.1:14540"
+    hil_url: str | None = None  # motor-command link: no telemetry streams, not logged
     extra_urls: list[str] = field(default_factory=list)
+    lockstep: bool = False  # simulated time moves only with motor commands
+    signing_key: bytes | None = None  # MAVLink 2 signing key (32 bytes)
     system_id: int = 1
     home: Home = field(default_factory=Home)
     airframe: str = "paper"
@@ -57,7 +68,7 @@ class SimConfig:
             )
         if not (math.isfinite(self.speed) and 0.01 <= self.speed <= 100):
             raise ValueError(f"speed factor must be 0.01..100, got {self.speed}")
-        if not [u for u in (self.gcs_url, self.api_url, *self.extra_urls) if u]:
+        if not [u for u in (self.gcs_url, self.api_url, self.hil_url, *self.extra_urls) if u]:
             raise ValueError("at least one link is needed")
 
 
@@ -104,7 +115,8 @@ class Simulator:
             self.vehicle.set_param(name, value)
         self.links: list[Link] = []
         try:
-            for name, url in (("gcs", config.gcs_url), ("api", config.api_url)):
+            named = (("gcs", config.gcs_url), ("api", config.api_url), ("hil", config.hil_url))
+            for name, url in named:
                 if url:
                     self.links.append(Link(url, name, config.system_id, 1))
             for i, url in enumerate(config.extra_urls):
@@ -117,8 +129,9 @@ class Simulator:
             stamp = time.strftime("%Y%m%d-%H%M%S")
             self.tlog = TlogWriter(Path(config.log_dir) / f"quadsitl-{stamp}-{os.getpid()}.tlog")
         self.server = MavlinkServer(
-            self.vehicle, self.links, self.tlog, config.system_id, 1, echo=self._print
-        )
+            self.vehicle, self.links, self.tlog, config.system_id, 1, echo=self._print,
+            lockstep=config.lockstep, signing_key=config.signing_key,
+        )  # fmt: skip
         self.timing = Timing()
         self.stopping = False
 
@@ -133,32 +146,47 @@ class Simulator:
         dt = self.vehicle.fleet.dt
         wall_per_step = dt / self.config.speed
         start = time.monotonic()
-        steps = 0
+        steps = 0  # physics steps taken on the wall-clock schedule since ``start``
         end = None if self.config.duration is None else start + self.config.duration
-        sockets = {}
+        last_tick = -math.inf
         while not self.stopping:
             now = time.monotonic()
             if end is not None and now >= end:
                 break
-            due = int((now - start) / wall_per_step) - steps
-            if due * wall_per_step > MAX_LAG:  # e.g. the machine was suspended
-                self.timing.skipped_steps += due - 1
-                steps += due - 1
-                due = 1
-            for _ in range(due):
-                scheduled = start + (steps + 1) * wall_per_step
-                self.timing.record(max(0.0, time.monotonic() - scheduled))
-                self.vehicle.step()
-                steps += 1
-            self.server.tick(now)
+            if self.server.motors.lockstep:
+                start, steps = now, 0  # real time resumes from here when lockstep ends
+                # Poll while commands are flowing (waking from sleep costs more than a
+                # round trip); sleep once the client pauses.
+                busy = now - self.server.motors.last_lockstep_wall < LOCKSTEP_SPIN
+                wait = 0.0 if busy else LOCKSTEP_WAIT
+                if now - last_tick >= LOCKSTEP_TICK:
+                    self.server.tick(now)
+                    last_tick = now
+            else:
+                steps = self._real_time_steps(start, steps, wall_per_step)
+                self.server.tick(now)
+                wait = start + (steps + 1) * wall_per_step - time.monotonic()
             if self.tlog is not None:
                 self.tlog.flush()
             sockets = {s: link for link in self.links for s in link.sockets()}
-            wait = start + (steps + 1) * wall_per_step - time.monotonic()
             readable, _, _ = select.select(list(sockets), [], [], max(0.0, wait))
             received_at = time.time()
             for link in {sockets[s] for s in readable}:
                 self.server.receive(link, received_at)
+
+    def _real_time_steps(self, start: float, steps: int, wall_per_step: float) -> int:
+        """Take the physics steps due by now; returns the new step count."""
+        due = int((time.monotonic() - start) / wall_per_step) - steps
+        if due * wall_per_step > MAX_LAG:  # e.g. the machine was suspended
+            self.timing.skipped_steps += due - 1
+            steps += due - 1
+            due = 1
+        for _ in range(due):
+            scheduled = start + (steps + 1) * wall_per_step
+            self.timing.record(max(0.0, time.monotonic() - scheduled))
+            self.vehicle.step()
+            steps += 1
+        return steps
 
     def close(self) -> None:
         for link in self.links:

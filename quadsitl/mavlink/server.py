@@ -2,7 +2,9 @@
 
 It owns no sockets and no clock: the loop in :mod:`.runner` passes messages in with the
 link they came from, and calls :meth:`MavlinkServer.tick` after stepping the physics.
-Every frame sent or received goes to the telemetry log.
+Every frame sent or received goes to the telemetry log, except on the motor-command
+link (``hil``), whose thousands of round trips a second would swamp it. With a signing
+key, messages other than HEARTBEAT and RADIO_STATUS must be signed (:mod:`.signing`).
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink import telemetry as T
 from quadsitl.mavlink.links import Link
 from quadsitl.mavlink.mission_protocol import MissionProtocol
+from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_MOTION, MotorPath
+from quadsitl.mavlink.signing import SignatureCheck, sign_outgoing
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.vehicle.controller import Setpoint
 from quadsitl.vehicle.modes import Mode
@@ -27,6 +31,8 @@ from quadsitl.vehicle.vehicle import ACCEPTED, Outcome, Result, Vehicle
 
 FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 that forces the action (PX4, ArduPilot)
 STATUSTEXT_LENGTH = 50
+SIGNING_REPORT_PERIOD = 10.0  # wall s between STATUSTEXT summaries of rejected messages
+MOTOR_LINK = "hil"  # the link name whose traffic is not logged and has no streams
 RESULTS = {
     Outcome.ACCEPTED: mav.MAV_RESULT_ACCEPTED,
     Outcome.TEMPORARILY_REJECTED: mav.MAV_RESULT_TEMPORARILY_REJECTED,
@@ -60,6 +66,8 @@ class MavlinkServer:
         system_id: int = 1,
         component_id: int = 1,
         echo: Callable[[str], None] | None = None,
+        lockstep: bool = False,
+        signing_key: bytes | None = None,
     ) -> None:
         self.vehicle = vehicle
         self.links = links
@@ -67,10 +75,15 @@ class MavlinkServer:
         self.system_id, self.component_id = system_id, component_id
         self.echo = echo  # prints vehicle events for the user
         self.encoder = mav.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
-        self.schedules = {id(link): T.Schedule() for link in links}
+        self.schedules = {id(link): T.Schedule(streams=link.name != MOTOR_LINK) for link in links}
+        self.motors = MotorPath(vehicle, lockstep)
+        self.signing: SignatureCheck | None = None
+        self._signing_reported: tuple[float, int] = (-math.inf, 0)
+        if signing_key is not None:
+            self.set_signing_key(signing_key)
         self.missions = MissionProtocol(vehicle, self.encoder, self.statustext)
         self.last_heartbeat = -math.inf
-        self.last_state: tuple[bool, Mode, bool] | None = None
+        self.last_state: tuple[bool, Mode, bool, bool] | None = None
         self._after_ack: list[Any] = []
         self.commands = self._commands()
         self.counters = {"ignored": 0, "bad_values": 0}
@@ -80,13 +93,31 @@ class MavlinkServer:
             if name.startswith("handle_")
         }
 
+    def set_signing_key(self, key: bytes | None) -> None:
+        """Require signed messages (and sign ours) with ``key``; None turns signing off."""
+        self.signing = SignatureCheck(key) if key is not None else None
+        for link_id, link in enumerate(self.links):
+            if key is None:
+                link.mav.signing.sign_outgoing = False
+                link.mav.signing.secret_key = None
+            else:
+                sign_outgoing(link.mav, key, link_id)
+
     # --- sending ----------------------------------------------------------------------
     def send(self, message: Any, link: Link | None = None) -> None:
         """Send on one link, or on all."""
         for target in [link] if link is not None else self.links:
             frame = target.pack(message)
             target.send_bytes(frame)
-            if self.tlog is not None:
+            if self.tlog is not None and target.name != MOTOR_LINK:
+                self.tlog.record(frame)
+
+    def send_together(self, messages: list[Any], link: Link) -> None:
+        """Several messages in one datagram (one system call, one wake-up at the peer)."""
+        frames = [link.pack(message) for message in messages]
+        link.send_bytes(b"".join(frames))
+        if self.tlog is not None and link.name != MOTOR_LINK:
+            for frame in frames:
                 self.tlog.record(frame)
 
     def statustext(self, severity: int, text: str) -> None:
@@ -103,10 +134,20 @@ class MavlinkServer:
     def comm_errors(self) -> int:
         return sum(link.bad_frames for link in self.links)
 
+    @property
+    def error_counts(self) -> tuple[int, int, int, int]:
+        """SYS_STATUS errors_count1..4: unsigned, badly signed and replayed messages
+        rejected by signing, and rejected motor commands."""
+        r = self.signing.rejected if self.signing is not None else {}
+        return (
+            r.get("unsigned", 0), r.get("bad_signature", 0), r.get("replayed", 0),
+            self.motors.counters["rejected"],
+        )  # fmt: skip
+
     # --- the loop's hooks -------------------------------------------------------------
     def receive(self, link: Link, received_at: float | None = None) -> None:
         for message, _peer in link.receive():
-            if self.tlog is not None:
+            if self.tlog is not None and link.name != MOTOR_LINK:
                 self.tlog.record(bytes(message.get_msgbuf()), received_at)
             self.dispatch(message, link)
 
@@ -114,6 +155,9 @@ class MavlinkServer:
         target = getattr(message, "target_system", 0)
         if target not in (0, self.system_id):
             self.counters["ignored"] += 1
+            return
+        if self.signing is not None and self.signing.verdict(message) is not None:
+            self._report_signing()
             return
         handler = self.handlers.get(message.get_type())
         if handler is None:
@@ -126,27 +170,66 @@ class MavlinkServer:
             self.statustext(4, f"rejected {message.get_type()}: {error}")
 
     def tick(self, wall_now: float) -> None:
-        """After the physics: events, heartbeat (wall clock), telemetry (sim clock)."""
+        """After the physics: events, heartbeat (wall clock), telemetry (sim clock; in
+        lockstep also never faster than its rate on the wall clock)."""
         v = self.vehicle
         while v.events:
             severity, text = v.events.popleft()
             self.statustext(severity, text)
         while v.items_reached:
             self.send(self.encoder.mission_item_reached_encode(v.items_reached.popleft()))
-        state = (v.armed, v.mode, v.crashed)
+        state = (v.armed, v.mode, v.crashed, v.motor_control)
         if wall_now - self.last_heartbeat >= T.HEARTBEAT_PERIOD or state != self.last_state:
             self.last_heartbeat, self.last_state = wall_now, state  # at once on a change
             self.send(T.build_heartbeat(v))
         self.missions.tick(wall_now)
+        if self.signing is not None and wall_now - self._signing_reported[0] > 1.0:
+            self._report_signing(wall_now)
+        wall_cap = wall_now if self.motors.lockstep else None
         snapshot: T.Snapshot | None = None
         for link in self.links:
-            due = self.schedules[id(link)].due(v.time)
+            due = self.schedules[id(link)].due(v.time, wall_cap)
             if not due:
                 continue
             if snapshot is None:
-                snapshot = T.Snapshot(v, self.comm_errors)
+                snapshot = T.Snapshot(v, self.comm_errors, self.error_counts)
             for message_id in due:
                 self.send(T.BUILDERS[message_id](snapshot), link)
+
+    def _report_signing(self, wall_now: float | None = None) -> None:
+        """STATUSTEXT at the first rejection, then a summary at most every 10 s."""
+        assert self.signing is not None
+        total = sum(self.signing.rejected.values())
+        last_time, last_total = self._signing_reported
+        now = time.monotonic() if wall_now is None else wall_now
+        first = last_total == 0 and total > 0
+        if total != last_total and (first or now - last_time >= SIGNING_REPORT_PERIOD):
+            self._signing_reported = (now, total)
+            self.statustext(4, self.signing.summary())
+
+    # --- motor path ---------------------------------------------------------------------
+    def handle_hil_actuator_controls(self, msg: Any, link: Link) -> None:
+        problem = self.motors.command(msg)
+        if problem is not None and (
+            self.motors.counters["rejected"] % 100 == 1 or "disarmed" in problem
+        ):
+            self.statustext(4, problem)
+        self.send_together(self.motors.state_messages(), link)
+
+    def handle_setup_signing(self, msg: Any, link: Link) -> None:
+        """A new key from a ground station (MAVProxy's ``signing setup``). Once signing is
+        on, only a message signed with the current key gets here; all zeros: off."""
+        key = bytes(msg.secret_key)
+        if getattr(msg, "target_component", 0) not in (0, self.component_id):
+            return
+        self.set_signing_key(None if not any(key) else key)
+        self.statustext(5, "signing " + ("off" if not any(key) else "key set"))
+
+    def _cmd_reset_state(self, c: Command, link: Link) -> Result:
+        result = self.motors.reset(c.params)
+        if result.ok:
+            self._after_ack.extend(self.motors.state_messages())
+        return result
 
     # --- heartbeat, ping, time --------------------------------------------------------
     def handle_ping(self, msg: Any, link: Link) -> None:
@@ -226,8 +309,9 @@ class MavlinkServer:
             ),
             link,
         )
-        while self._after_ack:  # requested messages follow their ACK (MAVLink spec)
-            self.send(self._after_ack.pop(0), link)
+        if self._after_ack:  # requested messages follow their ACK (MAVLink spec)
+            self.send_together(self._after_ack, link)
+            self._after_ack = []
 
     def _commands(self) -> dict[int, Callable[[Command, Link], Result]]:
         return {
@@ -251,6 +335,8 @@ class MavlinkServer:
             ),
             mav.MAV_CMD_DO_CHANGE_SPEED: self._cmd_change_speed,
             mav.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: self._cmd_reboot,
+            RESET_STATE: self._cmd_reset_state,
+            STAGE_MOTION: lambda c, link: self.motors.stage_motion(c.params),
         }
 
     def _cmd_arm_disarm(self, c: Command, link: Link) -> Result:
@@ -337,7 +423,9 @@ class MavlinkServer:
         builder = T.BUILDERS.get(message_id)
         if builder is None:
             return Result(Outcome.UNSUPPORTED)
-        self._after_ack.append(builder(T.Snapshot(self.vehicle, self.comm_errors)))
+        self._after_ack.append(
+            builder(T.Snapshot(self.vehicle, self.comm_errors, self.error_counts))
+        )
         return ACCEPTED
 
     def handle_request_data_stream(self, msg: Any, link: Link) -> None:

@@ -60,9 +60,12 @@ def _version_number() -> int:
 class Snapshot:
     """The vehicle's state in wire frames and units, computed once per telemetry tick."""
 
-    def __init__(self, vehicle: Vehicle, comm_errors: int = 0) -> None:
+    def __init__(
+        self, vehicle: Vehicle, comm_errors: int = 0, error_counts: tuple[int, ...] = (0,) * 4
+    ) -> None:
         self.vehicle = vehicle
         self.comm_errors = min(comm_errors, 65535)  # malformed frames received
+        self.error_counts = [min(n, 65535) for n in error_counts]  # signing, motor commands
         s = vehicle.state
         self.time_boot_ms = int(vehicle.time * 1000) & 0xFFFFFFFF
         self.time_usec = int(vehicle.time * 1e6)
@@ -90,6 +93,8 @@ def build_heartbeat(v: Vehicle) -> Any:
         base |= mav.MAV_MODE_FLAG_GUIDED_ENABLED
     if v.armed:
         base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
+    if v.motor_control:
+        base |= mav.MAV_MODE_FLAG_HIL_ENABLED
     if v.crashed:
         status = mav.MAV_STATE_CRITICAL
     else:
@@ -104,7 +109,8 @@ def build_sys_status(s: Snapshot) -> Any:
     health = SENSORS & ~mav.MAV_SYS_STATUS_PREARM_CHECK if v.crashed else SENSORS
     return _encoder.sys_status_encode(
         SENSORS, SENSORS, health, 100, int(v.battery.voltage * 1000),
-        int(v.battery.current * 100), int(v.battery.remaining * 100), 0, s.comm_errors, 0, 0, 0, 0,
+        int(v.battery.current * 100), int(v.battery.remaining * 100), 0, s.comm_errors,
+        *s.error_counts,
     )  # fmt: skip
 
 
@@ -264,11 +270,15 @@ DATA_STREAMS[mav.MAV_DATA_STREAM_ALL] = tuple(m for ids in DATA_STREAMS.values()
 
 
 class Schedule:
-    """Per-link message intervals (s of simulated time) and when each is next due."""
+    """Per-link message intervals (s of simulated time) and when each is next due.
 
-    def __init__(self) -> None:
-        self.intervals: dict[int, float] = {m: 1.0 / hz for m, hz in DEFAULT_RATES.items()}
+    ``streams=False`` starts with every stream off (the motor-command link)."""
+
+    def __init__(self, streams: bool = True) -> None:
+        rates = DEFAULT_RATES if streams else {}
+        self.intervals: dict[int, float] = {m: 1.0 / hz for m, hz in rates.items()}
         self.next_due: dict[int, float] = {}
+        self.last_wall: dict[int, float] = {}
 
     def set_rate(self, message_id: int, hz: float | None) -> None:
         """Rate in Hz; 0 or negative stops the message; None restores the default."""
@@ -283,13 +293,20 @@ class Schedule:
             self.intervals[message_id] = 1.0 / hz
         self.next_due.pop(message_id, None)
 
-    def due(self, now: float) -> list[int]:
-        """Message ids due at simulated time ``now``; advances their next due time."""
+    def due(self, now: float, wall_now: float | None = None) -> list[int]:
+        """Message ids due at simulated time ``now``; advances their next due time.
+
+        With ``wall_now`` (lockstep, possibly far faster than real time) a message is
+        also held back until its interval has passed on the wall clock."""
         out = []
         for message_id, interval in self.intervals.items():
             due = self.next_due.get(message_id, now)
             if due - now > interval:  # simulated time went back (reboot, reset)
                 due = now
+            if now >= due and wall_now is not None:
+                if wall_now - self.last_wall.get(message_id, -math.inf) < interval:
+                    continue
+                self.last_wall[message_id] = wall_now
             if now >= due:
                 out.append(message_id)
                 # Keep the phase, but never queue a backlog after a pause.

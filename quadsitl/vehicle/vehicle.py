@@ -25,6 +25,9 @@ from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
 from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg, Limits, Orbit
 from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
 
+MOTOR_TIMEOUT = 0.5  # s of simulated time without motor commands before the onboard
+# controller takes over again
+
 # Severities of events, as MAV_SEVERITY numbers them.
 CRITICAL, ERROR, WARNING, NOTICE, INFO = 2, 3, 4, 5, 6
 # Landed states, as MAV_LANDED_STATE numbers them.
@@ -83,6 +86,8 @@ class Vehicle:
     land_after_leg: bool
     item_hold_until: float | None
     item_target: Vec | None
+    motor_control: bool  # rotors commanded by an external controller, not the onboard one
+    motor_command_time: float  # s, simulated, of the last external motor command
 
     def __init__(
         self,
@@ -186,6 +191,8 @@ class Vehicle:
             return _denied("return denied: vehicle is on the ground")
         if mode is Mode.LAND and self.on_ground and not self.armed:
             return _denied("land denied: vehicle is on the ground")
+        if self.motor_control:
+            self.release_motors(f"mode {mode.name} requested")
         if mode is not self.mode:
             self._event(INFO, f"mode {mode.name}")
         self._enter_mode(mode)
@@ -234,6 +241,52 @@ class Vehicle:
         self.offboard = setpoint
         self.offboard_time = self.time
 
+    def motor_command(self, rotor_speeds: Vec) -> None:
+        """Rotor speeds (rad/s, finite, within [0, Ω_max]; the caller checks) from an
+        external controller: the onboard controller is bypassed until the commands stop
+        for MOTOR_TIMEOUT, the mode changes, or :meth:`release_motors`. A disarmed vehicle
+        keeps its rotors stopped."""
+        if not self.motor_control:
+            self.motor_control = True
+            self.mode = Mode.OFFBOARD
+            self._event(INFO, "external motor control")
+        self.motor_command_time = self.time
+        self.rotor_cmd[:] = rotor_speeds if self.armed else 0.0
+
+    def release_motors(self, reason: str) -> None:
+        """Hand the rotors back to the onboard controller, holding the current position."""
+        if not self.motor_control:
+            return
+        self.motor_control = False
+        self.controller.reset()
+        self._enter_mode(Mode.LOITER)
+        self._event(NOTICE, f"motor control ended ({reason}): onboard controller holding")
+
+    def reset_state(self, state: Vec) -> Result:
+        """Put the vehicle in ``state`` (17 values, world ENU, layout of
+        :mod:`quadsitl.physics.layout`): for training episodes. Clears a crash; arming,
+        simulated time and motor control are kept. Not under motor control, the onboard
+        controller then holds the new position."""
+        state = np.asarray(state, dtype=np.float64)
+        if state.shape != (L.STATE_SIZE,) or not np.isfinite(state).all():
+            return _denied("reset denied: state must be 17 finite numbers")
+        if np.linalg.norm(state[L.QUAT]) < 1e-6:
+            return _denied("reset denied: attitude quaternion is zero")
+        gear = self.airframe.gear_height
+        if state[L.I_PZ] < gear - 1e-6:
+            return _denied("reset denied: position below the ground")
+        if abs(state[L.POS]).max() > 50_000 or state[L.ROTORS].min() < 0:
+            return _denied("reset denied: position too far or negative rotor speed")
+        state[L.ROTORS] = np.minimum(state[L.ROTORS], self.airframe.max_rotor_speed)
+        resting = state[L.I_PZ] <= gear + 1e-6 and not np.any(state[L.VEL])
+        self.fleet.reset(state, contact=L.ON_GROUND if resting else L.AIRBORNE)
+        self.flew = not resting
+        self.landed_at = self.time if resting else None
+        if not self.motor_control:
+            self.controller.reset()
+            self._enter_mode(Mode.LOITER)
+        return ACCEPTED
+
     def set_param(self, name: str, value: float) -> float:
         """Set a parameter; returns the value stored. ValueError when refused."""
         value = self.params.check(name, value)
@@ -278,14 +331,34 @@ class Vehicle:
         contact_before = int(self.fleet.contact[0])
         self.fleet.step(self.rotor_cmd)
         self._watch_contact(contact_before)
+        self._drain_battery(self.fleet.dt)
+
+    def advance(self) -> None:
+        """One control period. Under motor control the physics takes it in one call."""
+        if not self.motor_control:
+            for _ in range(self.substeps):
+                self.step()
+            return
+        self._control()
+        self._physics_steps += self.substeps
+        contact_before = int(self.fleet.contact[0])
+        self.fleet.step(self.rotor_cmd, n_substeps=self.substeps)
+        self._watch_contact(contact_before)
+        self._drain_battery(self.control_period)
+
+    def _drain_battery(self, seconds: float) -> None:
         rotors = self.fleet.state[0, L.ROTORS]
         shaft_power = self.airframe.torque_coeff * float(np.sum(rotors**3))
-        self.battery.drain(shaft_power, self.fleet.dt)
+        self.battery.drain(shaft_power, seconds)
 
     def _control(self) -> None:
+        if self.motor_control and self.time - self.motor_command_time > MOTOR_TIMEOUT:
+            self.release_motors("no motor commands")
         if not self.armed:
             self.rotor_cmd[:] = 0.0
             return
+        if self.motor_control:
+            return  # the external controller's command stands
         self._navigate()
         setpoint = self._current_setpoint()
         self.rotor_cmd[:] = self.controller.rotor_command(self.state, setpoint, self.control_period)
@@ -546,6 +619,8 @@ class Vehicle:
         self.item_hold_until = None
         self.item_target = None
         self._physics_steps = 0
+        self.motor_control = False
+        self.motor_command_time = -math.inf
         self.rotor_cmd[:] = 0.0
         self.controller.reset()
         self.mode = Mode.LOITER

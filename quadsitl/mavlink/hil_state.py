@@ -1,0 +1,64 @@
+"""The motor path's vehicle state on the wire, both ways.
+
+The simulator's physics state (world ENU, body FLU, centre of mass, ground at z = 0)
+becomes the motor path's frames: position in local NED whose origin is the centre of
+mass resting at home (the frame of LOCAL_POSITION_NED), attitude FRD -> NED, velocity in
+body FRD (ODOMETRY's child frame, as PX4 sends it), body rates FRD, rotor speeds rad/s.
+Both the simulator (encoding) and :mod:`quadsitl.mavlink.motor_client` (decoding) use
+these two functions, so the round trip is exact up to the wire's float32.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from quadsitl import frames
+from quadsitl.physics import layout as L
+
+Vec = NDArray[np.float64]
+
+
+@dataclass
+class WireState:
+    """One state answer of the motor path, in wire frames and units."""
+
+    time_usec: int  # simulated time since boot
+    position_ned: Vec  # m
+    q_ned_frd: Vec  # (w, x, y, z), body FRD -> local NED
+    velocity_frd: Vec  # m/s, body FRD
+    rates_frd: Vec  # rad/s, body FRD
+    rotor_speeds: Vec  # rad/s, measured
+    contact: int  # physics.layout AIRBORNE / ON_GROUND / CRASHED
+    touchdown_speed: float  # m/s, downward speed at the last touchdown
+
+    @classmethod
+    def from_physics(
+        cls, state: ArrayLike, gear_height: float, time_usec: int, contact: int, touchdown: float
+    ) -> WireState:
+        s = np.asarray(state, dtype=np.float64)
+        q_enu_flu = s[L.QUAT]
+        velocity_flu = frames.quat_rotate(frames.quat_conjugate(q_enu_flu), s[L.VEL])
+        return cls(
+            time_usec=time_usec,
+            position_ned=frames.enu_to_ned(s[L.POS] - np.array([0.0, 0.0, gear_height])),
+            q_ned_frd=frames.quat_enu_flu_to_ned_frd(q_enu_flu),
+            velocity_frd=frames.flu_to_frd(velocity_flu),
+            rates_frd=frames.flu_to_frd(s[L.RATES]),
+            rotor_speeds=s[L.ROTORS].copy(),
+            contact=contact,
+            touchdown_speed=touchdown,
+        )
+
+    def to_physics(self, gear_height: float) -> Vec:
+        """(17,) physics state row (world ENU, centre of mass above the ground plane)."""
+        state = np.zeros(L.STATE_SIZE)
+        q_enu_flu = frames.quat_normalize(frames.quat_ned_frd_to_enu_flu(self.q_ned_frd))
+        state[L.POS] = frames.ned_to_enu(self.position_ned) + np.array([0.0, 0.0, gear_height])
+        state[L.QUAT] = q_enu_flu
+        state[L.VEL] = frames.quat_rotate(q_enu_flu, frames.frd_to_flu(self.velocity_frd))
+        state[L.RATES] = frames.frd_to_flu(self.rates_frd)
+        state[L.ROTORS] = self.rotor_speeds
+        return state

@@ -1,0 +1,214 @@
+"""The external controller's end of the motor path: a small, fast lockstep client.
+
+Talks to ``quadsitl sim --hil udpin:HOST:PORT`` (or any of its links) over one UDP
+socket with its own pymavlink codec: HIL_ACTUATOR_CONTROLS out, the state answer
+(:class:`~quadsitl.mavlink.hil_state.WireState`) back. Used by the MAVLink gym
+environment and the lockstep benchmark; an example for anyone writing their own.
+"""
+
+from __future__ import annotations
+
+import math
+import select
+import socket
+import time
+from collections import deque
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from quadsitl.mavlink import mavlink as mav
+from quadsitl.mavlink.hil_state import WireState
+from quadsitl.mavlink.motor_path import ARMED_FLAG, LOCKSTEP_FLAG, RESET_STATE, STAGE_MOTION
+from quadsitl.mavlink.signing import sign_outgoing
+from quadsitl.physics import layout as L
+
+FORCE_MAGIC = 21196
+SPIN_SECONDS = 0.002  # poll this long for an answer before sleeping in select()
+
+
+class SimulatorError(RuntimeError):
+    """The simulator did not answer in time, or refused a command."""
+
+
+class _Capture:
+    def __init__(self) -> None:
+        self.frame = b""
+
+    def write(self, data: bytes) -> None:
+        self.frame = bytes(data)
+
+
+class MotorClient:
+    """Lockstep motor commands to one simulated vehicle.
+
+    Args:
+        host, port: where the simulator's link listens (``udpin``).
+        timeout: wall seconds to wait for any answer before :class:`SimulatorError`.
+        signing_key: 32-byte MAVLink 2 key if the simulator requires signing.
+        system_id, component_id: this client's MAVLink identity.
+    """
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        timeout: float = 2.0,
+        signing_key: bytes | None = None,
+        system_id: int = 255,
+        component_id: int = 191,
+    ) -> None:
+        self.address = (host, port)
+        self.timeout = timeout
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1" if host in ("127.0.0.1", "localhost") else "0.0.0.0", 0))
+        self.sock.setblocking(False)
+        self._out = _Capture()
+        self.mav = mav.MAVLink(self._out, srcSystem=system_id, srcComponent=component_id)
+        if signing_key is not None:
+            sign_outgoing(self.mav, signing_key, link_id=0)
+        self.parser = mav.MAVLink(None)
+        self.parser.robust_parsing = True
+        self.target_system = 1
+        self.statustexts: deque[str] = deque(maxlen=100)
+        self.state: WireState | None = None
+        self._pending: dict[str, Any] = {}
+        self._inbox: deque[Any] = deque()
+        self._controls = [0.0] * 16
+
+    # --- plumbing ---------------------------------------------------------------------
+    def _send(self, message: Any) -> None:
+        self.mav.send(message)
+        self.sock.sendto(self._out.frame, self.address)
+
+    def _receive(self, deadline: float) -> None:
+        """Queue the next datagram's messages, waiting until ``deadline`` for one."""
+        started = time.monotonic()
+        while True:
+            try:
+                data = self.sock.recv(65535)
+            except BlockingIOError:
+                now = time.monotonic()
+                if now >= deadline:
+                    return
+                if now - started < SPIN_SECONDS:
+                    continue  # the answer is usually microseconds away: do not sleep yet
+                select.select([self.sock], [], [], deadline - now)
+                continue
+            except ConnectionRefusedError:  # ICMP: nothing listens at the address
+                raise SimulatorError(f"nothing listens at {self.address}") from None
+            self._inbox.extend(self.parser.parse_buffer(data) or [])
+            return
+
+    def _wait_for(self, wanted: str, what: str, accept: Any = None) -> Any:
+        deadline = time.monotonic() + self.timeout
+        while True:
+            while self._inbox:
+                message = self._inbox.popleft()
+                self._collect(message)
+                if message.get_type() == wanted and (accept is None or accept(message)):
+                    return message
+            if time.monotonic() >= deadline:
+                break
+            self._receive(deadline)
+        recent = "; ".join(list(self.statustexts)[-3:])
+        raise SimulatorError(
+            f"no {what} from the simulator at {self.address[0]}:{self.address[1]} within "
+            f"{self.timeout:g} s" + (f" (it said: {recent})" if recent else "")
+        )
+
+    def _collect(self, message: Any) -> None:
+        """Keep the parts of a state answer until its closing ODOMETRY arrives."""
+        kind = message.get_type()
+        if kind == "STATUSTEXT":
+            self.statustexts.append(message.text)
+        elif kind == "ACTUATOR_OUTPUT_STATUS":
+            self._pending["rotors"] = message.actuator[: L.N_ROTORS]
+        elif kind == "NAMED_VALUE_INT" and message.name == "CONTACT":
+            self._pending["contact"] = message.value
+        elif kind == "NAMED_VALUE_FLOAT" and message.name == "TD_SPEED":
+            self._pending["touchdown"] = message.value
+        elif kind == "ODOMETRY":
+            p = self._pending
+            self.state = WireState(
+                time_usec=message.time_usec,
+                position_ned=np.array([message.x, message.y, message.z]),
+                q_ned_frd=np.array(message.q, dtype=np.float64),
+                velocity_frd=np.array([message.vx, message.vy, message.vz]),
+                rates_frd=np.array([message.rollspeed, message.pitchspeed, message.yawspeed]),
+                rotor_speeds=np.array(p.get("rotors", [0.0] * L.N_ROTORS), dtype=np.float64),
+                contact=int(p.get("contact", L.AIRBORNE)),
+                touchdown_speed=float(p.get("touchdown", 0.0)),
+            )
+            self._pending = {}
+
+    # --- the vehicle ------------------------------------------------------------------
+    def connect(self) -> None:
+        """Introduce ourselves (a udpin link learns its peers) and wait for a heartbeat."""
+        self._send(self.mav.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0))
+        heartbeat = self._wait_for("HEARTBEAT", "heartbeat")
+        self.target_system = heartbeat.get_srcSystem()
+
+    def command(self, command: int, *params: float) -> int:
+        """COMMAND_LONG and its MAV_RESULT (up to 7 params; missing ones are 0)."""
+        values = list(params) + [0.0] * (7 - len(params))
+        self._send(self.mav.command_long_encode(self.target_system, 1, command, 0, *values))
+        ack = self._wait_for(
+            "COMMAND_ACK", f"COMMAND_ACK for {command}", lambda m: m.command == command
+        )
+        return int(ack.result)
+
+    def arm(self, force: bool = True) -> None:
+        """Arm (forced by default: training starts in the air)."""
+        result = self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, FORCE_MAGIC if force else 0)
+        if result != mav.MAV_RESULT_ACCEPTED:
+            raise SimulatorError(f"arming refused (MAV_RESULT {result}): {self._last_text()}")
+
+    def reset(
+        self,
+        position_ned: ArrayLike,
+        q_ned_frd: ArrayLike = (1.0, 0.0, 0.0, 0.0),
+        velocity_ned: ArrayLike = (0.0, 0.0, 0.0),
+        rates_frd: ArrayLike = (0.0, 0.0, 0.0),
+        rotor_speed: float = math.nan,
+    ) -> WireState:
+        """Put the vehicle in a state (local NED; see docs/mavlink.md); the state after it."""
+        motion = [*np.asarray(velocity_ned, float), *np.asarray(rates_frd, float), rotor_speed]
+        result = self.command(STAGE_MOTION, *motion)
+        if result != mav.MAV_RESULT_ACCEPTED:
+            raise SimulatorError(f"reset refused (MAV_RESULT {result}): {self._last_text()}")
+        self.state = None
+        pose = [*np.asarray(position_ned, float), *np.asarray(q_ned_frd, float)]
+        result = self.command(RESET_STATE, *pose)
+        if result != mav.MAV_RESULT_ACCEPTED:
+            raise SimulatorError(f"reset refused (MAV_RESULT {result}): {self._last_text()}")
+        if self.state is None:  # the state follows the ACK
+            self._wait_for("ODOMETRY", "state after reset")
+        assert self.state is not None
+        return self.state
+
+    def step(self, controls: ArrayLike, armed: bool = True, lockstep: bool = True) -> WireState:
+        """Send normalised rotor commands in [0, 1]; the state one control period later."""
+        self._controls[: L.N_ROTORS] = [float(u) for u in np.asarray(controls).reshape(-1)]
+        stamp = self.state.time_usec if self.state is not None else 0
+        self._send(
+            self.mav.hil_actuator_controls_encode(
+                stamp, self._controls, ARMED_FLAG if armed else 0, LOCKSTEP_FLAG if lockstep else 0
+            )
+        )
+        self._wait_for("ODOMETRY", "state answer")
+        assert self.state is not None
+        return self.state
+
+    def _last_text(self) -> str:
+        return self.statustexts[-1] if self.statustexts else "no reason given"
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def __enter__(self) -> MotorClient:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()

@@ -1,0 +1,212 @@
+"""The motor path: HIL_ACTUATOR_CONTROLS in, the vehicle's state out, lockstep, reset.
+
+PX4 semantics: ``controls[0..3]`` are normalised rotor speed commands in [0, 1]
+(Ω = u·Ω_max, rotor order of the airframe), ``mode`` bit 128 is the armed flag (clear:
+motors stopped), ``flags`` bit 0 asks for lockstep. Each accepted command bypasses the
+onboard controller; in lockstep it advances simulated time by exactly one control
+period. Every command is answered, accepted or not, by the state at full precision,
+stamped with simulated time (see :meth:`MotorPath.state_messages`). A rejected command
+changes nothing: its answer carries the unchanged time.
+
+Reset for training episodes is two ``COMMAND_LONG``\\s, each ACKed: MAV_CMD_USER_2
+stages velocity, body rates and rotor speed; MAV_CMD_USER_1 sets position and attitude
+and applies what was staged, then answers with the state after its ACK.
+
+Pure: no sockets. The server sends what the methods return.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from quadsitl import frames
+from quadsitl.mavlink import mavlink as mav
+from quadsitl.mavlink.hil_state import WireState
+from quadsitl.physics import layout as L
+from quadsitl.vehicle.vehicle import ACCEPTED, Outcome, Result, Vehicle
+
+RESET_STATE = mav.MAV_CMD_USER_1  # 31010
+STAGE_MOTION = mav.MAV_CMD_USER_2  # 31011
+ARMED_FLAG = mav.MAV_MODE_FLAG_SAFETY_ARMED  # 128
+LOCKSTEP_FLAG = 1
+LOCKSTEP_IDLE = 5.0  # wall s without lockstep commands before real time resumes
+# (only when lockstep was asked for by the flag; ``--lockstep`` waits for ever)
+NAN_COVARIANCE = [math.nan] + [0.0] * 20  # "covariance unknown"
+
+_encoder = mav.MAVLink(None)
+
+
+def _int16(x: float) -> int:
+    return int(max(-32767, min(32767, round(x))))
+
+
+class MotorPath:
+    """State of the motor path for one vehicle. ``lockstep``: started with --lockstep."""
+
+    def __init__(self, vehicle: Vehicle, lockstep: bool = False) -> None:
+        self.vehicle = vehicle
+        self.always_lockstep = lockstep
+        self.last_lockstep_wall = -math.inf
+        self.last_command_usec = 0
+        self.resets = 0
+        self.staged: dict[str, Any] | None = None
+        self.counters = {"accepted": 0, "rejected": 0, "while_disarmed": 0}
+        self._previous_velocity: tuple[float, np.ndarray] | None = None
+
+    @property
+    def lockstep(self) -> bool:
+        """True while simulated time moves only with motor commands."""
+        idle = time.monotonic() - self.last_lockstep_wall
+        return self.always_lockstep or idle < LOCKSTEP_IDLE
+
+    # --- motor commands ---------------------------------------------------------------
+    def check(self, msg: Any) -> str | None:
+        """Why this HIL_ACTUATOR_CONTROLS must be rejected, or None."""
+        controls = msg.controls[: L.N_ROTORS]
+        for i, u in enumerate(controls):
+            if not math.isfinite(u):
+                return f"motor command rejected: control {i} is {u}"
+            if not 0.0 <= u <= 1.0:
+                return f"motor command rejected: control {i} = {u:g} outside [0, 1]"
+        if msg.time_usec and msg.time_usec < self.last_command_usec:
+            return (
+                f"motor command rejected: time {msg.time_usec} µs is before the last "
+                f"command's {self.last_command_usec} µs"
+            )
+        return None
+
+    def command(self, msg: Any) -> str | None:
+        """Apply one motor command (and step, in lockstep). Returns a problem to report:
+        the rejection reason, or a warning that a disarmed vehicle ignores it."""
+        problem = self.check(msg)
+        if problem is not None:
+            self.counters["rejected"] += 1
+            return problem
+        v = self.vehicle
+        speeds = np.asarray(msg.controls[: L.N_ROTORS], dtype=np.float64)
+        speeds *= v.airframe.max_rotor_speed
+        if not msg.mode & ARMED_FLAG:
+            speeds[:] = 0.0  # the controller's own outputs are disarmed
+        warning = None
+        if not v.armed and msg.mode & ARMED_FLAG:
+            self.counters["while_disarmed"] += 1
+            if self.counters["while_disarmed"] % 1000 == 1:
+                warning = "motor commands ignored: vehicle disarmed (arm it first)"
+        v.motor_command(speeds)
+        self.counters["accepted"] += 1
+        if msg.time_usec:
+            self.last_command_usec = msg.time_usec
+        if msg.flags & LOCKSTEP_FLAG or self.always_lockstep:
+            self.last_lockstep_wall = time.monotonic()
+            v.advance()
+        return warning
+
+    # --- reset ------------------------------------------------------------------------
+    def stage_motion(self, params: list[float]) -> Result:
+        """MAV_CMD_USER_2: velocity NED (m/s), body rates FRD (rad/s), rotor speed
+        (rad/s, all four; NaN: hover speed if airborne), used by the next reset."""
+        motion = params[:6]
+        if not all(math.isfinite(x) for x in motion):
+            return Result(Outcome.DENIED, "stage motion denied: NaN or inf")
+        rotor = params[6]
+        if not (math.isnan(rotor) or 0.0 <= rotor <= self.vehicle.airframe.max_rotor_speed):
+            return Result(Outcome.DENIED, f"stage motion denied: rotor speed {rotor} rad/s")
+        self.staged = {"velocity_ned": motion[:3], "rates_frd": motion[3:6], "rotor": rotor}
+        return ACCEPTED
+
+    def reset(self, params: list[float]) -> Result:
+        """MAV_CMD_USER_1: position local NED (m), attitude quaternion w, x, y, z
+        (FRD -> NED); with the staged motion (else at rest)."""
+        if not all(math.isfinite(x) for x in params):
+            return Result(Outcome.DENIED, "reset denied: NaN or inf in position or attitude")
+        q = np.asarray(params[3:7], dtype=np.float64)
+        if np.linalg.norm(q) < 1e-6:
+            return Result(Outcome.DENIED, "reset denied: attitude quaternion is zero")
+        staged = self.staged or {"velocity_ned": [0.0] * 3, "rates_frd": [0.0] * 3}
+        v = self.vehicle
+        q = q / np.linalg.norm(q)
+        velocity_ned = np.asarray(staged["velocity_ned"], dtype=np.float64)
+        velocity_frd = frames.quat_rotate(frames.quat_conjugate(q), velocity_ned)
+        wire = WireState(
+            time_usec=0,
+            position_ned=np.asarray(params[:3], dtype=np.float64),
+            q_ned_frd=q,
+            velocity_frd=velocity_frd,
+            rates_frd=np.asarray(staged["rates_frd"], dtype=np.float64),
+            rotor_speeds=np.zeros(L.N_ROTORS),
+            contact=L.AIRBORNE,
+            touchdown_speed=0.0,
+        )
+        state = wire.to_physics(v.airframe.gear_height)
+        rotor = staged.get("rotor", math.nan)
+        on_ground = state[L.I_PZ] <= v.airframe.gear_height + 1e-6
+        if math.isnan(rotor):
+            rotor = 0.0 if on_ground else v.airframe.hover_rotor_speed
+        state[L.ROTORS] = rotor
+        result = v.reset_state(state)
+        if result.ok:
+            self.staged = None
+            self.resets += 1
+            self._previous_velocity = None
+        return result
+
+    # --- the answer -------------------------------------------------------------------
+    def state_messages(self) -> list[Any]:
+        """The answer to a motor command or a reset, in this order: HIL_STATE_QUATERNION
+        (PX4's simulator state; integer position/velocity), ACTUATOR_OUTPUT_STATUS
+        (rotor speeds, rad/s), NAMED_VALUE_INT ``CONTACT`` (0 airborne, 1 on the ground,
+        2 crashed), NAMED_VALUE_FLOAT ``TD_SPEED`` (touchdown speed, m/s; only when not
+        airborne) and last ODOMETRY (float32 pose and body-frame velocity)."""
+        v = self.vehicle
+        time_usec = round(v.time * 1e6)
+        contact = int(v.fleet.contact[0])
+        wire = WireState.from_physics(
+            v.state, v.airframe.gear_height, time_usec, contact, float(v.fleet.touchdown_speed[0])
+        )
+        time_ms = (time_usec // 1000) & 0xFFFFFFFF
+        messages = [
+            self._hil_state_quaternion(wire),
+            _encoder.actuator_output_status_encode(
+                time_usec, 0b1111, [float(w) for w in wire.rotor_speeds] + [0.0] * 28
+            ),
+            _encoder.named_value_int_encode(time_ms, b"CONTACT", contact),
+        ]
+        if contact != L.AIRBORNE:
+            messages.append(
+                _encoder.named_value_float_encode(time_ms, b"TD_SPEED", wire.touchdown_speed)
+            )
+        p, q, vel, r = wire.position_ned, wire.q_ned_frd, wire.velocity_frd, wire.rates_frd
+        odometry = _encoder.odometry_encode(
+            time_usec, mav.MAV_FRAME_LOCAL_NED, mav.MAV_FRAME_BODY_FRD,
+            p[0], p[1], p[2], list(q), vel[0], vel[1], vel[2], r[0], r[1], r[2],
+            NAN_COVARIANCE, NAN_COVARIANCE, self.resets & 0xFF,
+            mav.MAV_ESTIMATOR_TYPE_UNKNOWN, 100,
+        )  # fmt: skip
+        messages.append(odometry)
+        return messages
+
+    def _hil_state_quaternion(self, wire: WireState) -> Any:
+        v = self.vehicle
+        s = v.state
+        up = float(s[L.I_PZ]) - v.airframe.gear_height
+        lat, lon, alt = v.home.to_global(s[L.I_PX], s[L.I_PY], up)
+        velocity_ned = np.array([s[L.I_VY], s[L.I_VX], -s[L.I_VZ]])
+        # Specific force (what an accelerometer reads), body FRD, over the last period.
+        accel_frd = np.array([0.0, 0.0, -9.80665])
+        if self._previous_velocity is not None and v.time > self._previous_velocity[0]:
+            t0, v0 = self._previous_velocity
+            accel_ned = (velocity_ned - v0) / (v.time - t0) - np.array([0.0, 0.0, 9.80665])
+            accel_frd = frames.quat_rotate(frames.quat_conjugate(wire.q_ned_frd), accel_ned)
+        self._previous_velocity = (v.time, velocity_ned)
+        speed = float(np.linalg.norm(velocity_ned)) * 100
+        mg = accel_frd / 9.80665 * 1000
+        return _encoder.hil_state_quaternion_encode(
+            wire.time_usec, list(wire.q_ned_frd), *(float(x) for x in wire.rates_frd),
+            round(lat * 1e7), round(lon * 1e7), round(alt * 1000),
+            *(_int16(x * 100) for x in velocity_ned), min(round(speed), 65535),
+            min(round(speed), 65535), *(_int16(x) for x in mg),
+        )  # fmt: skip
