@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 
 import pytest
 
 from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
+from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
 
 
 class RunningSim:
@@ -37,6 +39,39 @@ def start_sim(log_dir: str, speed: float = 5.0) -> RunningSim:
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )  # fmt: skip
     return RunningSim(process, port, log_dir)
+
+
+class MotorSim:
+    """``quadsitl sim`` with a motor link and a ground-station link, both udpin."""
+
+    def __init__(self, *options: str) -> None:
+        self.hil_port, self.gcs_port = free_udp_port(), free_udp_port()
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "quadsitl.cli", "sim", "--api", "none", "--logs", "none",
+             "--gcs", f"udpin:127.0.0.1:{self.gcs_port}",
+             "--hil", f"udpin:127.0.0.1:{self.hil_port}", *options],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        )  # fmt: skip
+
+    def client(self, **kwargs: object) -> MotorClient:
+        client = MotorClient("127.0.0.1", self.hil_port, **kwargs)  # type: ignore[arg-type]
+        deadline = time.monotonic() + 20
+        while True:  # the process needs a moment to start
+            try:
+                client.connect()
+                return client
+            except SimulatorError:
+                if time.monotonic() > deadline or self.process.poll() is not None:
+                    raise
+
+    def stop(self) -> str:
+        self.process.terminate()
+        try:
+            out, _ = self.process.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            out, _ = self.process.communicate()
+        return out
 
 
 @pytest.fixture

@@ -84,3 +84,12 @@ def test_quaternion_helpers():
         F.quat_normalize([0.0, 0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="3 components"):
         F.enu_to_ned([1.0, 2.0])
+
+
+def test_single_vector_rotation_equals_the_batched_one():
+    rng = np.random.default_rng(5)
+    q = F.quat_normalize(rng.normal(size=(50, 4)))
+    v = rng.normal(size=(50, 3))
+    batched = F.quat_rotate(q, v)
+    single = np.array([F.quat_rotate(q[i], v[i]) for i in range(50)])
+    np.testing.assert_allclose(single, batched, atol=1e-14)

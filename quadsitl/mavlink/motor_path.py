@@ -64,28 +64,31 @@ class MotorPath:
         return self.always_lockstep or idle < LOCKSTEP_IDLE
 
     # --- motor commands ---------------------------------------------------------------
-    def check(self, msg: Any) -> str | None:
-        """Why this HIL_ACTUATOR_CONTROLS must be rejected, or None."""
+    def check(self, msg: Any) -> tuple[str, str] | None:
+        """(kind, reason) why this HIL_ACTUATOR_CONTROLS must be rejected, or None."""
         controls = msg.controls[: L.N_ROTORS]
         for i, u in enumerate(controls):
             if not math.isfinite(u):
-                return f"motor command rejected: control {i} is {u}"
+                return "not_finite", f"motor command rejected: control {i} is {u}"
             if not 0.0 <= u <= 1.0:
-                return f"motor command rejected: control {i} = {u:g} outside [0, 1]"
+                return "out_of_range", f"motor command rejected: control {i} = {u:g} not in [0, 1]"
         if msg.time_usec and msg.time_usec < self.last_command_usec:
-            return (
+            return "time_backwards", (
                 f"motor command rejected: time {msg.time_usec} µs is before the last "
                 f"command's {self.last_command_usec} µs"
             )
         return None
 
     def command(self, msg: Any) -> str | None:
-        """Apply one motor command (and step, in lockstep). Returns a problem to report:
-        the rejection reason, or a warning that a disarmed vehicle ignores it."""
+        """Apply one motor command (and step, in lockstep). Returns a problem worth
+        reporting: the first rejection of each kind (then every 100th), or the first
+        command ignored by a disarmed vehicle (then every 1000th)."""
         problem = self.check(msg)
         if problem is not None:
+            kind, reason = problem
             self.counters["rejected"] += 1
-            return problem
+            self.counters[kind] = self.counters.get(kind, 0) + 1
+            return reason if self.counters[kind] % 100 == 1 else None
         v = self.vehicle
         speeds = np.asarray(msg.controls[: L.N_ROTORS], dtype=np.float64)
         speeds *= v.airframe.max_rotor_speed

@@ -210,9 +210,7 @@ class MavlinkServer:
     # --- motor path ---------------------------------------------------------------------
     def handle_hil_actuator_controls(self, msg: Any, link: Link) -> None:
         problem = self.motors.command(msg)
-        if problem is not None and (
-            self.motors.counters["rejected"] % 100 == 1 or "disarmed" in problem
-        ):
+        if problem is not None:
             self.statustext(4, problem)
         self.send_together(self.motors.state_messages(), link)
 

@@ -1,0 +1,191 @@
+"""The motor path over real UDP: lockstep, state answers, reset, bad motor commands."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+from pymavlink import mavutil
+
+from quadsitl.mavlink.hil_state import WireState
+from quadsitl.mavlink.motor_client import SimulatorError
+from quadsitl.physics import Fleet, get_airframe
+from quadsitl.physics import layout as L
+from tests.conftest import MotorSim
+
+AIRFRAME = get_airframe("paper")
+HOVER = AIRFRAME.hover_rotor_speed / AIRFRAME.max_rotor_speed
+
+
+@pytest.fixture
+def lockstep_sim() -> Iterator[MotorSim]:
+    sim = MotorSim("--lockstep")
+    yield sim
+    sim.stop()
+
+
+def _as_float32(state: WireState) -> np.ndarray:
+    return np.concatenate(
+        [state.position_ned, state.q_ned_frd, state.velocity_frd, state.rates_frd,
+         state.rotor_speeds]
+    ).astype(np.float32)  # fmt: skip
+
+
+def test_lockstep_n_commands_make_n_steps_matching_in_process_physics(lockstep_sim):
+    client = lockstep_sim.client()
+    q = np.array([0.9, 0.1, -0.2, 0.3])  # some attitude (FRD -> NED); normalised by reset
+    start = client.reset([1.0, -2.0, -6.0], q / np.linalg.norm(q), [0.5, 0.0, -0.25])
+    client.arm()
+    period_us = 4000  # default: 250 Hz control, 1 kHz physics -> 4 physics steps each
+    fleet = Fleet(1, AIRFRAME, dt=0.001)
+    fleet.reset(start.to_physics(AIRFRAME.gear_height))
+    rng = np.random.default_rng(0)
+    n = 300
+    for i in range(n):
+        controls = np.clip(HOVER + rng.normal(0, 0.05, 4), 0, 1).astype(np.float32)
+        answer = client.step(controls)
+        assert answer.time_usec == start.time_usec + (i + 1) * period_us
+        fleet.step(controls.astype(np.float64) * AIRFRAME.max_rotor_speed, n_substeps=4)
+        expected = WireState.from_physics(
+            fleet.state[0], AIRFRAME.gear_height, answer.time_usec, 0, 0.0
+        )
+        got, want = _as_float32(answer), _as_float32(expected)
+        # The simulator started from the float32 state it answered the reset with.
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5)
+    assert answer.contact == L.AIRBORNE
+    assert client.statustexts.count("external motor control") == 1
+
+
+def test_bad_motor_commands_change_nothing_and_are_answered(lockstep_sim):
+    client = lockstep_sim.client()
+    client.reset([0.0, 0.0, -5.0])
+    client.arm()
+    client.step([HOVER] * 4)
+    before = client.step([HOVER] * 4)  # stamped with the time of the answer before it
+    for bad in ([float("nan"), 0.5, 0.5, 0.5], [float("inf")] * 4, [1.5, 0.5, 0.5, 0.5],
+                [-0.1, 0.5, 0.5, 0.5]):  # fmt: skip
+        answer = client.step(bad)
+        assert answer.time_usec == before.time_usec  # rejected: time did not move
+        np.testing.assert_array_equal(answer.position_ned, before.position_ned)
+    assert any("motor command rejected" in t for t in client.statustexts)
+    # Time going backwards: stamp the command before the last accepted one (4000 µs).
+    client.state = WireState(**{**before.__dict__, "time_usec": 3999})
+    assert client.step([HOVER] * 4).time_usec == before.time_usec
+    assert "before the last command" in "".join(client.statustexts)  # chunked: > 50 chars
+    # Still flying on good commands.
+    client.state = before
+    assert client.step([HOVER] * 4).time_usec == before.time_usec + 4000
+
+
+def test_disarmed_vehicle_ignores_motor_commands(lockstep_sim):
+    client = lockstep_sim.client()
+    client.reset([0.0, 0.0, -20.0])  # hovering rotor speed, not armed
+    answers = [client.step([1.0] * 4) for _ in range(100)]
+    assert answers[-1].time_usec == answers[0].time_usec + 99 * 4000  # time moves
+    assert answers[-1].rotor_speeds.max() < 0.5 * answers[0].rotor_speeds.max()  # spin down
+    assert answers[-1].velocity_frd[2] > 1.0  # falling
+    assert any("disarmed" in t for t in client.statustexts)
+    # The armed flag clear also stops the motors, even when armed.
+    client.reset([0.0, 0.0, -20.0])
+    client.arm()
+    answer = [client.step([1.0] * 4, armed=False) for _ in range(100)][-1]
+    assert answer.rotor_speeds.max() < 100
+
+
+def test_reset_is_checked_and_acknowledged(lockstep_sim):
+    client = lockstep_sim.client()
+    with pytest.raises(SimulatorError, match="below the ground"):
+        client.reset([0.0, 0.0, 1.0])
+    with pytest.raises(SimulatorError, match="NaN"):
+        client.reset([0.0, float("nan"), -1.0])
+    with pytest.raises(SimulatorError, match="quaternion is zero"):
+        client.reset([0.0, 0.0, -1.0], [0.0, 0.0, 0.0, 0.0])
+    state = client.reset([3.0, 4.0, -5.0], rates_frd=[0.1, 0.0, 0.0], rotor_speed=300.0)
+    np.testing.assert_allclose(state.position_ned, [3.0, 4.0, -5.0], atol=1e-6)
+    np.testing.assert_allclose(state.rates_frd, [0.1, 0.0, 0.0], atol=1e-7)
+    np.testing.assert_allclose(state.rotor_speeds, 300.0)
+    assert state.contact == L.AIRBORNE
+    on_ground = client.reset([0.0, 0.0, 0.0])
+    assert on_ground.contact == L.ON_GROUND
+    assert on_ground.rotor_speeds.max() == 0.0
+
+
+def test_silent_lockstep_client_costs_no_cpu_and_gcs_keeps_heartbeat(lockstep_sim):
+    client = lockstep_sim.client()
+    client.reset([0.0, 0.0, -5.0])
+    client.arm()
+    for _ in range(50):
+        client.step([HOVER] * 4)
+    gcs = mavutil.mavlink_connection(f"udpout:127.0.0.1:{lockstep_sim.gcs_port}")
+    try:
+        gcs.mav.heartbeat_send(
+            mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0
+        )
+        cpu_before = _cpu_seconds(lockstep_sim.process.pid)
+        started = time.monotonic()
+        beats = 0
+        while time.monotonic() - started < 3.0:
+            if gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5):
+                beats += 1
+        cpu = (_cpu_seconds(lockstep_sim.process.pid) - cpu_before) / 3.0
+    finally:
+        gcs.close()
+    assert beats >= 2
+    assert cpu < 0.2  # waiting, not spinning
+    assert client.step([HOVER] * 4).time_usec == 51 * 4000  # resumes where it stopped
+
+
+def test_motor_control_ends_safely_when_commands_stop():
+    sim = MotorSim("--speed", "1")
+    gcs = mavutil.mavlink_connection(f"udpout:127.0.0.1:{sim.gcs_port}")
+    try:
+        client = sim.client()
+        client.reset([0.0, 0.0, -5.0])
+        client.arm()
+        gcs.mav.heartbeat_send(
+            mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0
+        )
+        for _ in range(50):  # real time: each answer is the current state
+            client.step([HOVER] * 4, lockstep=False)
+            time.sleep(0.01)
+        beat = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
+        assert beat.base_mode & mavutil.mavlink.MAV_MODE_FLAG_HIL_ENABLED
+        # Commands stop: after 0.5 s the onboard controller takes over and holds.
+        text = gcs.recv_match(
+            type="STATUSTEXT", blocking=True, timeout=5,
+            condition="'motor control ended' in STATUSTEXT.text",
+        )  # fmt: skip
+        assert text is not None and "no motor commands" in text.text
+        time.sleep(2.0)
+        gcs.recv_match(type="LOCAL_POSITION_NED", blocking=False)
+        while gcs.recv_match(blocking=False) is not None:  # drain what queued meanwhile
+            pass
+        position = gcs.recv_match(type="LOCAL_POSITION_NED", blocking=True, timeout=5)
+        assert abs(position.z + 5.0) < 0.5 and abs(position.x) < 0.5
+        beat = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
+        assert not beat.base_mode & mavutil.mavlink.MAV_MODE_FLAG_HIL_ENABLED
+        assert beat.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+    finally:
+        gcs.close()
+        sim.stop()
+
+
+def _cpu_seconds(pid: int) -> float:
+    with open(f"/proc/{pid}/stat") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / 100.0  # utime + stime, clock ticks
+
+
+def test_wire_state_round_trip_is_exact_to_float64_rounding():
+    rng = np.random.default_rng(3)
+    state = np.zeros(L.STATE_SIZE)
+    state[L.POS] = rng.normal(0, 10, 3) + [0, 0, 20]
+    state[L.VEL] = rng.normal(0, 3, 3)
+    q = rng.normal(size=4)
+    state[L.QUAT] = q / np.linalg.norm(q)
+    state[L.RATES] = rng.normal(0, 2, 3)
+    state[L.ROTORS] = rng.uniform(0, 800, 4)
+    wire = WireState.from_physics(state, 0.1, 0, L.AIRBORNE, 0.0)
+    np.testing.assert_allclose(wire.to_physics(0.1), state, rtol=0, atol=1e-12)

@@ -1,0 +1,141 @@
+"""MAVLink 2 signing against a real simulator process, with pymavlink on the other side."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from pymavlink import mavutil
+
+from quadsitl.mavlink.motor_client import SimulatorError
+from quadsitl.mavlink.signing import SignatureCheck, key_from_file, key_from_passphrase
+from tests.conftest import MotorSim
+
+mav = mavutil.mavlink
+PASSPHRASE = "correct horse battery staple"
+
+
+def _connection(port: int, system: int, key: bytes | None, wait: bool = True) -> mavutil.mavfile:
+    conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=system)
+    if key is not None:
+        conn.setup_signing(key, sign_outgoing=True)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:  # until the vehicle (starting up) has heard us
+        conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        if not wait or conn.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5):
+            return conn
+    raise AssertionError("no heartbeat from the simulator")
+
+
+def _ack(conn: mavutil.mavfile, timeout: float = 1.0) -> object:
+    """The vehicle's ACK addressed to this station (a link carries everyone's ACKs)."""
+    mine = f"COMMAND_ACK.target_system == {conn.source_system}"
+    return conn.recv_match(type="COMMAND_ACK", blocking=True, timeout=timeout, condition=mine)
+
+
+def _request_home(conn: mavutil.mavfile) -> bytes:
+    """A signed (if the connection signs) command; returns the bytes sent."""
+    msg = conn.mav.command_long_encode(1, 1, mav.MAV_CMD_GET_HOME_POSITION, 0, 0, 0, 0, 0, 0, 0, 0)
+    frame = msg.pack(conn.mav)
+    conn.write(frame)
+    return bytes(frame)
+
+
+@pytest.fixture
+def signed_sim():
+    sim = MotorSim("--signing-passphrase", PASSPHRASE)
+    yield sim
+    sim.stop()
+
+
+def test_signed_accepted_unsigned_bad_and_replayed_rejected_and_counted(signed_sim):
+    key = key_from_passphrase(PASSPHRASE)
+    good = _connection(signed_sim.gcs_port, 200, key)
+    plain = _connection(signed_sim.gcs_port, 201, None)
+    # A wrong key also rejects the vehicle's frames: nothing to wait for.
+    forged = _connection(signed_sim.gcs_port, 202, key_from_passphrase("wrong"), wait=False)
+    try:
+        # Heartbeats are open: the unsigned station saw the (signed) vehicle in _connection.
+        beat = plain.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
+        assert beat is not None and beat.get_srcSystem() == 1
+        assert beat.get_header().incompat_flags & 1  # signed by the vehicle
+        frame = _request_home(good)
+        ack = _ack(good, 5)
+        assert ack is not None and ack.result == mav.MAV_RESULT_ACCEPTED
+        _request_home(plain)
+        _request_home(forged)
+        assert _ack(plain) is None and _ack(forged) is None
+        good.write(frame)  # the same signed bytes again: a replay
+        assert _ack(good) is None
+        text = good.recv_match(
+            type="STATUSTEXT", blocking=True, timeout=12,
+            condition="'signing: rejected' in STATUSTEXT.text",
+        )  # fmt: skip
+        assert text is not None
+        deadline = time.monotonic() + 5
+        counts = (0, 0, 0)
+        # unsigned: plain's command (its heartbeats are open); badly signed: forged's
+        # heartbeat and command (a wrong signature is rejected even on a heartbeat);
+        # replayed: the frame sent twice.
+        while time.monotonic() < deadline and counts != (1, 2, 1):
+            status = good.recv_match(type="SYS_STATUS", blocking=True, timeout=2)
+            if status is not None:
+                counts = (status.errors_count1, status.errors_count2, status.errors_count3)
+        assert counts == (1, 2, 1)
+    finally:
+        for conn in (good, plain, forged):
+            conn.close()
+
+
+def test_motor_commands_need_the_key(signed_sim):
+    key = key_from_passphrase(PASSPHRASE)
+    unsigned = signed_sim.client(timeout=1.0)  # heartbeats pass: it connects
+    with pytest.raises(SimulatorError):
+        unsigned.reset([0.0, 0.0, -5.0])
+    unsigned.close()
+    signed = signed_sim.client(signing_key=key)
+    signed.reset([0.0, 0.0, -5.0])
+    signed.arm()
+    assert signed.step([0.7] * 4, lockstep=True).time_usec > 0
+    signed.close()
+
+
+def test_keys_from_passphrase_and_files(tmp_path):
+    key = key_from_passphrase(PASSPHRASE)
+    assert len(key) == 32
+    hex_file = tmp_path / "key.hex"
+    hex_file.write_text(key.hex() + "\n")
+    raw_file = tmp_path / "key.bin"
+    raw_file.write_bytes(key)
+    assert key_from_file(hex_file) == key == key_from_file(raw_file)
+    bad = tmp_path / "short"
+    bad.write_text("abc")
+    with pytest.raises(ValueError, match="64 hex digits"):
+        key_from_file(bad)
+    with pytest.raises(ValueError, match="No such file"):
+        key_from_file(tmp_path / "missing")
+    with pytest.raises(ValueError, match="32 bytes"):
+        SignatureCheck(b"short")
+
+
+def test_a_forged_frame_does_not_lock_out_the_real_sender():
+    """A bad signature with a far-future timestamp must not advance the stream."""
+    key = key_from_passphrase(PASSPHRASE)
+    check = SignatureCheck(key)
+    sender = mav.MAVLink(None, srcSystem=9, srcComponent=1)
+    sender.signing.secret_key, sender.signing.sign_outgoing = key, True
+    from quadsitl.mavlink.signing import now_timestamp
+
+    sender.signing.timestamp = now_timestamp()
+    forger = mav.MAVLink(None, srcSystem=9, srcComponent=1)
+    forger.signing.secret_key, forger.signing.sign_outgoing = b"x" * 32, True
+    forger.signing.timestamp = now_timestamp() + 10**9
+    parser = mav.MAVLink(None)
+
+    def roundtrip(encoder: mav.MAVLink) -> object:
+        frame = encoder.ping_encode(0, 0, 0, 0).pack(encoder)
+        return parser.parse_buffer(frame)[0]
+
+    assert check.verdict(roundtrip(forger)) == "bad_signature"
+    assert check.verdict(roundtrip(sender)) is None
+    assert check.verdict(roundtrip(sender)) is None
