@@ -1,14 +1,21 @@
-"""Real-time simulator process: step-timing jitter and CPU use (issue 4 targets).
+"""The simulator process: real-time jitter and CPU use, and lockstep round trips.
 
-Runs ``quadsitl sim`` at 1 kHz physics with its default telemetry (attitude and
-position at 50 Hz) on two links, each drained by a listening client, and reports:
-
-The vehicle is armed and hovers at 5 m, so the whole controller cascade runs.
+Real time: ``quadsitl sim`` at 1 kHz physics with its default telemetry (attitude and
+position at 50 Hz) on two links, each drained by a listening client; the vehicle is
+armed and hovers at 5 m, so the whole controller cascade runs. Reports
 
 * ``realtime_jitter_p99_ms``: 99th percentile lateness of a physics step against its
   wall-clock schedule, as the simulator measures it (target < 2 ms);
 * ``realtime_cpu_percent``: CPU time of the simulator process over a steady window,
   as a percentage of one core (target < 50 %).
+
+Lockstep: ``quadsitl sim --lockstep`` (1 kHz physics, 250 Hz control: 4 ms a command)
+with a ground station listening on its GCS link; a :class:`MotorClient` holds 5 m with
+a proportional altitude loop on the rotor commands, one HIL_ACTUATOR_CONTROLS and its
+state answer per round trip, over loopback UDP. Reports
+
+* ``lockstep_round_trips_per_s`` (target ≥ 4,000), unsigned, and
+* ``lockstep_round_trips_per_s_signed``, the same with MAVLink 2 signing both ways.
 """
 
 from __future__ import annotations
@@ -20,7 +27,17 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import report
+
+from gcs_tools.demo import free_udp_port
+from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
+from quadsitl.mavlink.signing import key_from_passphrase
+from quadsitl.physics import get_airframe
+
+AIRFRAME = get_airframe("paper")
 DURATION = 20.0  # s of wall time
 WINDOW = (4.0, 18.0)  # s: CPU measured between these times (after start-up)
 
@@ -57,7 +74,7 @@ def _take_off(sock: socket.socket, counts: list) -> None:
         time.sleep(0.2)
 
 
-def main() -> None:
+def realtime() -> None:
     listeners = []
     for _ in range(2):
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -99,6 +116,66 @@ def main() -> None:
     print(f"CPU {cpu:.1f} % of one core; target < 50 %: {'meets' if cpu < 50 else 'MISSES'}")
     print(f"realtime_jitter_p99_ms: {p99:.3f}")
     print(f"realtime_cpu_percent: {cpu:.1f}")
+
+
+def _fly_lockstep(client: MotorClient, steps: int) -> float:
+    """Hold 5 m with a P loop on the rotor commands; returns round trips per second."""
+    hover = AIRFRAME.hover_rotor_speed / AIRFRAME.max_rotor_speed
+    state = client.reset([0.0, 0.0, -5.0])
+    client.arm()
+    start = time.perf_counter()
+    for _ in range(steps):
+        climb = 0.05 * (state.position_ned[2] + 5.0) + 0.05 * state.velocity_frd[2]
+        state = client.step([min(1.0, max(0.0, hover + climb))] * 4)
+    rate = steps / (time.perf_counter() - start)
+    if abs(state.position_ned[2] + 5.0) > 0.5:
+        sys.exit(f"the lockstep client lost its altitude: {state.position_ned}")
+    return rate
+
+
+def lockstep(signed: bool, steps: int = 10_000, repeats: int = 3) -> tuple[float, int]:
+    """Best round-trip rate of ``repeats`` flights; also datagrams the GCS received."""
+    listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    listener.bind(("127.0.0.1", 0))
+    counts: list = [0, None]
+    stop = threading.Event()
+    thread = threading.Thread(target=_drain, args=(listener, counts, stop), daemon=True)
+    thread.start()
+    port = free_udp_port()
+    key = key_from_passphrase("benchmark") if signed else None
+    signing = ["--signing-passphrase", "benchmark"] if signed else []
+    process = subprocess.Popen(
+        [sys.executable, "-m", "quadsitl.cli", "sim", "--lockstep", "--api", "none",
+         "--gcs", f"udpout:127.0.0.1:{listener.getsockname()[1]}",
+         "--hil", f"udpin:127.0.0.1:{port}", "--logs", "none", "--quiet", *signing],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    try:
+        client = MotorClient("127.0.0.1", port, timeout=5.0, signing_key=key)
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                client.connect()
+                break
+            except SimulatorError:
+                if time.monotonic() > deadline:
+                    raise
+        best = max(_fly_lockstep(client, steps) for _ in range(repeats))
+        client.close()
+    finally:
+        process.terminate()
+        process.wait(10)
+        stop.set()
+    return best, counts[0]
+
+
+def main() -> None:
+    realtime()
+    rate, gcs_datagrams = lockstep(signed=False)
+    print(f"lockstep: ground station received {gcs_datagrams} datagrams meanwhile")
+    report("lockstep_round_trips_per_s", rate, 4000, "round trips/s")
+    rate, _ = lockstep(signed=True)
+    report("lockstep_round_trips_per_s_signed", rate, 4000, "round trips/s (signed)")
 
 
 if __name__ == "__main__":

@@ -181,7 +181,7 @@ def _cpu_seconds(pid: int) -> float:
 def test_wire_state_round_trip_is_exact_to_float64_rounding():
     rng = np.random.default_rng(3)
     state = np.zeros(L.STATE_SIZE)
-    state[L.POS] = rng.normal(0, 10, 3) + [0, 0, 20]
+    state[L.POS] = rng.normal(0, 10, 3) + np.array([0.0, 0.0, 20.0])
     state[L.VEL] = rng.normal(0, 3, 3)
     q = rng.normal(size=4)
     state[L.QUAT] = q / np.linalg.norm(q)
