@@ -79,7 +79,8 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
     signing.add_argument(
         "--signing-key",
         metavar="FILE",
-        help="require MAVLink 2 signing with the key in FILE (64 hex digits or 32 bytes)",
+        help="require MAVLink 2 signing with the key in FILE (64 hex digits or 32 bytes; "
+        "environment: QUADSITL_SIGNING_KEY=64 hex digits)",
     )
     signing.add_argument(
         "--signing-passphrase",
@@ -150,7 +151,18 @@ def _signing_key(args: argparse.Namespace) -> bytes | None:
     if args.signing_key:
         return key_from_file(args.signing_key)
     passphrase = args.signing_passphrase or os.environ.get("QUADSITL_SIGNING_PASSPHRASE")
-    return key_from_passphrase(passphrase) if passphrase else None
+    if passphrase:
+        return key_from_passphrase(passphrase)
+    key_hex = os.environ.get("QUADSITL_SIGNING_KEY")  # 64 hex digits, off the command line
+    if key_hex:
+        try:
+            key = bytes.fromhex(key_hex)
+        except ValueError:
+            key = b""
+        if len(key) != 32:
+            raise ValueError("QUADSITL_SIGNING_KEY must be 64 hexadecimal digits")
+        return key
+    return None
 
 
 def _sim_config(args: argparse.Namespace) -> object:

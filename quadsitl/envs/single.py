@@ -8,7 +8,11 @@ import gymnasium as gym
 import numpy as np
 
 from quadsitl.envs import docs
+from quadsitl.envs.mavlink_backend import MavlinkBackend
+from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
+
+BACKENDS = ("inprocess", "mavlink")
 
 EQ18 = (
     "Per step (Eq. 18, Δd = previous − current distance to the goal): "
@@ -31,17 +35,42 @@ def check_no_render(render_mode: str | None) -> None:
 
 
 class QuadEnv(gym.Env):
-    """Base of the five task envs; subclasses set ``task_name`` and the docstring."""
+    """Base of the five task envs; subclasses set ``task_name`` and the docstring.
+
+    ``backend="inprocess"`` (default) steps the physics here; ``backend="mavlink"`` flies
+    a ``quadsitl sim --lockstep`` process over MAVLink with the same task code (see
+    docs/tasks.md): ``sim_address`` ("HOST:PORT") connects to a running one instead of
+    starting one, ``gcs`` gives the spawned one a ground-station link (a URL),
+    ``system_id`` its MAVLink id, ``timeout`` bounds every wait (s), ``signing_key``
+    signs the traffic (32 bytes).
+    """
 
     metadata: dict[str, Any] = {"render_modes": [], "render_fps": 20}  # noqa: RUF012
     task_name = "hover"
 
-    def __init__(self, render_mode: str | None = None, **options: Any) -> None:
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        backend: str = "inprocess",
+        sim_address: str | None = None,
+        gcs: str | None = None,
+        system_id: int = 1,
+        timeout: float = 2.0,
+        signing_key: bytes | None = None,
+        **options: Any,
+    ) -> None:
         check_no_render(render_mode)
+        if backend not in BACKENDS:
+            raise ValueError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
         self.render_mode = render_mode
         self.engine = TaskEngine(get_task(self.task_name), 1, TaskOptions.from_kwargs(**options))
         self.observation_space, self.action_space = make_spaces(self.engine)
         self._all = np.ones(1, bool)
+        self.backend: MavlinkBackend | None = None
+        if backend == "mavlink":
+            self.backend = MavlinkBackend(
+                self.engine, sim_address, gcs, system_id, timeout, signing_key
+            )
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -51,11 +80,19 @@ class QuadEnv(gym.Env):
             raise ValueError(f"reset options are not supported, got {sorted(options)}")
         if seed is not None:
             self.engine.seed([seed])
-        self.engine.reset_envs(self._all)
+        if self.backend is not None:
+            self.backend.check_alive()
+        try:
+            self.engine.reset_envs(self._all)
+        except SimulatorError as error:
+            raise self._explain(error) from None
         return self.engine.obs[0].copy(), {}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        reward, terminated, truncated = self.engine.step(action)
+        try:
+            reward, terminated, truncated = self.engine.step(action)
+        except SimulatorError as error:
+            raise self._explain(error) from None
         info: dict[str, Any] = {}
         if terminated[0] or truncated[0]:
             metrics = self.engine.episode_metrics(np.zeros(1, np.int64))
@@ -67,6 +104,14 @@ class QuadEnv(gym.Env):
             bool(truncated[0]),
             info,
         )
+
+    def _explain(self, error: SimulatorError) -> SimulatorError:
+        return self.backend.explain(error) if self.backend is not None else error
+
+    def close(self) -> None:
+        if self.backend is not None:
+            self.backend.close()
+        super().close()
 
 
 class HoverEnv(QuadEnv):

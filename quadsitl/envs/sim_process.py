@@ -1,0 +1,83 @@
+"""A ``quadsitl sim --lockstep`` child process for one MAVLink environment.
+
+It is started on a free UDP port (or a given one) and dies with its parent: on
+``stop()``, on interpreter exit, and, through Linux's parent-death signal, even when the
+parent is killed outright. Nothing is left running and the port is released.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import ctypes
+import os
+import signal
+import socket
+import subprocess
+import sys
+import weakref
+
+PR_SET_PDEATHSIG = 1
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def _die_with_parent() -> None:  # runs in the child between fork and exec
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def _terminate(process: subprocess.Popen[bytes]) -> None:
+    if process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(5)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+class SimProcess:
+    """The simulator as a child process. ``args``: extra ``quadsitl sim`` options;
+    ``env``: extra environment variables (e.g. QUADSITL_SIGNING_KEY)."""
+
+    def __init__(
+        self, args: list[str], port: int | None = None, env: dict[str, str] | None = None
+    ) -> None:
+        self.port = port if port is not None else free_udp_port()
+        self.command = [
+            sys.executable, "-m", "quadsitl.cli", "sim", "--lockstep", "--quiet",
+            "--hil", f"udpin:127.0.0.1:{self.port}", "--logs", "none", *args,
+        ]  # fmt: skip
+        self.process = subprocess.Popen(
+            self.command,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            env={**os.environ, **(env or {})},
+            preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
+        )
+        self._finalizer = weakref.finalize(self, _terminate, self.process)
+        atexit.register(self._finalizer)
+
+    @property
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def exit_message(self) -> str:
+        """Why the process ended (its exit code and last error line), once it has."""
+        if self.alive:
+            return "still running"
+        err = self.process.stderr.read().decode(errors="replace") if self.process.stderr else ""
+        lines = [line for line in err.strip().splitlines() if not line.startswith("timing:")]
+        reason = lines[-1] if lines else "no message"
+        return f"exited with code {self.process.returncode}: {reason}"
+
+    def stop(self) -> None:
+        self._finalizer()
+        if self.process.stderr:
+            self.process.stderr.close()

@@ -1,0 +1,185 @@
+"""The Gymnasium envs with backend="mavlink": parity with the in-process physics for
+every task, the env checker, faults (a killed simulator, a busy port), no orphans."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import quadsitl  # noqa: F401  (registers the envs)
+from quadsitl.envs.parallel import mavlink_vector_env
+from quadsitl.mavlink import mavlink
+from quadsitl.mavlink.motor_client import SimulatorError
+from quadsitl.registration import ENV_IDS
+
+OBS_TOLERANCE = 1e-4  # float32 on the wire, carried through whole episodes
+REWARD_TOLERANCE = 2e-3  # rewards weigh distance changes by up to 100
+
+
+def _episode(env: gym.Env, seed: int, actions: np.ndarray) -> tuple[list, list, list, dict]:
+    obs, _ = env.reset(seed=seed)
+    observations, rewards, ends = [obs], [], []
+    for action in actions:
+        obs, reward, terminated, truncated, info = env.step(action)
+        observations.append(obs)
+        rewards.append(reward)
+        ends.append((terminated, truncated))
+        if terminated or truncated:
+            return observations, rewards, ends, info
+    raise AssertionError("episode longer than the actions given")
+
+
+@pytest.mark.parametrize("name", sorted(ENV_IDS))
+def test_parity_with_in_process_env_over_whole_episodes(name):
+    env_id = ENV_IDS[name]
+    local = gym.make(env_id, init_position_noise=0.2, init_attitude_noise=0.1)
+    remote = gym.make(env_id, backend="mavlink", init_position_noise=0.2, init_attitude_noise=0.1)
+    try:
+        rng = np.random.default_rng(7)
+        actions = rng.normal(0.0, 0.05, (600, 4)).astype(np.float32)
+        for seed in (1, 2):
+            a = _episode(local, seed, actions)
+            b = _episode(remote, seed, actions)
+            assert len(a[1]) == len(b[1]) > 10
+            np.testing.assert_allclose(np.array(b[0]), np.array(a[0]), atol=OBS_TOLERANCE)
+            np.testing.assert_allclose(b[1], a[1], atol=REWARD_TOLERANCE)
+            assert a[2] == b[2]
+            assert a[3]["outcome"] == b[3]["outcome"]
+    finally:
+        local.close()
+        remote.close()
+
+
+def test_env_checker_passes():
+    env = gym.make("QuadSITL/Land-v0", backend="mavlink")
+    try:
+        check_env(env.unwrapped, skip_render_check=True)
+    finally:
+        env.close()
+
+
+def test_killed_simulator_raises_within_timeout_and_reset_restarts_it():
+    env = gym.make("QuadSITL/Hover-v0", backend="mavlink", timeout=1.0)
+    try:
+        env.reset(seed=0)
+        env.step(np.zeros(4, np.float32))
+        process = env.unwrapped.backend.process
+        process.process.kill()
+        started = time.monotonic()
+        with pytest.raises(SimulatorError, match="exited with code"):
+            env.step(np.zeros(4, np.float32))
+        assert time.monotonic() - started < 2.0
+        with pytest.warns(RuntimeWarning, match="starting a new one"):
+            env.reset(seed=0)
+        assert env.unwrapped.backend.process is not process
+        env.step(np.zeros(4, np.float32))
+    finally:
+        env.close()
+
+
+def test_close_leaves_nothing_running_and_releases_the_port():
+    env = gym.make("QuadSITL/Hover-v0", backend="mavlink")
+    env.reset(seed=0)
+    sim = env.unwrapped.backend.process
+    port = sim.port
+    env.close()
+    assert sim.process.poll() is not None
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", port))  # free again
+
+
+def test_busy_ground_station_port_gives_a_clear_error():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as busy:
+        busy.bind(("127.0.0.1", 0))
+        url = f"udpin:127.0.0.1:{busy.getsockname()[1]}"
+        with pytest.raises(SimulatorError, match="Address already in use"):
+            gym.make("QuadSITL/Hover-v0", backend="mavlink", gcs=url)
+
+
+def test_ground_station_watches_a_training_run():
+    listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    listener.bind(("127.0.0.1", 0))
+    listener.settimeout(0.1)
+    url = f"udpout:127.0.0.1:{listener.getsockname()[1]}"
+    env = gym.make("QuadSITL/Hover-v0", backend="mavlink", gcs=url)
+    parser = mavlink.MAVLink(None)
+    seen: set[str] = set()
+    try:
+        env.reset(seed=0)
+        deadline = time.monotonic() + 3
+        while time.monotonic() < deadline and not {"HEARTBEAT", "ATTITUDE"} <= seen:
+            _, _, terminated, truncated, _ = env.step(np.zeros(4, np.float32))
+            if terminated or truncated:
+                env.reset()
+            try:
+                data = listener.recv(65535)
+            except TimeoutError:
+                continue
+            seen |= {m.get_type() for m in parser.parse_buffer(data) or []}
+    finally:
+        env.close()
+        listener.close()
+    assert {"HEARTBEAT", "ATTITUDE"} <= seen
+
+
+def test_vector_env_over_two_processes_and_no_orphans():
+    envs = mavlink_vector_env("QuadSITL/Hover-v0", 2)
+    try:
+        obs, _ = envs.reset(seed=[1, 2])
+        assert obs.shape == (2, 34)
+        for _ in range(150):  # past an autoreset (100-step episodes)
+            obs, reward, *_ = envs.step(np.zeros((2, 4), np.float32))
+        assert np.isfinite(obs).all() and np.isfinite(reward).all()
+    finally:
+        envs.close()
+    assert not _live_simulators()
+
+
+def test_a_killed_parent_takes_its_simulator_down():
+    code = (
+        "import gymnasium as gym, quadsitl, sys, time\n"
+        "env = gym.make('QuadSITL/Hover-v0', backend='mavlink')\n"
+        "print(env.unwrapped.backend.process.process.pid, flush=True)\n"
+        "time.sleep(60)\n"
+    )
+    parent = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    sim_pid = int(parent.stdout.readline())
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and _running(sim_pid):
+        time.sleep(0.1)
+    assert not _running(sim_pid)
+
+
+def _running(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def _live_simulators() -> list[int]:
+    """Live ``quadsitl.cli sim`` processes on this machine (tests run one at a time)."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/cmdline", "rb") as f:
+                cmdline = f.read().split(b"\0")
+        except OSError:
+            continue
+        if b"quadsitl.cli" in cmdline and b"sim" in cmdline and _running(int(entry)):
+            found.append(int(entry))
+    return found
