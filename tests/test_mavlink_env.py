@@ -72,15 +72,15 @@ def test_killed_simulator_raises_within_timeout_and_reset_restarts_it():
     try:
         env.reset(seed=0)
         env.step(np.zeros(4, np.float32))
-        process = env.unwrapped.backend.process
+        process = env.unwrapped.backend.processes[0]
         process.process.kill()
         started = time.monotonic()
         with pytest.raises(SimulatorError, match="exited with code"):
             env.step(np.zeros(4, np.float32))
         assert time.monotonic() - started < 2.0
-        with pytest.warns(RuntimeWarning, match="starting a new one"):
+        with pytest.warns(RuntimeWarning, match="starting new ones"):
             env.reset(seed=0)
-        assert env.unwrapped.backend.process is not process
+        assert env.unwrapped.backend.processes[0] is not process
         env.step(np.zeros(4, np.float32))
     finally:
         env.close()
@@ -89,7 +89,7 @@ def test_killed_simulator_raises_within_timeout_and_reset_restarts_it():
 def test_close_leaves_nothing_running_and_releases_the_port():
     env = gym.make("QuadSITL/Hover-v0", backend="mavlink")
     env.reset(seed=0)
-    sim = env.unwrapped.backend.process
+    sim = env.unwrapped.backend.processes[0]
     port = sim.port
     env.close()
     assert sim.process.poll() is not None
@@ -148,7 +148,7 @@ def test_a_killed_parent_takes_its_simulator_down():
     code = (
         "import gymnasium as gym, quadsitl, sys, time\n"
         "env = gym.make('QuadSITL/Hover-v0', backend='mavlink')\n"
-        "print(env.unwrapped.backend.process.process.pid, flush=True)\n"
+        "print(env.unwrapped.backend.processes[0].process.pid, flush=True)\n"
         "time.sleep(60)\n"
     )
     parent = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
@@ -183,3 +183,36 @@ def _live_simulators() -> list[int]:
         if b"quadsitl.cli" in cmdline and b"sim" in cmdline and _running(int(entry)):
             found.append(int(entry))
     return found
+
+
+def test_native_vector_env_over_two_simulators_matches_in_process():
+    kwargs = {"init_position_noise": 0.3}
+    local = gym.make_vec("QuadSITL/RandomWaypoint-v0", 2, "vector_entry_point", **kwargs)
+    remote = gym.make_vec(
+        "QuadSITL/RandomWaypoint-v0", 2, "vector_entry_point", backend="mavlink", **kwargs
+    )
+    try:
+        assert len(remote.unwrapped.backend.processes) == 2
+        a, _ = local.reset(seed=4)
+        b, _ = remote.reset(seed=4)
+        np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
+        rng = np.random.default_rng(1)
+        for _ in range(160):  # through episode ends and autoresets
+            actions = rng.normal(0, 0.05, (2, 4)).astype(np.float32)
+            a, ra, ta, ua, _ = local.step(actions)
+            b, rb, tb, ub, _ = remote.step(actions)
+            np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
+            np.testing.assert_allclose(rb, ra, atol=REWARD_TOLERANCE)
+            assert (ta == tb).all() and (ua == ub).all()
+    finally:
+        local.close()
+        remote.close()
+
+
+def test_backend_options_are_checked():
+    with pytest.raises(ValueError, match="unknown backend"):
+        gym.make("QuadSITL/Hover-v0", backend="gazebo")
+    with pytest.raises(ValueError, match="need backend='mavlink'"):
+        gym.make("QuadSITL/Hover-v0", gcs="udpout:127.0.0.1:14550")
+    with pytest.raises(ValueError, match="param_randomization"):
+        gym.make("QuadSITL/Hover-v0", backend="mavlink", param_randomization={"mass": 0.1})

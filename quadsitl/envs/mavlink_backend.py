@@ -1,15 +1,16 @@
-"""The ``backend="mavlink"`` of the task envs: a simulator process, a lockstep client,
+"""The ``backend="mavlink"`` of the task envs: simulator processes, lockstep clients,
 and a :class:`RemoteFleet` in the task engine in place of the in-process physics.
 
 Faults: a simulator that dies or stops answering makes ``step``/``reset`` raise
 :class:`SimulatorError` within ``timeout`` seconds (the process's own exit message
-included); the next ``reset`` starts a fresh process and warns that it did.
+included); the next ``reset`` starts fresh processes and warns that it did.
 """
 
 from __future__ import annotations
 
 import time
 import warnings
+from typing import Any
 
 from quadsitl.envs.remote_fleet import RemoteFleet
 from quadsitl.envs.sim_process import SimProcess
@@ -18,6 +19,26 @@ from quadsitl.physics import AIRFRAMES
 from quadsitl.tasks import TaskEngine
 
 START_TIMEOUT = 30.0  # s for a new simulator process to answer (imports, kernel load)
+BACKENDS = ("inprocess", "mavlink")
+BACKEND_OPTIONS = ("sim_address", "gcs", "system_id", "timeout", "signing_key")
+
+
+def split_backend_options(options: dict[str, Any]) -> dict[str, Any]:
+    """Remove ``backend`` and BACKEND_OPTIONS from an env's keyword options; return them."""
+    return {k: options.pop(k) for k in ("backend", *BACKEND_OPTIONS) if k in options}
+
+
+def attach_backend(engine: TaskEngine, backend_options: dict[str, Any]) -> MavlinkBackend | None:
+    """For ``backend="mavlink"``, put the engine's vehicles in simulator processes."""
+    kwargs = dict(backend_options)
+    backend = kwargs.pop("backend", "inprocess")
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
+    if backend == "inprocess":
+        if kwargs:
+            raise ValueError(f"{sorted(kwargs)} need backend='mavlink'")
+        return None
+    return MavlinkBackend(engine, **kwargs)
 
 
 def parse_address(address: str) -> tuple[str, int]:
@@ -29,22 +50,23 @@ def parse_address(address: str) -> tuple[str, int]:
 
 
 class MavlinkBackend:
-    """Runs an engine's single vehicle in ``quadsitl sim`` (spawned, or at ``address``).
+    """Runs each of an engine's vehicles in its own ``quadsitl sim``.
 
     Args:
-        engine: a one-env TaskEngine; its fleet is replaced by a RemoteFleet.
-        address: "HOST:PORT" of a running ``quadsitl sim --lockstep --hil udpin:...``
-            (None: start one).
-        gcs: ground-station link URL for a spawned simulator (None: no GCS link).
-        system_id: MAVLink system id of a spawned simulator.
+        engine: the TaskEngine; its fleet is replaced by a RemoteFleet.
+        sim_address: "HOST:PORT" of a running ``quadsitl sim --lockstep --hil udpin:...``,
+            one per vehicle (a list) or None: start one process per vehicle.
+        gcs: ground-station link URL of the spawned simulators (None: none); with
+            several, each gets it with its own system id.
+        system_id: MAVLink system id of the first spawned simulator (then +1 each).
         timeout: seconds to wait for any answer before raising SimulatorError.
-        signing_key: 32-byte MAVLink 2 key (the spawned simulator requires it too).
+        signing_key: 32-byte MAVLink 2 key (the spawned simulators require it too).
     """
 
     def __init__(
         self,
         engine: TaskEngine,
-        address: str | None = None,
+        sim_address: str | list[str] | None = None,
         gcs: str | None = None,
         system_id: int = 1,
         timeout: float = 2.0,
@@ -59,66 +81,80 @@ class MavlinkBackend:
                 f"backend='mavlink' needs a preset airframe ({sorted(AIRFRAMES)}), "
                 f"got a custom one named {airframe.name!r}"
             )
+        addresses = [sim_address] if isinstance(sim_address, str) else sim_address
+        if addresses is not None and len(addresses) != engine.n:
+            raise ValueError(f"got {len(addresses)} simulator addresses for {engine.n} envs")
         self.engine = engine
-        self.address = parse_address(address) if address else None
+        self.addresses = [parse_address(a) for a in addresses] if addresses else None
         self.timeout = timeout
         self.signing_key = signing_key
-        self.sim_args = [
-            "--physics-rate", f"{1 / options.physics_dt:.12g}",
-            "--control-rate", f"{1 / options.control_period:.12g}",
-            "--airframe", airframe.name, "--sysid", str(system_id),
-            "--gcs", gcs or "none", "--api", "none",
-        ]  # fmt: skip
-        self.process: SimProcess | None = None
-        self.client: MotorClient | None = None
+        self.gcs = gcs
+        self.system_id = system_id
+        self.processes: list[SimProcess] = []
+        self.clients: list[MotorClient] = []
         self._connect()
 
-    def _connect(self) -> None:
-        if self.address is not None:
-            host, port = self.address
-        else:
-            key = {"QUADSITL_SIGNING_KEY": self.signing_key.hex()} if self.signing_key else {}
-            self.process = SimProcess(self.sim_args, env=key)
-            host, port = "127.0.0.1", self.process.port
-        self.client = MotorClient(host, port, self.timeout, self.signing_key)
-        deadline = time.monotonic() + (START_TIMEOUT if self.process else self.timeout)
-        while True:
-            if self.process is not None and not self.process.alive:
-                raise SimulatorError(f"quadsitl sim {self.process.exit_message()}")
-            try:
-                self.client.connect()
-                break
-            except SimulatorError:
-                if time.monotonic() > deadline:
-                    self.close()
-                    raise
+    def _sim_args(self, index: int) -> list[str]:
         o = self.engine.options
-        self.engine.fleet = RemoteFleet(
-            self.client,
-            self.engine.airframe,
-            o.physics_dt,
-            o.control_period,
-            self.engine.task.ground,
+        return [
+            "--physics-rate", f"{1 / o.physics_dt:.12g}",
+            "--control-rate", f"{1 / o.control_period:.12g}",
+            "--airframe", self.engine.airframe.name,
+            "--sysid", str(self.system_id + index),
+            "--gcs", self.gcs or "none", "--api", "none",
+        ]  # fmt: skip
+
+    def _connect(self) -> None:
+        if self.addresses is None:
+            key = {"QUADSITL_SIGNING_KEY": self.signing_key.hex()} if self.signing_key else {}
+            self.processes = [SimProcess(self._sim_args(i), env=key) for i in range(self.engine.n)]
+            addresses = [("127.0.0.1", p.port) for p in self.processes]
+        else:
+            addresses = self.addresses
+        try:
+            for host, port in addresses:
+                self.clients.append(MotorClient(host, port, self.timeout, self.signing_key))
+                self._wait_for_heartbeat(len(self.clients) - 1)
+        except BaseException:
+            self.close()
+            raise
+        engine, o = self.engine, self.engine.options
+        engine.fleet = RemoteFleet(
+            self.clients, engine.airframe, o.physics_dt, o.control_period, engine.task.ground
         )
 
+    def _wait_for_heartbeat(self, index: int) -> None:
+        process = self.processes[index] if self.processes else None
+        deadline = time.monotonic() + (START_TIMEOUT if process else self.timeout)
+        while True:
+            if process is not None and not process.alive:
+                raise SimulatorError(f"quadsitl sim {process.exit_message()}")
+            try:
+                self.clients[index].connect()
+                return
+            except SimulatorError:
+                if time.monotonic() > deadline:
+                    raise
+
     def check_alive(self) -> None:
-        """Before a reset: restart a simulator process that has died, with a warning."""
-        if self.process is not None and not self.process.alive:
-            reason = self.process.exit_message()
+        """Before a reset: restart simulator processes if one has died, with a warning."""
+        dead = [p for p in self.processes if not p.alive]
+        if dead:
+            reason = dead[0].exit_message()
             self.close()
-            warnings.warn(f"quadsitl sim {reason}; starting a new one", RuntimeWarning, 2)
+            warnings.warn(f"quadsitl sim {reason}; starting new ones", RuntimeWarning, 3)
             self._connect()
 
     def explain(self, error: SimulatorError) -> SimulatorError:
-        """The error, with the process's exit message when it has died."""
-        if self.process is not None and not self.process.alive:
-            return SimulatorError(f"{error} (quadsitl sim {self.process.exit_message()})")
+        """The error, with a dead process's exit message."""
+        dead = [p for p in self.processes if not p.alive]
+        if dead:
+            return SimulatorError(f"{error} (quadsitl sim {dead[0].exit_message()})")
         return error
 
     def close(self) -> None:
-        if self.client is not None:
-            self.client.close()
-            self.client = None
-        if self.process is not None:
-            self.process.stop()
-            self.process = None
+        for client in self.clients:
+            client.close()
+        for process in self.processes:
+            process.stop()
+        self.clients, self.processes = [], []

@@ -15,17 +15,23 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
+from quadsitl.envs.mavlink_backend import MavlinkBackend, attach_backend, split_backend_options
 from quadsitl.envs.single import ENV_CLASSES, make_spaces
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
 
 
 class QuadSB3VecEnv(VecEnv):
-    """``QuadSB3VecEnv("hover", num_envs=64, **task_options)``; ``PPO("MlpPolicy", it)``."""
+    """``QuadSB3VecEnv("hover", num_envs=64, **task_options)``; ``PPO("MlpPolicy", it)``.
+
+    ``backend="mavlink"`` (and the backend options of the gym envs) flies every env's
+    vehicle in its own ``quadsitl sim`` process."""
 
     def __init__(self, task: str, num_envs: int = 1, seed: int | None = None, **options: Any):
         names = {cls.task_name for cls in ENV_CLASSES.values()}
         task_name = task if task in names else _task_name_of(task)
+        backend_options = split_backend_options(options)
         self.engine = TaskEngine(get_task(task_name), num_envs, TaskOptions.from_kwargs(**options))
+        self.backend: MavlinkBackend | None = attach_backend(self.engine, backend_options)
         observation_space, action_space = make_spaces(self.engine)
         super().__init__(num_envs, observation_space, action_space)
         self._actions: np.ndarray | None = None
@@ -66,7 +72,8 @@ class QuadSB3VecEnv(VecEnv):
         return self.engine.obs.copy(), reward.astype(np.float32), done, infos
 
     def close(self) -> None:
-        pass
+        if self.backend is not None:
+            self.backend.close()
 
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
         self._seed = seed

@@ -8,11 +8,9 @@ import gymnasium as gym
 import numpy as np
 
 from quadsitl.envs import docs
-from quadsitl.envs.mavlink_backend import MavlinkBackend
+from quadsitl.envs.mavlink_backend import MavlinkBackend, attach_backend, split_backend_options
 from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
-
-BACKENDS = ("inprocess", "mavlink")
 
 EQ18 = (
     "Per step (Eq. 18, Δd = previous − current distance to the goal): "
@@ -48,29 +46,14 @@ class QuadEnv(gym.Env):
     metadata: dict[str, Any] = {"render_modes": [], "render_fps": 20}  # noqa: RUF012
     task_name = "hover"
 
-    def __init__(
-        self,
-        render_mode: str | None = None,
-        backend: str = "inprocess",
-        sim_address: str | None = None,
-        gcs: str | None = None,
-        system_id: int = 1,
-        timeout: float = 2.0,
-        signing_key: bytes | None = None,
-        **options: Any,
-    ) -> None:
+    def __init__(self, render_mode: str | None = None, **options: Any) -> None:
         check_no_render(render_mode)
-        if backend not in BACKENDS:
-            raise ValueError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
         self.render_mode = render_mode
+        backend_options = split_backend_options(options)
         self.engine = TaskEngine(get_task(self.task_name), 1, TaskOptions.from_kwargs(**options))
         self.observation_space, self.action_space = make_spaces(self.engine)
         self._all = np.ones(1, bool)
-        self.backend: MavlinkBackend | None = None
-        if backend == "mavlink":
-            self.backend = MavlinkBackend(
-                self.engine, sim_address, gcs, system_id, timeout, signing_key
-            )
+        self.backend: MavlinkBackend | None = attach_backend(self.engine, backend_options)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None

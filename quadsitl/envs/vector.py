@@ -14,12 +14,19 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from quadsitl.envs.mavlink_backend import MavlinkBackend, attach_backend, split_backend_options
 from quadsitl.envs.single import ENV_CLASSES, check_no_render, make_spaces
+from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
 
 
 class QuadVectorEnv(VectorEnv):
-    """N envs of one task; subclasses set ``task_name``."""
+    """N envs of one task; subclasses set ``task_name``.
+
+    ``backend="mavlink"`` flies each env's vehicle in its own ``quadsitl sim`` process
+    (stepped in parallel, system ids 1..N); the other backend options are those of
+    :class:`~quadsitl.envs.single.QuadEnv` (``sim_address`` is then a list).
+    """
 
     metadata: dict[str, Any] = {  # noqa: RUF012
         "render_modes": [],
@@ -29,6 +36,7 @@ class QuadVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, render_mode: str | None = None, **options: Any) -> None:
         check_no_render(render_mode)
+        backend_options = split_backend_options(options)
         if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         self.num_envs = int(num_envs)
@@ -41,6 +49,7 @@ class QuadVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._autoreset = np.zeros(self.num_envs, bool)
         self._all = np.ones(self.num_envs, bool)
+        self.backend: MavlinkBackend | None = attach_backend(self.engine, backend_options)
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
@@ -54,11 +63,31 @@ class QuadVectorEnv(VectorEnv):
             if len(seed) != self.num_envs:
                 raise ValueError(f"got {len(seed)} seeds for {self.num_envs} envs")
             self.engine.seed(list(seed))
-        self.engine.reset_envs(self._all)
+        if self.backend is not None:
+            self.backend.check_alive()
+        try:
+            self.engine.reset_envs(self._all)
+        except SimulatorError as error:
+            raise self._explain(error) from None
         self._autoreset[:] = False
         return self.engine.obs.copy(), {}
 
     def step(
+        self, actions: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        try:
+            return self._step(actions)
+        except SimulatorError as error:
+            raise self._explain(error) from None
+
+    def _explain(self, error: SimulatorError) -> SimulatorError:
+        return self.backend.explain(error) if self.backend is not None else error
+
+    def close_extras(self, **kwargs: Any) -> None:
+        if self.backend is not None:
+            self.backend.close()
+
+    def _step(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         resetting = self._autoreset

@@ -9,6 +9,7 @@ environment and the lockstep benchmark; an example for anyone writing their own.
 from __future__ import annotations
 
 import math
+import os
 import select
 import socket
 import time
@@ -93,7 +94,8 @@ class MotorClient:
                 if now >= deadline:
                     return
                 if now - started < SPIN_SECONDS:
-                    continue  # the answer is usually microseconds away: do not sleep yet
+                    os.sched_yield()  # the answer is usually microseconds away: poll, but
+                    continue  # let a simulator sharing this core run first
                 select.select([self.sock], [], [], deadline - now)
                 continue
             except ConnectionRefusedError:  # ICMP: nothing listens at the address
@@ -144,11 +146,17 @@ class MotorClient:
             self._pending = {}
 
     # --- the vehicle ------------------------------------------------------------------
-    def connect(self) -> None:
-        """Introduce ourselves (a udpin link learns its peers) and wait for a heartbeat."""
+    def connect(self, hil_state: bool = False) -> None:
+        """Introduce ourselves (a udpin link learns its peers) and wait for a heartbeat.
+        Unless ``hil_state``, ask for answers without HIL_STATE_QUATERNION (this client
+        reads ODOMETRY; leaving it out saves encoding and decoding a message a step)."""
         self._send(self.mav.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0))
         heartbeat = self._wait_for("HEARTBEAT", "heartbeat")
         self.target_system = heartbeat.get_srcSystem()
+        interval = 0 if hil_state else -1
+        self.command(
+            mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_HIL_STATE_QUATERNION, interval
+        )
 
     def command(self, command: int, *params: float) -> int:
         """COMMAND_LONG and its MAV_RESULT (up to 7 params; missing ones are 0)."""
@@ -190,6 +198,11 @@ class MotorClient:
 
     def step(self, controls: ArrayLike, armed: bool = True, lockstep: bool = True) -> WireState:
         """Send normalised rotor commands in [0, 1]; the state one control period later."""
+        self.send_controls(controls, armed, lockstep)
+        return self.receive_state()
+
+    def send_controls(self, controls: ArrayLike, armed: bool = True, lockstep: bool = True) -> None:
+        """The first half of :meth:`step` (to drive several simulators at once)."""
         self._controls[: L.N_ROTORS] = [float(u) for u in np.asarray(controls).reshape(-1)]
         stamp = self.state.time_usec if self.state is not None else 0
         self._send(
@@ -197,6 +210,9 @@ class MotorClient:
                 stamp, self._controls, ARMED_FLAG if armed else 0, LOCKSTEP_FLAG if lockstep else 0
             )
         )
+
+    def receive_state(self) -> WireState:
+        """The second half of :meth:`step`: wait for the state answer."""
         self._wait_for("ODOMETRY", "state answer")
         assert self.state is not None
         return self.state

@@ -158,9 +158,10 @@ class MotorPath:
         return result
 
     # --- the answer -------------------------------------------------------------------
-    def state_messages(self) -> list[Any]:
+    def state_messages(self, hil_state: bool = True) -> list[Any]:
         """The answer to a motor command or a reset, in this order: HIL_STATE_QUATERNION
-        (PX4's simulator state; integer position/velocity), ACTUATOR_OUTPUT_STATUS
+        (PX4's simulator state; integer position/velocity; left out when ``hil_state`` is
+        False, which a client asks for with SET_MESSAGE_INTERVAL −1), ACTUATOR_OUTPUT_STATUS
         (rotor speeds, rad/s), NAMED_VALUE_INT ``CONTACT`` (0 airborne, 1 on the ground,
         2 crashed), NAMED_VALUE_FLOAT ``TD_SPEED`` (touchdown speed, m/s; only when not
         airborne) and last ODOMETRY (float32 pose and body-frame velocity)."""
@@ -171,8 +172,8 @@ class MotorPath:
             v.state, v.airframe.gear_height, time_usec, contact, float(v.fleet.touchdown_speed[0])
         )
         time_ms = (time_usec // 1000) & 0xFFFFFFFF
-        messages = [
-            self._hil_state_quaternion(wire),
+        messages = [self._hil_state_quaternion(wire)] if hil_state else []
+        messages += [
             _encoder.actuator_output_status_encode(
                 time_usec, 0b1111, [float(w) for w in wire.rotor_speeds] + [0.0] * 28
             ),

@@ -77,6 +77,7 @@ class MavlinkServer:
         self.encoder = mav.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self.schedules = {id(link): T.Schedule(streams=link.name != MOTOR_LINK) for link in links}
         self.motors = MotorPath(vehicle, lockstep)
+        self.without_hil_state: set[int] = set()  # links whose answers leave it out
         self.signing: SignatureCheck | None = None
         self._signing_reported: tuple[float, int] = (-math.inf, 0)
         if signing_key is not None:
@@ -212,7 +213,7 @@ class MavlinkServer:
         problem = self.motors.command(msg)
         if problem is not None:
             self.statustext(4, problem)
-        self.send_together(self.motors.state_messages(), link)
+        self.send_together(self.motors.state_messages(self._hil_state(link)), link)
 
     def handle_setup_signing(self, msg: Any, link: Link) -> None:
         """A new key from a ground station (MAVProxy's ``signing setup``). Once signing is
@@ -223,10 +224,13 @@ class MavlinkServer:
         self.set_signing_key(None if not any(key) else key)
         self.statustext(5, "signing " + ("off" if not any(key) else "key set"))
 
+    def _hil_state(self, link: Link) -> bool:
+        return id(link) not in self.without_hil_state
+
     def _cmd_reset_state(self, c: Command, link: Link) -> Result:
         result = self.motors.reset(c.params)
         if result.ok:
-            self._after_ack.extend(self.motors.state_messages())
+            self._after_ack.extend(self.motors.state_messages(self._hil_state(link)))
         return result
 
     # --- heartbeat, ping, time --------------------------------------------------------
@@ -399,6 +403,12 @@ class MavlinkServer:
         message_id, interval_us = _int(c.params[0], "message id"), c.params[1]
         if message_id == mav.MAVLINK_MSG_ID_HEARTBEAT:
             return ACCEPTED  # always 1 Hz
+        if message_id == mav.MAVLINK_MSG_ID_HIL_STATE_QUATERNION:  # in motor answers only
+            if interval_us < 0:
+                self.without_hil_state.add(id(link))
+            else:
+                self.without_hil_state.discard(id(link))
+            return ACCEPTED
         if message_id not in T.BUILDERS:
             return Result(Outcome.UNSUPPORTED, f"message {message_id} is not streamed")
         schedule = self.schedules[id(link)]
