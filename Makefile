@@ -29,6 +29,8 @@ bench: venv
 	$(BIN)/python benchmarks/physics.py
 	$(BIN)/python benchmarks/envs.py
 	$(BIN)/python benchmarks/sitl.py
+	$(BIN)/python benchmarks/mavlink_env.py
+	$(BIN)/python benchmarks/mavlink_training.py
 
 lint: venv
 	$(BIN)/ruff check .

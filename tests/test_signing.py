@@ -7,7 +7,7 @@ import time
 import pytest
 from pymavlink import mavutil
 
-from quadsitl.mavlink.motor_client import SimulatorError
+from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
 from quadsitl.mavlink.signing import SignatureCheck, key_from_file, key_from_passphrase
 from tests.conftest import MotorSim
 
@@ -89,14 +89,18 @@ def test_signed_accepted_unsigned_bad_and_replayed_rejected_and_counted(signed_s
 
 def test_motor_commands_need_the_key(signed_sim):
     key = key_from_passphrase(PASSPHRASE)
-    unsigned = signed_sim.client(timeout=1.0)  # heartbeats pass: it connects
-    with pytest.raises(SimulatorError):
-        unsigned.reset([0.0, 0.0, -5.0])
-    unsigned.close()
     signed = signed_sim.client(signing_key=key)
     signed.reset([0.0, 0.0, -5.0])
     signed.arm()
     assert signed.step([0.7] * 4, lockstep=True).time_usec > 0
+    # Without the key: the heartbeat passes, its first command (in connect) does not.
+    with MotorClient("127.0.0.1", signed_sim.hil_port, timeout=2.5) as unsigned:
+        with pytest.raises(SimulatorError, match="COMMAND_ACK"):
+            unsigned.connect()
+        unsigned._send(unsigned.mav.hil_actuator_controls_encode(0, [0.7] * 16, 128, 1))
+        with pytest.raises(SimulatorError, match="state answer"):
+            unsigned.receive_state()
+    assert signed.step([0.7] * 4, lockstep=True).time_usec > 0  # the signed one still flies
     signed.close()
 
 

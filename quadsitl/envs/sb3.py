@@ -33,6 +33,7 @@ class QuadSB3VecEnv(VecEnv):
         self.engine = TaskEngine(get_task(task_name), num_envs, TaskOptions.from_kwargs(**options))
         self.backend: MavlinkBackend | None = attach_backend(self.engine, backend_options)
         observation_space, action_space = make_spaces(self.engine)
+        self.render_mode = None
         super().__init__(num_envs, observation_space, action_space)
         self._actions: np.ndarray | None = None
         self._seed = seed
