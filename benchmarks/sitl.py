@@ -14,8 +14,10 @@ with a ground station listening on its GCS link; a :class:`MotorClient` holds 5 
 a proportional altitude loop on the rotor commands, one HIL_ACTUATOR_CONTROLS and its
 state answer per round trip, over loopback UDP. Reports
 
-* ``lockstep_round_trips_per_s`` (target ≥ 4,000), unsigned, and
-* ``lockstep_round_trips_per_s_signed``, the same with MAVLink 2 signing both ways.
+* ``lockstep_round_trips_per_s`` (target ≥ 4,000), unsigned, full answers;
+* ``lockstep_round_trips_per_s_signed``, the same with MAVLink 2 signing both ways;
+* ``lockstep_round_trips_per_s_lean``: answers without HIL_STATE_QUATERNION (what the
+  gym env's client asks for with SET_MESSAGE_INTERVAL −1).
 """
 
 from __future__ import annotations
@@ -133,8 +135,11 @@ def _fly_lockstep(client: MotorClient, steps: int) -> float:
     return rate
 
 
-def lockstep(signed: bool, steps: int = 10_000, repeats: int = 3) -> tuple[float, int]:
-    """Best round-trip rate of ``repeats`` flights; also datagrams the GCS received."""
+def lockstep(
+    signed: bool, hil_state: bool = True, steps: int = 10_000, repeats: int = 3
+) -> tuple[float, int]:
+    """Best round-trip rate of ``repeats`` flights; also datagrams the GCS received.
+    ``hil_state``: answers include HIL_STATE_QUATERNION (the default of the wire)."""
     listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     listener.bind(("127.0.0.1", 0))
     counts: list = [0, None]
@@ -155,7 +160,7 @@ def lockstep(signed: bool, steps: int = 10_000, repeats: int = 3) -> tuple[float
         deadline = time.monotonic() + 30
         while True:
             try:
-                client.connect()
+                client.connect(hil_state=hil_state)
                 break
             except SimulatorError:
                 if time.monotonic() > deadline:
@@ -176,6 +181,13 @@ def main() -> None:
     report("lockstep_round_trips_per_s", rate, 4000, "round trips/s")
     rate, _ = lockstep(signed=True)
     report("lockstep_round_trips_per_s_signed", rate, 4000, "round trips/s (signed)")
+    rate, _ = lockstep(signed=False, hil_state=False)
+    report(
+        "lockstep_round_trips_per_s_lean",
+        rate,
+        4000,
+        "round trips/s (answers without HIL_STATE_QUATERNION, as the gym env asks)",
+    )
 
 
 if __name__ == "__main__":
