@@ -10,7 +10,7 @@ import pytest
 from pymavlink import mavutil
 
 from quadsitl.mavlink.hil_state import WireState
-from quadsitl.mavlink.motor_client import SimulatorError
+from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from tests.conftest import MotorSim
@@ -189,3 +189,20 @@ def test_wire_state_round_trip_is_exact_to_float64_rounding():
     state[L.ROTORS] = rng.uniform(0, 800, 4)
     wire = WireState.from_physics(state, 0.1, 0, L.AIRBORNE, 0.0)
     np.testing.assert_allclose(wire.to_physics(0.1), state, rtol=0, atol=1e-12)
+
+
+def test_answers_carry_hil_state_quaternion_unless_turned_off(lockstep_sim):
+    full = MotorClient("127.0.0.1", lockstep_sim.hil_port)
+    lockstep_sim.client().close()  # wait until the simulator is up
+    full.connect(hil_state=True)
+    full.reset([0.0, 0.0, -5.0], [1.0, 0.0, 0.0, 0.0], [2.0, 0.0, 0.0])
+    answer = full.step([HOVER] * 4)
+    hil = full.hil_state
+    assert hil is not None and hil.time_usec == answer.time_usec
+    assert abs(hil.vx - 200) <= 1  # cm/s, NED: the staged 2 m/s north
+    assert abs(hil.alt - (488_000 + 5_000)) <= 10  # mm above sea level at 5 m
+    lean = lockstep_sim.client()  # connect() turns it off for its own link
+    lean.step([HOVER] * 4)
+    assert lean.hil_state is None
+    full.close()
+    lean.close()

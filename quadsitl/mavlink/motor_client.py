@@ -74,6 +74,7 @@ class MotorClient:
         self.target_system = 1
         self.statustexts: deque[str] = deque(maxlen=100)
         self.state: WireState | None = None
+        self.hil_state: Any = None  # the last HIL_STATE_QUATERNION received
         self._pending: dict[str, Any] = {}
         self._inbox: deque[Any] = deque()
         self._controls = [0.0] * 16
@@ -125,6 +126,8 @@ class MotorClient:
         kind = message.get_type()
         if kind == "STATUSTEXT":
             self.statustexts.append(message.text)
+        elif kind == "HIL_STATE_QUATERNION":
+            self.hil_state = message  # PX4's view of the same state (when asked for)
         elif kind == "ACTUATOR_OUTPUT_STATUS":
             self._pending["rotors"] = message.actuator[: L.N_ROTORS]
         elif kind == "NAMED_VALUE_INT" and message.name == "CONTACT":
