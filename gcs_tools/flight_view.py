@@ -1,0 +1,191 @@
+"""What a flight looks like: MAVLink messages of one vehicle -> samples for the Rerun scene.
+
+Used row by row by the live viewer and column by column by the replay. Works with
+whatever a log holds: position from LOCAL_POSITION_NED (or ODOMETRY, or
+GLOBAL_POSITION_INT until a local one appears), attitude from ATTITUDE_QUATERNION (or
+ODOMETRY, HIL_STATE_QUATERNION, ATTITUDE), rotors from ACTUATOR_OUTPUT_STATUS or
+SERVO_OUTPUT_RAW, battery from BATTERY_STATUS or SYS_STATUS; messages it does not know
+are ignored. Frames: see :mod:`quadsitl.viz` (ENU on screen).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from pymavlink import mavutil
+
+from quadsitl import frames
+from quadsitl.vehicle.geo import Home
+from quadsitl.vehicle.modes import Mode
+from quadsitl.viz import pose_from_ned, quat_xyzw
+
+GCS_TYPE = 6  # MAV_TYPE_GCS
+SEVERITY = ["CRITICAL"] * 3 + ["ERROR", "WARN", "INFO", "INFO", "DEBUG"]  # MAV_SEVERITY 0..7
+
+
+@dataclass
+class Sample:
+    """``kind``: translation (3,), rotation (xyzw), scalar, point (3,) or text."""
+
+    entity: str
+    kind: str
+    value: Any
+    level: str = "INFO"
+
+
+@dataclass
+class FlightView:
+    vehicle: tuple[int, int] | None = None  # (system, component) of the vehicle
+    home: Home | None = None
+    home_local_enu: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    mission: dict[int, np.ndarray] = field(default_factory=dict)  # seq -> ENU point
+    mission_changed: bool = False
+    seen: set[str] = field(default_factory=set)
+    last_mode: tuple[bool, str] | None = None
+
+    def samples(self, msg: Any) -> list[Sample]:
+        kind = msg.get_type()
+        if kind == "HEARTBEAT":
+            return self._heartbeat(msg)
+        if kind in ("SET_POSITION_TARGET_LOCAL_NED", "MISSION_ITEM_INT", "MISSION_ITEM"):
+            return self._from_anyone(kind, msg)  # either direction: GCS or vehicle
+        if not self._from_vehicle(msg):
+            return []
+        handler = getattr(self, f"_{kind.lower()}", None)
+        if handler is None:
+            return []
+        self.seen.add(kind)
+        return list(handler(msg))
+
+    # --- whose message ----------------------------------------------------------------
+    def _from_vehicle(self, msg: Any) -> bool:
+        source = (msg.get_srcSystem(), msg.get_srcComponent())
+        if self.vehicle is None:
+            return source[0] != 255  # before its heartbeat: anything but a ground station
+        return source == self.vehicle
+
+    def _heartbeat(self, msg: Any) -> list[Sample]:
+        source = (msg.get_srcSystem(), msg.get_srcComponent())
+        if self.vehicle is None and msg.type != GCS_TYPE and msg.autopilot != 8:
+            self.vehicle = source
+        if source != self.vehicle:
+            return []
+        armed = bool(msg.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+        state = (armed, _mode_name(msg))
+        if state == self.last_mode:
+            return []
+        self.last_mode = state
+        return [Sample("events", "text", f"{'ARMED' if armed else 'disarmed'}, mode {state[1]}")]
+
+    def _from_anyone(self, kind: str, msg: Any) -> list[Sample]:
+        if kind == "SET_POSITION_TARGET_LOCAL_NED":
+            if msg.coordinate_frame != mavutil.mavlink.MAV_FRAME_LOCAL_NED or msg.type_mask & 7:
+                return []
+            return [Sample("world/setpoint", "point", frames.ned_to_enu([msg.x, msg.y, msg.z]))]
+        if getattr(msg, "mission_type", 0) != 0 or self.home is None:
+            return []
+        scale = 1e-7 if kind == "MISSION_ITEM_INT" else 1.0
+        if msg.x == 0 and msg.y == 0:  # e.g. take-off, land here, RTL
+            return []
+        relative = msg.frame in (3, 6)  # GLOBAL_RELATIVE_ALT(_INT)
+        up = msg.z if relative else msg.z - self.home.altitude
+        east, north, _ = self.home.to_local(msg.x * scale, msg.y * scale, self.home.altitude)
+        self.mission[msg.seq] = np.array([east, north, up])
+        self.mission_changed = True
+        return []
+
+    # --- the vehicle's telemetry (one method per message) -----------------------------
+    def _local_position_ned(self, msg: Any) -> list[Sample]:
+        position = frames.ned_to_enu([msg.x, msg.y, msg.z])
+        velocity = frames.ned_to_enu([msg.vx, msg.vy, msg.vz])
+        return [Sample("world/vehicle", "translation", position), *_altitude_velocity(position, velocity)]
+
+    def _odometry(self, msg: Any) -> list[Sample]:
+        out = []
+        if "LOCAL_POSITION_NED" not in self.seen:
+            translation, rotation = pose_from_ned([msg.x, msg.y, msg.z], msg.q)
+            out.append(Sample("world/vehicle", "translation", translation))
+        if "ATTITUDE_QUATERNION" not in self.seen:
+            out.append(Sample("world/vehicle", "rotation", pose_from_ned([0, 0, 0], msg.q)[1]))
+        return out
+
+    def _global_position_int(self, msg: Any) -> list[Sample]:
+        if self.home is None:
+            self.home = Home(msg.lat * 1e-7, msg.lon * 1e-7, (msg.alt - msg.relative_alt) * 1e-3)
+        if "LOCAL_POSITION_NED" in self.seen or "ODOMETRY" in self.seen:
+            return []
+        east, north, _ = self.home.to_local(msg.lat * 1e-7, msg.lon * 1e-7, self.home.altitude)
+        position = np.array([east, north, msg.relative_alt * 1e-3])
+        velocity = frames.ned_to_enu([msg.vx * 0.01, msg.vy * 0.01, msg.vz * 0.01])
+        return [Sample("world/vehicle", "translation", position), *_altitude_velocity(position, velocity)]
+
+    def _home_position(self, msg: Any) -> list[Sample]:
+        self.home = Home(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+        self.home_local_enu = frames.ned_to_enu([msg.x, msg.y, msg.z])
+        return []
+
+    def _attitude_quaternion(self, msg: Any) -> list[Sample]:
+        q = [msg.q1, msg.q2, msg.q3, msg.q4]
+        return [Sample("world/vehicle", "rotation", pose_from_ned([0, 0, 0], q)[1])]
+
+    def _hil_state_quaternion(self, msg: Any) -> list[Sample]:
+        if {"ATTITUDE_QUATERNION", "ODOMETRY"} & self.seen:
+            return []
+        q = msg.attitude_quaternion
+        return [Sample("world/vehicle", "rotation", pose_from_ned([0, 0, 0], q)[1])]
+
+    def _attitude(self, msg: Any) -> list[Sample]:
+        out = [
+            Sample(f"plots/attitude/{name}", "scalar", math.degrees(value))
+            for name, value in (("roll", msg.roll), ("pitch", msg.pitch), ("yaw", msg.yaw))
+        ]
+        if not {"ATTITUDE_QUATERNION", "ODOMETRY", "HIL_STATE_QUATERNION"} & self.seen:
+            q_ned = frames.quat_from_euler(msg.roll, msg.pitch, msg.yaw)
+            out.append(Sample("world/vehicle", "rotation", quat_xyzw(frames.quat_ned_frd_to_enu_flu(q_ned))))
+        return out
+
+    def _actuator_output_status(self, msg: Any) -> list[Sample]:
+        count = bin(msg.active).count("1") or 4
+        return [Sample(f"plots/rotors/speed_{i + 1}", "scalar", msg.actuator[i]) for i in range(min(count, 8))]
+
+    def _servo_output_raw(self, msg: Any) -> list[Sample]:
+        return [
+            Sample(f"plots/rotors/pwm_{i}", "scalar", getattr(msg, f"servo{i}_raw")) for i in range(1, 5)
+        ]
+
+    def _battery_status(self, msg: Any) -> list[Sample]:
+        cells = [v for v in msg.voltages if v not in (0, 65535)]
+        out = [Sample("plots/battery/remaining_percent", "scalar", msg.battery_remaining)]
+        if cells:
+            out.append(Sample("plots/battery/voltage", "scalar", sum(cells) / 1000))
+        return out
+
+    def _sys_status(self, msg: Any) -> list[Sample]:
+        if "BATTERY_STATUS" in self.seen or msg.voltage_battery in (0, 65535):
+            return []
+        return [Sample("plots/battery/voltage", "scalar", msg.voltage_battery / 1000)]
+
+    def _statustext(self, msg: Any) -> list[Sample]:
+        level = SEVERITY[min(max(msg.severity, 0), 7)]
+        return [Sample("events", "text", str(msg.text).rstrip("\x00"), level)]
+
+
+def _altitude_velocity(position: np.ndarray, velocity: np.ndarray) -> list[Sample]:
+    return [
+        Sample("plots/altitude", "scalar", float(position[2])),
+        *(Sample(f"plots/velocity/{axis}", "scalar", float(v))
+          for axis, v in zip(("east", "north", "up"), velocity, strict=True)),
+    ]  # fmt: skip
+
+
+def _mode_name(msg: Any) -> str:
+    """PX4-layout custom modes (PX4 and quadsitl), else pymavlink's names (ArduPilot...)."""
+    if msg.autopilot in (mavutil.mavlink.MAV_AUTOPILOT_PX4, mavutil.mavlink.MAV_AUTOPILOT_GENERIC):
+        try:
+            return Mode.from_custom_mode(msg.custom_mode).name
+        except ValueError:
+            pass
+    return str(mavutil.mode_string_v10(msg))
