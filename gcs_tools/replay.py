@@ -3,7 +3,7 @@
 Any .tlog (quadsitl, QGroundControl, MAVProxy; PX4 or ArduPilot vehicles): the vehicle
 posed in 3-D with its trajectory, home, mission and setpoints, time series of altitude,
 velocity, attitude, rotors and battery, and flight mode, arming and STATUSTEXT as a
-text log (scene: :mod:`quadsitl.viz`). Each series is sent as one column
+text log (scene: :mod:`quadsitl.viz.scene`). Each series is sent as one column
 (``send_columns``), so an hour-long log converts in seconds. A damaged log converts as
 far as it is readable, with a warning; without ``-o`` the viewer opens.
 """
@@ -21,9 +21,9 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from gcs_tools.flight_view import FlightView, Sample
 from gcs_tools.tlog_reader import ReadStats, read_tlog
-from quadsitl.viz import TIMELINE, open_recording
+from quadsitl.viz.flight_view import FlightView, Sample
+from quadsitl.viz.scene import TIMELINE, open_recording
 
 
 @dataclass
@@ -101,7 +101,9 @@ def convert(tlog: str | Path, out: str | Path | None = None, spawn: bool = False
         points = np.array([view.mission[k] for k in sorted(view.mission)])
         rec.log("world/mission", rr.Points3D(points, radii=0.08, colors=[[230, 180, 0]],
                 labels=[str(k) for k in sorted(view.mission)]), static=True)  # fmt: skip
-        rec.log("world/mission/path", rr.LineStrips3D([points], colors=[[230, 180, 0]]), static=True)
+        rec.log(
+            "world/mission/path", rr.LineStrips3D([points], colors=[[230, 180, 0]]), static=True
+        )
     rec.flush()
     if out is not None:
         rec.disconnect()

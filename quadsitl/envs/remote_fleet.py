@@ -53,7 +53,7 @@ class RemoteFleet(Fleet):
         mask: ArrayLike | None = None,
     ) -> None:
         super().reset(state, contact, mask)  # checks the input, as the local fleet does
-        rows = range(self.n) if mask is None else np.flatnonzero(mask)
+        rows = range(self.n) if mask is None else np.flatnonzero(mask).tolist()
         for i in rows:
             s = self.state[i].copy()
             s[L.POS] += self.offset
@@ -78,9 +78,10 @@ class RemoteFleet(Fleet):
             client.send_controls(row)
         for i, client in enumerate(self.clients):
             answer = client.receive_state()
-            if before[i] is not None and answer.time_usec - before[i] != self.period_usec:
+            start = before[i]
+            if start is not None and answer.time_usec - start != self.period_usec:
                 raise SimulatorError(
-                    f"the simulator advanced {answer.time_usec - before[i]} µs for one "
+                    f"the simulator advanced {answer.time_usec - start} µs for one "
                     f"command; the task needs {self.period_usec} µs (start it with --lockstep "
                     f"--physics-rate {1 / self.dt:g} --control-rate {1e6 / self.period_usec:g})"
                 )

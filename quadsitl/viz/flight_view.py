@@ -5,7 +5,7 @@ whatever a log holds: position from LOCAL_POSITION_NED (or ODOMETRY, or
 GLOBAL_POSITION_INT until a local one appears), attitude from ATTITUDE_QUATERNION (or
 ODOMETRY, HIL_STATE_QUATERNION, ATTITUDE), rotors from ACTUATOR_OUTPUT_STATUS or
 SERVO_OUTPUT_RAW, battery from BATTERY_STATUS or SYS_STATUS; messages it does not know
-are ignored. Frames: see :mod:`quadsitl.viz` (ENU on screen).
+are ignored. Frames: see :mod:`quadsitl.viz.scene` (ENU on screen).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from pymavlink import mavutil
 from quadsitl import frames
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.modes import Mode
-from quadsitl.viz import pose_from_ned, quat_xyzw
+from quadsitl.viz.scene import pose_from_ned, quat_xyzw
 
 GCS_TYPE = 6  # MAV_TYPE_GCS
 SEVERITY = ["CRITICAL"] * 3 + ["ERROR", "WARN", "INFO", "INFO", "DEBUG"]  # MAV_SEVERITY 0..7
@@ -46,13 +46,14 @@ class FlightView:
     seen: set[str] = field(default_factory=set)
     last_mode: tuple[bool, str] | None = None
 
-    def samples(self, msg: Any) -> list[Sample]:
+    def samples(self, msg: Any, own: bool = False) -> list[Sample]:
+        """Samples of one message; ``own``: built by the simulator itself (no header)."""
         kind = msg.get_type()
-        if kind == "HEARTBEAT":
+        if kind == "HEARTBEAT" and not own:
             return self._heartbeat(msg)
         if kind in ("SET_POSITION_TARGET_LOCAL_NED", "MISSION_ITEM_INT", "MISSION_ITEM"):
             return self._from_anyone(kind, msg)  # either direction: GCS or vehicle
-        if not self._from_vehicle(msg):
+        if not own and not self._from_vehicle(msg):
             return []
         handler = getattr(self, f"_{kind.lower()}", None)
         if handler is None:
@@ -101,12 +102,15 @@ class FlightView:
     def _local_position_ned(self, msg: Any) -> list[Sample]:
         position = frames.ned_to_enu([msg.x, msg.y, msg.z])
         velocity = frames.ned_to_enu([msg.vx, msg.vy, msg.vz])
-        return [Sample("world/vehicle", "translation", position), *_altitude_velocity(position, velocity)]
+        return [
+            Sample("world/vehicle", "translation", position),
+            *_altitude_velocity(position, velocity),
+        ]
 
     def _odometry(self, msg: Any) -> list[Sample]:
         out = []
         if "LOCAL_POSITION_NED" not in self.seen:
-            translation, rotation = pose_from_ned([msg.x, msg.y, msg.z], msg.q)
+            translation, _ = pose_from_ned([msg.x, msg.y, msg.z], msg.q)
             out.append(Sample("world/vehicle", "translation", translation))
         if "ATTITUDE_QUATERNION" not in self.seen:
             out.append(Sample("world/vehicle", "rotation", pose_from_ned([0, 0, 0], msg.q)[1]))
@@ -120,7 +124,10 @@ class FlightView:
         east, north, _ = self.home.to_local(msg.lat * 1e-7, msg.lon * 1e-7, self.home.altitude)
         position = np.array([east, north, msg.relative_alt * 1e-3])
         velocity = frames.ned_to_enu([msg.vx * 0.01, msg.vy * 0.01, msg.vz * 0.01])
-        return [Sample("world/vehicle", "translation", position), *_altitude_velocity(position, velocity)]
+        return [
+            Sample("world/vehicle", "translation", position),
+            *_altitude_velocity(position, velocity),
+        ]
 
     def _home_position(self, msg: Any) -> list[Sample]:
         self.home = Home(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
@@ -144,16 +151,24 @@ class FlightView:
         ]
         if not {"ATTITUDE_QUATERNION", "ODOMETRY", "HIL_STATE_QUATERNION"} & self.seen:
             q_ned = frames.quat_from_euler(msg.roll, msg.pitch, msg.yaw)
-            out.append(Sample("world/vehicle", "rotation", quat_xyzw(frames.quat_ned_frd_to_enu_flu(q_ned))))
+            out.append(
+                Sample(
+                    "world/vehicle", "rotation", quat_xyzw(frames.quat_ned_frd_to_enu_flu(q_ned))
+                )
+            )
         return out
 
     def _actuator_output_status(self, msg: Any) -> list[Sample]:
         count = bin(msg.active).count("1") or 4
-        return [Sample(f"plots/rotors/speed_{i + 1}", "scalar", msg.actuator[i]) for i in range(min(count, 8))]
+        return [
+            Sample(f"plots/rotors/speed_{i + 1}", "scalar", msg.actuator[i])
+            for i in range(min(count, 8))
+        ]
 
     def _servo_output_raw(self, msg: Any) -> list[Sample]:
         return [
-            Sample(f"plots/rotors/pwm_{i}", "scalar", getattr(msg, f"servo{i}_raw")) for i in range(1, 5)
+            Sample(f"plots/rotors/pwm_{i}", "scalar", getattr(msg, f"servo{i}_raw"))
+            for i in range(1, 5)
         ]
 
     def _battery_status(self, msg: Any) -> list[Sample]:

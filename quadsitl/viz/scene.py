@@ -36,8 +36,7 @@ def quat_xyzw(q_wxyz: np.ndarray) -> np.ndarray:
 def log_vehicle_model(rec: rr.RecordingStream, path: str = "world/vehicle") -> None:
     """Static geometry in the body frame (FLU): X arms, four rotor discs, a heading arrow."""
     rotors = [
-        (ARM * math.cos(a), ARM * math.sin(a), 0.0)
-        for a in np.radians([45.0, 135.0, 225.0, 315.0])
+        (ARM * math.cos(a), ARM * math.sin(a), 0.0) for a in np.radians([45.0, 135.0, 225.0, 315.0])
     ]
     rec.log(
         f"{path}/arms",

@@ -1,0 +1,114 @@
+"""Replay speed: a one-hour, 50 Hz telemetry log (≈ 1 million messages) to a Rerun
+recording (issue 8; target ≤ 30 s).
+
+The log is synthesised (a vehicle circling): ATTITUDE, ATTITUDE_QUATERNION,
+LOCAL_POSITION_NED, GLOBAL_POSITION_INT and ODOMETRY at 50 Hz, ACTUATOR_OUTPUT_STATUS
+and SERVO_OUTPUT_RAW at 10 Hz, GPS_RAW_INT at 5 Hz, HEARTBEAT, SYS_STATUS and
+BATTERY_STATUS at 1 Hz. Prints the time to read the log alone (pymavlink's decode: the
+floor) and to convert it, and ``replay_messages_per_s``.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+from pathlib import Path
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from gcs_tools.replay import convert
+from gcs_tools.tlog_reader import read_tlog
+from quadsitl.mavlink.tlog import TlogWriter
+
+HOURS = 1.0
+NAN = float("nan")
+
+
+def synthesise(path: Path) -> int:
+    """Write the log; returns the number of messages."""
+    enc = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    writer = TlogWriter(path)
+    t0 = time.time()
+    count = 0
+    for tick in range(int(HOURS * 3600 * 50)):
+        t = tick / 50
+        ms = tick * 20
+        x, y, yaw = 10 * math.cos(t / 10), 10 * math.sin(t / 10), (t / 10) % (2 * math.pi)
+        q = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
+        messages = [
+            enc.attitude_encode(ms, 0.05, -0.02, yaw - math.pi, 0.0, 0.0, 0.1),
+            enc.attitude_quaternion_encode(ms, *q, 0.0, 0.0, 0.1, [0.0] * 4),
+            enc.local_position_ned_encode(ms, x, y, -5.0, -y / 10, x / 10, 0.0),
+            enc.global_position_int_encode(ms, 473977420, 85455940, 493000, 5000, 0, 0, 0, 0),
+            enc.odometry_encode(
+                ms * 1000,
+                1,
+                12,
+                x,
+                y,
+                -5.0,
+                q,
+                1.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.1,
+                [NAN] + [0.0] * 20,
+                [NAN] + [0.0] * 20,
+            ),
+        ]
+        if tick % 5 == 0:
+            messages.append(
+                enc.actuator_output_status_encode(ms * 1000, 15, [500.0] * 4 + [0.0] * 28)
+            )
+            messages.append(
+                enc.servo_output_raw_encode(ms * 1000, 0, 1500, 1500, 1500, 1500, 0, 0, 0, 0)
+            )
+        if tick % 10 == 0:
+            messages.append(
+                enc.gps_raw_int_encode(
+                    ms * 1000, 3, 473977420, 85455940, 493000, 80, 120, 100, 0, 14
+                )
+            )
+        if tick % 50 == 0:
+            messages.append(enc.heartbeat_encode(2, 12, 129, 0, 4))
+            messages.append(enc.sys_status_encode(0, 0, 0, 0, 16000, 1000, 80, 0, 0, 0, 0, 0, 0))
+            messages.append(
+                enc.battery_status_encode(
+                    0, 0, 0, 32767, [4000] * 4 + [65535] * 6, 1000, 100, -1, 80
+                )
+            )
+        for message in messages:
+            writer.record(message.pack(enc), t0 + t)
+        count += len(messages)
+        if tick % 5000 == 0:
+            writer.flush()
+    writer.close()
+    return count
+
+
+def main() -> None:
+    with tempfile.TemporaryDirectory() as folder:
+        log = Path(folder) / "one_hour.tlog"
+        start = time.perf_counter()
+        count = synthesise(log)
+        print(f"synthesised {count:,} messages ({log.stat().st_size / 1e6:.0f} MB) in "
+              f"{time.perf_counter() - start:.0f} s")  # fmt: skip
+        start = time.perf_counter()
+        read = sum(1 for _ in read_tlog(log))
+        read_seconds = time.perf_counter() - start
+        print(f"read alone (pymavlink decode): {read:,} messages in {read_seconds:.1f} s "
+              f"({read / read_seconds:,.0f} messages/s)")  # fmt: skip
+        result = convert(log, Path(folder) / "one_hour.rrd")
+        rate = result.stats.messages / result.seconds
+        verdict = "meets" if result.seconds <= 30 else "MISSES"
+        print(f"converted {result.stats.messages:,} messages in {result.seconds:.1f} s "
+              f"({rate:,.0f} messages/s; target ≤ 30 s: {verdict}); "
+              f"{result.seconds / read_seconds:.2f}x the read alone")  # fmt: skip
+        print(f"replay_messages_per_s: {rate:.0f}")
+
+
+if __name__ == "__main__":
+    main()

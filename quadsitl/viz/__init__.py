@@ -1,0 +1,2 @@
+"""Rerun views of flights: the scene (:mod:`.scene`), MAVLink messages as samples
+(:mod:`.flight_view`) and the row-by-row logger shared by the live views (:mod:`.live`)."""

@@ -1,0 +1,131 @@
+"""Replay of telemetry logs in Rerun: a real flight, logs missing messages, damaged logs,
+files that are not logs; the recording is read back with Rerun's own reader."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rerun.chunk as rrc
+from pymavlink.dialects.v20 import common as mavlink
+
+from gcs_tools.client import VehicleClient
+from gcs_tools.replay import convert, main
+from gcs_tools.tlog_reader import ReadStats, read_tlog
+from quadsitl.mavlink.tlog import TlogWriter
+from tests.conftest import start_sim
+
+
+def rows_per_entity(rrd: Path) -> dict[str, int]:
+    rows: dict[str, int] = {}
+    for chunk in rrc.RrdReader(rrd).store().stream():
+        rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    return rows
+
+
+@pytest.fixture(scope="module")
+def flight_log(tmp_path_factory) -> Path:
+    """A real flight: arm, take off to 2 m, land, through the simulator at 5x."""
+    folder = tmp_path_factory.mktemp("flight")
+    sim = start_sim(str(folder), speed=5.0)
+    try:
+        client = VehicleClient(f"udpout:127.0.0.1:{sim.port}")
+        client.connect(timeout=30)
+        client.arm()
+        client.takeoff(2.0)
+        client.wait(lambda: client.position_enu()[2] > 1.8, 30, "take-off")
+        client.land()
+        client.wait(lambda: not client.armed, 60, "landing")
+        client.close()
+    finally:
+        sim.stop()
+    return next(folder.glob("*.tlog"))
+
+
+def test_a_recorded_flight_converts_with_every_part(flight_log, tmp_path):
+    out = tmp_path / "flight.rrd"
+    result = convert(flight_log, out)
+    assert not result.warnings
+    rows = rows_per_entity(out)
+    for entity in ("/world/vehicle", "/world/trajectory", "/world/home", "/events",
+                   "/plots/altitude", "/plots/attitude/roll", "/plots/rotors/speed_1",
+                   "/plots/battery/voltage", "/world/vehicle/rotors"):  # fmt: skip
+        assert rows.get(entity, 0) > 0, entity
+    # Every position sample is one row of altitude and one translation of the vehicle.
+    assert rows["/plots/altitude"] == result.entities["plots/altitude"] > 100
+    assert rows["/world/vehicle"] >= 2 * rows["/plots/altitude"] - 5  # + rotations
+    assert rows["/events"] >= 4  # armed, took off, landed, disarmed (and mode changes)
+
+
+def test_log_without_position_messages_still_converts(tmp_path):
+    log = tmp_path / "attitude_only.tlog"
+    writer = TlogWriter(log)
+    enc = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    t0 = time.time()
+    writer.record(enc.heartbeat_encode(2, 12, 128 | 1, 0, 4).pack(enc), t0)  # PX4, armed
+    for i in range(50):
+        writer.record(
+            enc.attitude_encode(i * 20, 0.1, -0.1, 0.01 * i, 0, 0, 0).pack(enc), t0 + 0.02 * i
+        )
+    writer.record(enc.statustext_encode(4, b"hello from PX4", 0, 0).pack(enc), t0 + 1)
+    writer.close()
+    out = tmp_path / "attitude_only.rrd"
+    result = convert(log, out)
+    assert any("no position" in w for w in result.warnings)
+    rows = rows_per_entity(out)
+    assert rows["/plots/attitude/yaw"] == 50
+    assert rows["/events"] == 2  # the arming/mode line and the STATUSTEXT
+    assert "/world/trajectory" not in rows
+
+
+def test_damaged_log_gives_a_partial_recording_and_a_warning(flight_log, tmp_path):
+    data = bytearray(flight_log.read_bytes())
+    whole = ReadStats()
+    count = sum(1 for _ in read_tlog(flight_log, whole))
+    middle = len(data) // 2
+    data[middle : middle + 300] = bytes(range(256)) + bytes(44)  # garbage in the middle
+    damaged = tmp_path / "damaged.tlog"
+    damaged.write_bytes(bytes(data[:-7]))  # and cut short
+    out = tmp_path / "damaged.rrd"
+    result = convert(damaged, out)
+    assert result.stats.damaged and result.stats.truncated
+    assert 0.8 * count < result.stats.messages < count
+    assert any("damaged" in w for w in result.warnings)
+    assert rows_per_entity(out)["/plots/altitude"] > 50
+
+
+@pytest.mark.parametrize(
+    "content", [b"", b"not a telemetry log at all\n" * 100, bytes(range(256)) * 40]
+)
+def test_not_a_log_says_so_without_a_traceback(tmp_path, capsys, content):
+    bogus = tmp_path / "bogus.tlog"
+    bogus.write_bytes(content)
+    assert main([str(bogus), "-o", str(tmp_path / "bogus.rrd")]) == 1
+    err = capsys.readouterr().err
+    assert "no MAVLink messages found" in err and "Traceback" not in err
+    assert main([str(tmp_path / "missing.tlog")]) == 2
+    assert "no such file" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_headless_screenshot_shows_the_flight(flight_log, tmp_path):
+    rerun = shutil.which("rerun", path=str(Path(sys.executable).parent))
+    if rerun is None:
+        pytest.skip("rerun viewer not installed")
+    out = tmp_path / "flight.rrd"
+    convert(flight_log, out)
+    png = tmp_path / "flight.png"
+    subprocess.run(
+        [rerun, str(out), "--headless", "--window-size", "1280x720", "--screenshot-to", str(png)],
+        check=True, timeout=120, capture_output=True,
+    )  # fmt: skip
+    from PIL import Image
+
+    image = np.asarray(Image.open(png).convert("RGB"))
+    assert image.shape[0] >= 720
+    assert len(np.unique(image.reshape(-1, 3), axis=0)) > 100  # a scene, not a blank window
