@@ -31,6 +31,7 @@ bench: venv
 	$(BIN)/python benchmarks/sitl.py
 	$(BIN)/python benchmarks/mavlink_env.py
 	$(BIN)/python benchmarks/mavlink_training.py
+	$(BIN)/python benchmarks/replay.py
 
 lint: venv
 	$(BIN)/ruff check .

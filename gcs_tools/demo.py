@@ -11,8 +11,10 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 from gcs_tools.client import ClientError, VehicleClient
+from gcs_tools.replay import convert
 from gcs_tools.scripted_flight import DEFAULT_WAYPOINTS, fly_mission
 
 
@@ -71,7 +73,12 @@ def run_demo(speed: float = 4.0, logs: str = "logs") -> int:
     for line in report.lines():
         print("  " + line)
     print(f"  telemetry log: {log}")
-    print("  replay it:      python -m pymavlink.tools.mavlogdump " + log + " | less")
+    if log != "(none)":
+        recording = str(Path(log).with_suffix(".rrd"))
+        replay = convert(log, recording)
+        print(f"  Rerun recording of the flight ({replay.stats.messages} messages, "
+              f"{replay.seconds:.1f} s): {recording}")  # fmt: skip
+        print(f"  open it with:    rerun {recording}")
     print("connect a ground station: run `quadsitl sim` and open QGroundControl (it listens on")
     print(
         "UDP 14550), or `mavproxy.py --master=udpin:0.0.0.0:14550`; MAVSDK: udpin://0.0.0.0:14540"

@@ -38,6 +38,14 @@ def _build_parser() -> argparse.ArgumentParser:
         "--print-every", type=float, default=0.5, help="seconds between table rows (default: 0.5)"
     )
     _add_sim_parser(commands)
+    replay = commands.add_parser(
+        "replay",
+        help="turn a MAVLink telemetry log (.tlog) into a Rerun recording (as gcs-replay)",
+    )
+    replay.add_argument("tlog", help="the telemetry log")
+    replay.add_argument(
+        "-o", "--output", metavar="RRD", help="write the recording here (default: open the viewer)"
+    )
     return parser
 
 
@@ -142,6 +150,14 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         metavar="S",
         help="stop after S wall-clock seconds (default: run until Ctrl-C / SIGTERM)",
     )
+    sim.add_argument(
+        "--rerun", action="store_true", help="stream the vehicle to a Rerun viewer (spawned)"
+    )
+    sim.add_argument(
+        "--rerun-save",
+        metavar="RRD",
+        help="stream the vehicle to this Rerun recording file instead of a viewer",
+    )
     sim.add_argument("--quiet", action="store_true", help="do not print vehicle events")
 
 
@@ -196,6 +212,7 @@ def _sim_config(args: argparse.Namespace) -> object:
         physics_rate=args.physics_rate, control_rate=args.control_rate, speed=args.speed,
         log_dir=None if args.logs.lower() == "none" else args.logs,
         duration=args.duration, params=params, quiet=args.quiet,
+        rerun=args.rerun, rerun_save=args.rerun_save,
     )  # fmt: skip
 
 
@@ -219,6 +236,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
         except ValueError as error:
             parser.exit(2, f"quadsitl demo: error: {error}\n")
+    if args.command == "replay":
+        from gcs_tools.replay import main as replay_main
+
+        return replay_main([args.tlog] + (["-o", args.output] if args.output else []))
     if args.command == "sim":
         from quadsitl.mavlink.runner import run_simulator
 

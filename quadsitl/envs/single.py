@@ -11,6 +11,7 @@ from quadsitl.envs import docs
 from quadsitl.envs.mavlink_backend import MavlinkBackend, attach_backend, split_backend_options
 from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
+from quadsitl.viz.episode_view import EpisodeView
 
 EQ18 = (
     "Per step (Eq. 18, Δd = previous − current distance to the goal): "
@@ -32,6 +33,9 @@ def check_no_render(render_mode: str | None) -> None:
         raise ValueError(f"render_mode {render_mode!r} is not supported (use None)")
 
 
+RENDER_MODES = ("rerun",)
+
+
 class QuadEnv(gym.Env):
     """Base of the five task envs; subclasses set ``task_name`` and the docstring.
 
@@ -43,17 +47,23 @@ class QuadEnv(gym.Env):
     signs the traffic (32 bytes).
     """
 
-    metadata: dict[str, Any] = {"render_modes": [], "render_fps": 20}  # noqa: RUF012
+    metadata: dict[str, Any] = {"render_modes": list(RENDER_MODES), "render_fps": 20}  # noqa: RUF012
     task_name = "hover"
 
-    def __init__(self, render_mode: str | None = None, **options: Any) -> None:
-        check_no_render(render_mode)
+    def __init__(
+        self, render_mode: str | None = None, rerun_save: str | None = None, **options: Any
+    ) -> None:
+        if render_mode not in (None, *RENDER_MODES):
+            raise ValueError(f"render_mode {render_mode!r} is not supported: None or 'rerun'")
         self.render_mode = render_mode
         backend_options = split_backend_options(options)
         self.engine = TaskEngine(get_task(self.task_name), 1, TaskOptions.from_kwargs(**options))
         self.observation_space, self.action_space = make_spaces(self.engine)
         self._all = np.ones(1, bool)
         self.backend: MavlinkBackend | None = attach_backend(self.engine, backend_options)
+        self.view: EpisodeView | None = None
+        if render_mode == "rerun":  # episodes logged as they are flown; see quadsitl.viz
+            self.view = EpisodeView(f"{self.task_name}", rerun_save)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -69,6 +79,8 @@ class QuadEnv(gym.Env):
             self.engine.reset_envs(self._all)
         except SimulatorError as error:
             raise self._explain(error) from None
+        if self.view is not None:
+            self.view.reset(self.engine)
         return self.engine.obs[0].copy(), {}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -76,6 +88,8 @@ class QuadEnv(gym.Env):
             reward, terminated, truncated = self.engine.step(action)
         except SimulatorError as error:
             raise self._explain(error) from None
+        if self.view is not None:
+            self.view.step(self.engine, float(reward[0]))
         info: dict[str, Any] = {}
         if terminated[0] or truncated[0]:
             metrics = self.engine.episode_metrics(np.zeros(1, np.int64))
@@ -91,9 +105,15 @@ class QuadEnv(gym.Env):
     def _explain(self, error: SimulatorError) -> SimulatorError:
         return self.backend.explain(error) if self.backend is not None else error
 
+    def render(self) -> None:
+        """Nothing to do: with ``render_mode="rerun"`` every reset and step is logged."""
+
     def close(self) -> None:
         if self.backend is not None:
             self.backend.close()
+        if self.view is not None:
+            self.view.close()
+            self.view = None
         super().close()
 
 

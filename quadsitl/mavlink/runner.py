@@ -29,6 +29,7 @@ from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.viz.sim_view import SimView
 
 MAX_LAG = 0.1  # s: further behind than this, skip ahead instead of catching up
 LOCKSTEP_TICK = 0.002  # wall s between telemetry/heartbeat ticks while in lockstep
@@ -46,6 +47,8 @@ class SimConfig:
     extra_urls: list[str] = field(default_factory=list)
     lockstep: bool = False  # simulated time moves only with motor commands
     signing_key: bytes | None = None  # MAVLink 2 signing key (32 bytes)
+    rerun: bool = False  # stream the vehicle to a spawned Rerun viewer
+    rerun_save: str | None = None  # ... or to this .rrd file
     system_id: int = 1
     home: Home = field(default_factory=Home)
     airframe: str = "paper"
@@ -134,10 +137,16 @@ class Simulator:
         )  # fmt: skip
         self.timing = Timing()
         self.stopping = False
+        self.view: SimView | None = None
+        if config.rerun or config.rerun_save:
+            self.view = SimView(self.vehicle, config.rerun_save)
 
     def _print(self, text: str) -> None:
         if not self.config.quiet:
             print(text, flush=True)
+        view = getattr(self, "view", None)
+        if view is not None:
+            view.event(text)
 
     def stop(self, *_: object) -> None:
         self.stopping = True
@@ -168,6 +177,8 @@ class Simulator:
                 wait = start + (steps + 1) * wall_per_step - time.monotonic()
             if self.tlog is not None:
                 self.tlog.flush()
+            if self.view is not None:
+                self.view.tick(now)
             sockets = {s: link for link in self.links for s in link.sockets()}
             readable, _, _ = select.select(list(sockets), [], [], max(0.0, wait))
             if not readable and wait == 0.0:
@@ -196,6 +207,9 @@ class Simulator:
         tlog = getattr(self, "tlog", None)
         if tlog is not None:
             tlog.close()
+        view = getattr(self, "view", None)
+        if view is not None:
+            view.close()
 
 
 def run_simulator(config: SimConfig) -> int:

@@ -167,7 +167,7 @@ class FlightView:
 
     def _servo_output_raw(self, msg: Any) -> list[Sample]:
         return [
-            Sample(f"plots/rotors/pwm_{i}", "scalar", getattr(msg, f"servo{i}_raw"))
+            Sample(f"plots/servo_pwm/{i}", "scalar", getattr(msg, f"servo{i}_raw"))
             for i in range(1, 5)
         ]
 

@@ -55,7 +55,8 @@ class LiveLogger:
             self.pose[sample.kind] = np.asarray(sample.value, dtype=np.float64)
             translation, quaternion = self.pose["translation"], self.pose["rotation"]
             self.rec.log(
-                sample.entity, rr.Transform3D(translation=translation, quaternion=rr.Quaternion(xyzw=quaternion))
+                sample.entity,
+                rr.Transform3D(translation=translation, quaternion=rr.Quaternion(xyzw=quaternion)),
             )
             if sample.kind == "translation":
                 self.track.append(translation)

@@ -6,8 +6,9 @@ NED/FRD values are converted with :mod:`quadsitl.frames` before logging. Entitie
 
 * ``world/vehicle`` — a small quadrotor (arms, rotor discs, heading arrow), posed by its
   transform; ``world/trajectory``, ``world/home``, ``world/mission``, ``world/setpoint``;
-* ``plots/altitude``, ``plots/velocity/*``, ``plots/attitude/*``, ``plots/rotors/*``,
-  ``plots/battery/*`` (and ``plots/reward`` for gym episodes) — time series;
+* ``plots/altitude`` (m), ``plots/velocity/*`` (m/s, ENU), ``plots/attitude/*`` (deg),
+  ``plots/rotors/*`` (rad/s), ``plots/servo_pwm/*`` (µs), ``plots/battery/*`` (V, %)
+  (and ``plots/reward`` for gym episodes) — time series;
 * ``events`` — flight mode, arming and STATUSTEXT as a text log.
 """
 
@@ -69,7 +70,15 @@ def blueprint(extra_plots: tuple[str, ...] = ()) -> rrb.Blueprint:
     """The default layout: 3-D view beside the plots and the event log."""
     plots = [
         rrb.TimeSeriesView(origin=f"plots/{name}", name=name)
-        for name in ("altitude", "velocity", "attitude", "rotors", "battery", *extra_plots)
+        for name in (
+            "altitude",
+            "velocity",
+            "attitude",
+            "rotors",
+            "servo_pwm",
+            "battery",
+            *extra_plots,
+        )
     ]
     return rrb.Blueprint(
         rrb.Horizontal(
