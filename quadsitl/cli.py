@@ -38,6 +38,9 @@ def _build_parser() -> argparse.ArgumentParser:
         "--print-every", type=float, default=0.5, help="seconds between table rows (default: 0.5)"
     )
     _add_sim_parser(commands)
+    from policies.cli import add_parsers as add_policy_parsers
+
+    add_policy_parsers(commands)
     replay = commands.add_parser(
         "replay",
         help="turn a MAVLink telemetry log (.tlog) into a Rerun recording (as gcs-replay)",
@@ -236,6 +239,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
         except ValueError as error:
             parser.exit(2, f"quadsitl demo: error: {error}\n")
+    if args.command in ("train", "eval", "plot"):
+        from policies.cli import run as run_policy_command
+
+        try:
+            return run_policy_command(args)
+        except ValueError as error:
+            parser.exit(2, f"quadsitl {args.command}: error: {error}\n")
     if args.command == "replay":
         from gcs_tools.replay import main as replay_main
 

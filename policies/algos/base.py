@@ -1,0 +1,109 @@
+"""What the algorithms share: the network, collecting a rollout, the critic loss."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch.nn import functional as F
+
+from policies.config import TrainConfig
+from policies.networks import ActorCritic
+from policies.rollout import BatchEnv, Rollout, compute_gae
+
+ACT_SIZE = 4  # rotor commands
+
+
+class Algorithm:
+    """Subclasses implement :meth:`update`; ``two_headed`` picks the network shape."""
+
+    two_headed = True
+
+    def __init__(self, config: TrainConfig, obs_size: int, act_size: int) -> None:
+        self.config = config
+        self.net = ActorCritic(
+            obs_size, act_size, config.hidden, self.two_headed, config.normalize_obs,
+            config.init_log_std,
+        )  # fmt: skip
+        self._obs: np.ndarray | None = None
+
+    # --- experience ---------------------------------------------------------------------
+    @torch.no_grad()
+    def collect(self, env: BatchEnv) -> Rollout:
+        """``steps_per_env`` steps of every env with the current policy."""
+        c = self.config
+        if self._obs is None:
+            self._obs = env.reset()
+        t_steps, n = c.steps_per_env, env.num_envs
+        obs = np.zeros((t_steps, n, env.obs_size), np.float32)
+        actions = np.zeros((t_steps, n, ACT_SIZE), np.float32)
+        log_probs = np.zeros((t_steps, n), np.float32)
+        values = np.zeros((t_steps, n), np.float32)
+        rewards = np.zeros((t_steps, n), np.float64)
+        terminated = np.zeros((t_steps, n), bool)
+        truncated = np.zeros((t_steps, n), bool)
+        final_values = np.zeros((t_steps, n), np.float32)
+        episode_returns: list[float] = []
+        episode_success: list[bool] = []
+        for t in range(t_steps):
+            o = torch.as_tensor(self._obs)
+            dist = self.net.distribution(o)
+            action = dist.sample()
+            obs[t], actions[t] = self._obs, action.numpy()
+            log_probs[t] = dist.log_prob(action).sum(-1).numpy()
+            values[t] = self.net.value(o).numpy()
+            self._obs, reward, terminated[t], truncated[t], final_obs, metrics = env.step(
+                actions[t]
+            )
+            rewards[t] = reward * c.reward_scale
+            if truncated[t].any():
+                final_values[t] = self.net.value(torch.as_tensor(final_obs)).numpy()
+            if metrics:
+                episode_returns += metrics["episode_return"].tolist()
+                episode_success += metrics["success"].tolist()
+        last_values = self.net.value(torch.as_tensor(self._obs)).numpy()
+        self.net.norm.update(torch.as_tensor(obs.reshape(t_steps * n, -1)))
+        advantages, returns = compute_gae(
+            rewards, values.astype(np.float64), terminated, truncated,
+            final_values.astype(np.float64), last_values.astype(np.float64),
+            c.gamma, c.gae_lambda,
+        )  # fmt: skip
+        return Rollout(
+            obs=torch.as_tensor(obs),
+            actions=torch.as_tensor(actions),
+            log_probs=torch.as_tensor(log_probs),
+            advantages=torch.as_tensor(advantages, dtype=torch.float32),
+            returns=torch.as_tensor(returns, dtype=torch.float32),
+            values=torch.as_tensor(values),
+            episode_returns=episode_returns,
+            episode_success=episode_success,
+        )
+
+    # --- learning ---------------------------------------------------------------------
+    def update(self, rollout: Rollout) -> dict[str, float]:
+        """Improve the policy (and critic) from one batch; returns loss metrics."""
+        raise NotImplementedError
+
+    def critic_loss(self, obs: torch.Tensor, returns: torch.Tensor) -> torch.Tensor:
+        """Huber loss of the value estimate against the returns (the paper's critic)."""
+        return F.huber_loss(self.net.value(obs), returns, delta=self.config.huber_delta)
+
+    def advantages(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
+        adv = batch["advantages"]
+        if self.config.normalize_advantages and adv.numel() > 1:
+            adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+        return adv
+
+    def log_prob(
+        self, obs: torch.Tensor, actions: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(log π(a|s), entropy) summed over action dimensions."""
+        dist = self.net.distribution(obs)
+        return dist.log_prob(actions).sum(-1), dist.entropy().sum(-1)
+
+    def step_optimizer(self, optimizer: torch.optim.Optimizer, loss: torch.Tensor) -> None:
+        optimizer.zero_grad()
+        loss.backward()
+        if self.config.max_grad_norm > 0:
+            params = [p for group in optimizer.param_groups for p in group["params"]]
+            torch.nn.utils.clip_grad_norm_(params, self.config.max_grad_norm)
+        optimizer.step()

@@ -1,0 +1,114 @@
+"""``quadsitl train``, ``quadsitl eval`` and ``quadsitl plot``: parsed here, run lazily
+(torch is imported only by these commands)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from policies.config import ALGORITHMS, TASK_NAMES
+
+
+def add_parsers(commands: argparse._SubParsersAction) -> None:
+    train = commands.add_parser(
+        "train", help="train a policy (GAE, PPO or TRPO) on a task",
+        description="Train a policy. Writes runs/TASK-ALGO-PRESET-seedN/ (config.json, "
+        "metrics.csv, checkpoints/).",
+    )  # fmt: skip
+    train.add_argument("--task", required=True, choices=TASK_NAMES)
+    train.add_argument("--algo", required=True, help=f"one of {', '.join(ALGORITHMS)}")
+    train.add_argument("--preset", default="paper", help="paper (Table I) or fast (default: paper)")
+    train.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    train.add_argument(
+        "--backend", default="inprocess", choices=("inprocess", "mavlink"),
+        help="physics in-process, or in quadsitl sim processes over MAVLink",
+    )  # fmt: skip
+    train.add_argument("--steps", type=int, help="environment steps (default: the preset's)")
+    train.add_argument("--num-envs", type=int, help="parallel envs (default: the preset's)")
+    train.add_argument("--runs", default="runs", help="folder of run folders (default: runs)")
+    train.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    evaluate = commands.add_parser(
+        "eval", help="evaluate a checkpoint with deterministic episodes",
+        description="Run deterministic episodes; prints success rate, return and the task's "
+        "metric, and a line `success_rate: X`.",
+    )  # fmt: skip
+    evaluate.add_argument("checkpoint", help="a .pt file written by quadsitl train")
+    evaluate.add_argument("--episodes", type=int, default=100, help="episodes (default: 100)")
+    evaluate.add_argument("--task", help="task to evaluate on (default: the trained one)")
+    evaluate.add_argument(
+        "--backend", default="inprocess", choices=("inprocess", "mavlink"),
+        help="physics in-process, or in quadsitl sim processes over MAVLink",
+    )  # fmt: skip
+    evaluate.add_argument(
+        "--rerun", nargs="?", const="", metavar="RRD",
+        help="record the first env's episodes in Rerun (a viewer, or the file RRD)",
+    )  # fmt: skip
+
+    plot = commands.add_parser(
+        "plot", help="learning curves (mean ± std over seeds) of run folders",
+    )  # fmt: skip
+    plot.add_argument("runs", nargs="+", help="run folders (any tasks, algorithms, seeds)")
+    plot.add_argument("-o", "--output", default="docs/images", help="folder for the PNGs")
+
+
+def run(args: argparse.Namespace) -> int:
+    import torch
+
+    torch.set_num_threads(1)  # small networks: one thread is fastest, and deterministic
+    if args.command == "train":
+        return _train(args)
+    if args.command == "eval":
+        return _eval(args)
+    return _plot(args)
+
+
+def _train(args: argparse.Namespace) -> int:
+    from policies.config import make_config
+    from policies.train import train
+
+    config = make_config(
+        args.task, args.algo, args.preset, args.seed, backend=args.backend,
+        total_steps=args.steps, num_envs=args.num_envs,
+    )  # fmt: skip
+    run_dir = Path(args.runs) / f"{args.task}-{args.algo}-{args.preset}-seed{args.seed}"
+    print(f"quadsitl train: {config.iterations} iterations of {config.batch_size} steps "
+          f"-> {run_dir}", file=sys.stderr)  # fmt: skip
+    result = train(config, run_dir, progress=not args.quiet)
+    print(f"{result.env_steps:,} steps in {result.seconds:.1f} s; last 100 episodes: return "
+          f"{result.final_return:.1f}, success {result.final_success:.0%}")  # fmt: skip
+    print(f"checkpoint: {run_dir / 'checkpoints' / 'last.pt'}")
+    return 1 if result.diverged else 0
+
+
+def _eval(args: argparse.Namespace) -> int:
+    from policies import checkpoint
+    from policies.evaluate import evaluate
+
+    net, config, _ = checkpoint.load(args.checkpoint)
+    on_step = None
+    view = None
+    if args.rerun is not None:
+        from quadsitl.viz.episode_view import EpisodeView
+
+        view = EpisodeView(f"eval {Path(args.checkpoint).name}", args.rerun or None)
+
+        def on_step(engine, reward):  # type: ignore[no-untyped-def]
+            view.reset(engine) if reward is None else view.step(engine, reward)
+
+    try:
+        result = evaluate(net, config, args.task, args.episodes, args.backend, on_step=on_step)
+    finally:
+        if view is not None:
+            view.close()
+    print("\n".join(result.lines()))
+    return 0
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from policies.plots import learning_curves
+
+    for path in learning_curves([Path(r) for r in args.runs], Path(args.output)):
+        print(path)
+    return 0

@@ -1,0 +1,121 @@
+"""Training configuration: one typed dataclass, and the presets that fill it.
+
+``paper`` is the paper's Table I (one env, 256 steps a batch, learning rate 1e-4, 5000
+iterations; see ../shared/spec/paper-reference.md). ``fast`` uses the native vector env
+(many envs, bigger batches, observation normalisation) to learn in little wall-clock
+time on a 2-core CPU; its numbers were tuned by measurement (docs/results.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+ALGORITHMS = ("gae", "ppo", "trpo")
+TASK_NAMES = ("hover", "static_waypoint", "random_waypoint", "land", "target_follow")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything a training run needs; saved with every run and checkpoint."""
+
+    task: str = "hover"
+    algo: str = "ppo"
+    preset: str = "paper"
+    seed: int = 0
+    backend: str = "inprocess"  # or "mavlink": the vehicles fly in simulator processes
+    num_envs: int = 1  # parallel envs collecting each batch
+    steps_per_env: int = 256  # rollout length; batch = num_envs * steps_per_env
+    total_steps: int = 1_280_000  # environment steps (the paper: 5000 x 256)
+    hidden: int = 128  # units of the one tanh hidden layer
+    gamma: float = 0.99  # discount
+    gae_lambda: float = 0.92  # GAE λ
+    learning_rate: float = 1e-4  # Adam, policy (and critic)
+    epochs: int = 2  # passes over each batch (GAE, PPO)
+    minibatches: int = 1  # per epoch (PPO)
+    clip_coef: float = 0.1  # PPO ε
+    max_kl: float = 0.01  # TRPO trust region
+    cg_damping: float = 0.1  # TRPO Fisher damping
+    cg_iters: int = 10  # TRPO conjugate-gradient iterations
+    line_search_steps: int = 10  # TRPO backtracking steps
+    line_search_shrink: float = 0.5  # TRPO backtracking factor
+    critic_epochs: int = 5  # TRPO critic passes over each batch
+    value_coef: float = 0.5  # weight of the critic loss (two-headed net)
+    huber_delta: float = 1.0  # critic loss: Huber on returns (scaled, see reward_scale)
+    entropy_coef: float = 0.0
+    max_grad_norm: float = 0.5  # 0: no clipping
+    normalize_obs: bool = False  # running mean/std of observations
+    normalize_advantages: bool = True
+    reward_scale: float = 1.0  # rewards are multiplied by this for learning only
+    init_log_std: float = 0.0  # initial log σ of the action distribution
+    checkpoint_every: int = 50  # iterations
+    task_options: dict[str, Any] = field(default_factory=dict)  # e.g. init_position_noise
+
+    @property
+    def batch_size(self) -> int:
+        return self.num_envs * self.steps_per_env
+
+    @property
+    def iterations(self) -> int:
+        return max(1, self.total_steps // self.batch_size)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> TrainConfig:
+        known = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in values.items() if k in known})
+
+
+PAPER: dict[str, dict[str, Any]] = {
+    "gae": {"gae_lambda": 0.92, "epochs": 2},
+    "ppo": {"gae_lambda": 0.92, "epochs": 4, "clip_coef": 0.1},
+    "trpo": {"gae_lambda": 0.97},
+}
+# Evaluation standard (and training distribution) of every task: a randomised start.
+STARTS: dict[str, dict[str, Any]] = {
+    "hover": {"init_position_noise": 0.3, "init_attitude_noise": 0.2},
+    "static_waypoint": {"init_attitude_noise": 0.1},
+    "random_waypoint": {"init_attitude_noise": 0.1},
+    "land": {"init_attitude_noise": 0.1},
+    "target_follow": {"init_attitude_noise": 0.1},
+}
+FAST_COMMON: dict[str, Any] = {
+    "num_envs": 128, "steps_per_env": 32, "learning_rate": 1e-3, "normalize_obs": True,
+    "reward_scale": 0.01, "hidden": 128, "gamma": 0.99, "max_grad_norm": 0.5,
+    "init_log_std": -0.5,
+}  # fmt: skip
+FAST: dict[str, dict[str, Any]] = {
+    "gae": {"gae_lambda": 0.95, "epochs": 1},
+    "ppo": {"gae_lambda": 0.95, "epochs": 5, "minibatches": 4, "clip_coef": 0.2},
+    "trpo": {"gae_lambda": 0.97, "max_kl": 0.02, "critic_epochs": 10, "learning_rate": 1e-3},
+}
+FAST_STEPS = {
+    "hover": 1_000_000, "static_waypoint": 2_000_000, "random_waypoint": 6_000_000,
+    "land": 6_000_000, "target_follow": 6_000_000,
+}  # fmt: skip
+
+
+def make_config(
+    task: str, algo: str, preset: str = "paper", seed: int = 0, **overrides: Any
+) -> TrainConfig:
+    """The preset's configuration for ``task`` and ``algo``, with ``overrides`` applied."""
+    if task not in TASK_NAMES:
+        raise ValueError(f"unknown task {task!r}; choose one of {TASK_NAMES}")
+    if algo not in ALGORITHMS:
+        raise ValueError(f"unknown algorithm {algo!r}; choose one of {ALGORITHMS}")
+    if preset == "paper":
+        values: dict[str, Any] = dict(PAPER[algo])
+    elif preset == "fast":
+        values = {**FAST_COMMON, **FAST[algo], "total_steps": FAST_STEPS[task]}
+    else:
+        raise ValueError(f"unknown preset {preset!r}; choose 'paper' or 'fast'")
+    values["task_options"] = dict(STARTS[task])
+    values.update(task=task, algo=algo, preset=preset, seed=seed)
+    unknown = set(overrides) - {f.name for f in dataclasses.fields(TrainConfig)}
+    if unknown:
+        raise ValueError(f"unknown training option(s) {sorted(unknown)}")
+    values.update({k: v for k, v in overrides.items() if v is not None})
+    return TrainConfig(**values)

@@ -1,0 +1,116 @@
+"""Deterministic evaluation of a policy: success rate, return and the task's own metrics.
+
+Episodes start from the task's evaluation standard (the randomised start of
+:data:`policies.config.STARTS`, as trained) with seeds 10_000 + k, so every
+evaluation of every checkpoint sees the same starts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+
+from policies import checkpoint
+from policies.config import TrainConfig
+from policies.networks import ActorCritic
+from policies.rollout import BatchEnv
+
+EVAL_SEED = 10_000
+# The figure that says how a task went, beyond success (episode-end info key, unit).
+TASK_METRICS: dict[str, tuple[str, str, str]] = {
+    "hover": ("final_distance", "final position error", "m"),
+    "static_waypoint": ("reach_time", "waypoint reach time", "s"),
+    "random_waypoint": ("reach_time", "waypoint reach time", "s"),
+    "land": ("touchdown_speed", "touchdown speed", "m/s"),
+    "target_follow": ("final_distance", "final range error", "m"),
+}
+
+
+@dataclass
+class Evaluation:
+    task: str
+    episodes: int
+    success_rate: float
+    mean_return: float
+    std_return: float
+    metric_name: str
+    metric_unit: str
+    metric_mean: float  # over episodes where it is defined (NaN-free)
+    outcomes: dict[str, int] = field(default_factory=dict)
+    trajectories: list[np.ndarray] = field(default_factory=list)  # (T, 3) positions
+    goals: list[np.ndarray] = field(default_factory=list)  # (T, 3) goal positions
+
+    def lines(self) -> list[str]:
+        outcomes = ", ".join(f"{k} {v}" for k, v in sorted(self.outcomes.items()))
+        return [
+            f"{self.task}: {self.episodes} deterministic episodes",
+            f"success rate {self.success_rate:.1%}; return {self.mean_return:.1f} ± "
+            f"{self.std_return:.1f}",
+            f"{self.metric_name}: {self.metric_mean:.3f} {self.metric_unit} (mean)",
+            f"outcomes: {outcomes}",
+            f"success_rate: {self.success_rate:.4f}",
+        ]
+
+
+def evaluate(
+    net: ActorCritic,
+    config: TrainConfig,
+    task: str | None = None,
+    episodes: int = 100,
+    backend: str = "inprocess",
+    num_envs: int = 25,
+    keep_trajectories: int = 0,
+    on_step: Any = None,
+) -> Evaluation:
+    """Run ``episodes`` of ``task`` (default: the one trained for) with the policy's mean
+    action, from the trained start distribution. ``on_step(engine, reward)`` is called
+    after each reset (reward None) and step of env 0 (e.g. to record it)."""
+    task = task or config.task
+    num_envs = min(num_envs, episodes)
+    env = BatchEnv(task, num_envs, EVAL_SEED, backend, **config.task_options)
+    try:
+        checkpoint.check_fits(net, config, task, env.obs_size)
+    except ValueError:
+        env.close()
+        raise
+    returns, success, metric, outcomes = [], [], [], {}  # type: ignore[var-annotated]
+    tracks: list[list[np.ndarray]] = [[] for _ in range(num_envs)]
+    goal_tracks: list[list[np.ndarray]] = [[] for _ in range(num_envs)]
+    trajectories, goals = [], []
+    key, name, unit = TASK_METRICS[task]
+    obs = env.reset()
+    if on_step is not None:
+        on_step(env.engine, None)
+    try:
+        while len(returns) < episodes:
+            for i in range(num_envs):
+                tracks[i].append(env.engine.fleet.state[i, :3].copy())
+                goal_tracks[i].append(env.engine.goal[i, :3].copy())
+            action = net.act(torch.as_tensor(obs), deterministic=True).numpy()
+            obs, reward, terminated, truncated, _, metrics = env.step(action)
+            ended = np.flatnonzero(terminated | truncated)
+            if on_step is not None:
+                on_step(env.engine, None if 0 in ended else float(reward[0]))
+            for k, i in enumerate(ended):
+                returns.append(float(metrics["episode_return"][k]))
+                success.append(bool(metrics["success"][k]))
+                value = float(metrics[key][k])
+                if np.isfinite(value):
+                    metric.append(value)
+                outcome = str(metrics["outcome"][k])
+                outcomes[outcome] = outcomes.get(outcome, 0) + 1
+                if len(trajectories) < keep_trajectories:
+                    trajectories.append(np.array(tracks[i]))
+                    goals.append(np.array(goal_tracks[i]))
+                tracks[i], goal_tracks[i] = [], []
+    finally:
+        env.close()
+    returns, success = returns[:episodes], success[:episodes]
+    return Evaluation(
+        task, len(returns), float(np.mean(success)), float(np.mean(returns)),
+        float(np.std(returns)), name, unit, float(np.mean(metric)) if metric else float("nan"),
+        outcomes, trajectories, goals,
+    )  # fmt: skip
