@@ -36,7 +36,7 @@ bench: venv
 lint: venv
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/mypy quadsitl --ignore-missing-imports
+	$(BIN)/mypy quadsitl policies --ignore-missing-imports
 
 format: venv
 	$(BIN)/ruff format .

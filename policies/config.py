@@ -32,6 +32,7 @@ class TrainConfig:
     gamma: float = 0.99  # discount
     gae_lambda: float = 0.92  # GAE λ
     learning_rate: float = 1e-4  # Adam, policy (and critic)
+    anneal_lr: bool = False  # decay the learning rate linearly to 0 over the run
     epochs: int = 2  # passes over each batch (GAE, PPO)
     minibatches: int = 1  # per epoch (PPO)
     clip_coef: float = 0.1  # PPO ε
@@ -50,6 +51,8 @@ class TrainConfig:
     reward_scale: float = 1.0  # rewards are multiplied by this for learning only
     init_log_std: float = 0.0  # initial log σ of the action distribution
     checkpoint_every: int = 50  # iterations
+    eval_every: int = 0  # iterations between deterministic evaluations (0: none)
+    eval_episodes: int = 50  # episodes of each such evaluation (fixed starts)
     task_options: dict[str, Any] = field(default_factory=dict)  # e.g. init_position_noise
 
     @property
@@ -85,15 +88,21 @@ STARTS: dict[str, dict[str, Any]] = {
 FAST_COMMON: dict[str, Any] = {
     "num_envs": 128, "steps_per_env": 32, "learning_rate": 1e-3, "normalize_obs": True,
     "reward_scale": 0.01, "hidden": 128, "gamma": 0.99, "max_grad_norm": 0.5,
-    "init_log_std": -0.5,
+    "init_log_std": -0.5, "eval_every": 20,
 }  # fmt: skip
 FAST: dict[str, dict[str, Any]] = {
     "gae": {"gae_lambda": 0.95, "epochs": 1},
-    "ppo": {"gae_lambda": 0.95, "epochs": 5, "minibatches": 4, "clip_coef": 0.2},
+    "ppo": {
+        "gae_lambda": 0.95,
+        "epochs": 10,
+        "minibatches": 8,
+        "clip_coef": 0.2,
+        "learning_rate": 6e-4,
+    },
     "trpo": {"gae_lambda": 0.97, "max_kl": 0.02, "critic_epochs": 10, "learning_rate": 1e-3},
 }
 FAST_STEPS = {
-    "hover": 1_000_000, "static_waypoint": 2_000_000, "random_waypoint": 6_000_000,
+    "hover": 800_000, "static_waypoint": 2_000_000, "random_waypoint": 6_000_000,
     "land": 6_000_000, "target_follow": 6_000_000,
 }  # fmt: skip
 

@@ -19,6 +19,10 @@ LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 class RunningNorm(nn.Module):
     """Running mean and variance of observations (Chan's parallel update)."""
 
+    mean: torch.Tensor
+    var: torch.Tensor
+    count: torch.Tensor
+
     def __init__(self, size: int, enabled: bool) -> None:
         super().__init__()
         self.enabled = enabled

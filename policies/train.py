@@ -2,8 +2,9 @@
 
 The run folder holds ``config.json`` (the resolved configuration), ``metrics.csv`` (one
 row per iteration) and ``checkpoints/`` (``last.pt`` every ``checkpoint_every``
-iterations and at the end, ``best.pt`` at the best success rate). A loss that turns
-NaN stops the run with a message; the last good checkpoint stays.
+iterations and at the end; ``best.pt`` at the best deterministic evaluation, every
+``eval_every`` iterations, whose success rate is the ``eval_success`` column). A loss
+that turns NaN stops the run with a message; the last good checkpoint stays.
 """
 
 from __future__ import annotations
@@ -23,11 +24,13 @@ import torch
 from policies import checkpoint
 from policies.algos import ALGORITHM_CLASSES
 from policies.config import TrainConfig
+from policies.evaluate import VALIDATION_SEED, evaluate
 from policies.rollout import BatchEnv
 
 COLUMNS = (
     "iteration", "env_steps", "wall_seconds", "episodes", "mean_return", "std_return",
-    "success_rate", "policy_loss", "value_loss", "entropy", "kl", "steps_per_second",
+    "success_rate", "eval_success", "policy_loss", "value_loss", "entropy", "kl",
+    "steps_per_second",
 )  # fmt: skip
 
 
@@ -60,6 +63,7 @@ def train(config: TrainConfig, run_dir: str | Path, progress: bool = True) -> Ru
     try:
         for it in range(1, config.iterations + 1):
             rollout = algo.collect(env)
+            algo.set_progress((it - 1) / config.iterations)
             stats = algo.update(rollout)
             if not all(math.isfinite(v) for v in stats.values()) or not _finite(algo):
                 log.diverged = True
@@ -88,6 +92,7 @@ class _Log:
         self.best = -1.0
         self.last_iteration = 0
         self.diverged = False
+        self.eval_seconds = 0.0  # spent in evaluations (included in wall_seconds)
 
     def iteration(self, it: int, rollout, stats: dict[str, float], algo) -> None:  # type: ignore[no-untyped-def]
         config = self.config
@@ -95,6 +100,8 @@ class _Log:
         self.returns = (self.returns + rollout.episode_returns)[-100:]
         self.success = (self.success + rollout.episode_success)[-100:]
         row = _row(config, it, self.started, rollout, stats)
+        if config.eval_every and (it % config.eval_every == 0 or it == config.iterations):
+            row["eval_success"] = self._evaluate(algo, it)
         self.writer.writerow(row)
         self.file.flush()
         if self.progress and (time.perf_counter() - self.shown > 0.5 or it == config.iterations):
@@ -103,9 +110,20 @@ class _Log:
         if it % config.checkpoint_every == 0 or it == config.iterations:
             folder = self.run_dir / "checkpoints"
             checkpoint.save(folder / "last.pt", algo.net, config, iteration=it)
-            if self.success and np.mean(self.success) >= self.best:
-                self.best = float(np.mean(self.success))
-                checkpoint.save(folder / "best.pt", algo.net, config, iteration=it)
+
+    def _evaluate(self, algo, it: int) -> float:  # type: ignore[no-untyped-def]
+        """Deterministic success on fixed starts; keeps the best network as best.pt."""
+        config = self.config
+        started = time.perf_counter()
+        success = evaluate(
+            algo.net, config, episodes=config.eval_episodes, seed=VALIDATION_SEED
+        ).success_rate
+        self.eval_seconds += time.perf_counter() - started
+        if success >= self.best:
+            self.best = success
+            checkpoint.save(self.run_dir / "checkpoints" / "best.pt", algo.net, config,
+                            iteration=it, eval_success=success)  # fmt: skip
+        return success
 
     def close(self) -> None:
         self.file.close()
@@ -136,6 +154,7 @@ def _row(config, it, started, rollout, stats) -> dict:  # type: ignore[no-untype
         "mean_return": float(np.mean(returns)) if returns else math.nan,
         "std_return": float(np.std(returns)) if returns else math.nan,
         "success_rate": float(np.mean(rollout.episode_success)) if returns else math.nan,
+        "eval_success": math.nan,
         **{k: stats.get(k, math.nan) for k in ("policy_loss", "value_loss", "entropy", "kl")},
         "steps_per_second": round(it * config.batch_size / max(elapsed, 1e-9)),
     }

@@ -100,6 +100,17 @@ class Algorithm:
         dist = self.net.distribution(obs)
         return dist.log_prob(actions).sum(-1), dist.entropy().sum(-1)
 
+    def set_progress(self, fraction: float) -> None:
+        """Called before each update with the fraction of the run done (LR annealing)."""
+        if not self.config.anneal_lr:
+            return
+        for optimizer in self.optimizers():
+            for group in optimizer.param_groups:
+                group["lr"] = self.config.learning_rate * max(0.0, 1.0 - fraction)
+
+    def optimizers(self) -> list[torch.optim.Optimizer]:
+        return [v for v in vars(self).values() if isinstance(v, torch.optim.Optimizer)]
+
     def step_optimizer(self, optimizer: torch.optim.Optimizer, loss: torch.Tensor) -> None:
         optimizer.zero_grad()
         loss.backward()

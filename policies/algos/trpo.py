@@ -96,7 +96,7 @@ class TRPO(Algorithm):
         with torch.no_grad():
             entropy = self.net.distribution(obs).entropy().sum(-1).mean()
         return {
-            "policy_loss": -float(gain), "value_loss": float(value_loss),
+            "policy_loss": -gain.item(), "value_loss": value_loss.item(),
             "entropy": float(entropy), "kl": float(kl), "step_accepted": float(accepted),
         }  # fmt: skip
 
