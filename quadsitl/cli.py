@@ -154,6 +154,12 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         help="stop after S wall-clock seconds (default: run until Ctrl-C / SIGTERM)",
     )
     sim.add_argument(
+        "--autopilot",
+        metavar="CHECKPOINT",
+        help="fly with a trained hover/waypoint policy instead of the cascaded controller "
+        "(e.g. policies/checkpoints/random_waypoint.pt)",
+    )
+    sim.add_argument(
         "--rerun", action="store_true", help="stream the vehicle to a Rerun viewer (spawned)"
     )
     sim.add_argument(
@@ -215,7 +221,7 @@ def _sim_config(args: argparse.Namespace) -> object:
         physics_rate=args.physics_rate, control_rate=args.control_rate, speed=args.speed,
         log_dir=None if args.logs.lower() == "none" else args.logs,
         duration=args.duration, params=params, quiet=args.quiet,
-        rerun=args.rerun, rerun_save=args.rerun_save,
+        rerun=args.rerun, rerun_save=args.rerun_save, autopilot=args.autopilot,
     )  # fmt: skip
 
 

@@ -49,6 +49,7 @@ class SimConfig:
     signing_key: bytes | None = None  # MAVLink 2 signing key (32 bytes)
     rerun: bool = False  # stream the vehicle to a spawned Rerun viewer
     rerun_save: str | None = None  # ... or to this .rrd file
+    autopilot: str | None = None  # checkpoint of a trained policy flying instead of the cascade
     system_id: int = 1
     home: Home = field(default_factory=Home)
     airframe: str = "paper"
@@ -114,6 +115,12 @@ class Simulator:
             control_period=1.0 / config.control_rate,
         )
         Vehicle(config.airframe).step()  # compile the kernels before the clock starts
+        if config.autopilot:
+            from policies.autopilot import PolicyAutopilot  # torch: only when asked for
+
+            self.vehicle.controller = PolicyAutopilot.from_checkpoint(
+                config.autopilot, self.vehicle.airframe
+            )
         for name, value in config.params.items():
             self.vehicle.set_param(name, value)
         self.links: list[Link] = []

@@ -47,6 +47,8 @@ class Setpoint:
     thrust: float | None = None  # fraction of the maximum collective thrust, 0..1
     idle: bool = False
     max_speed_xy: float | None = None  # m/s, overrides the parameter for this leg
+    destination: Vec | None = None  # (3,) m, where the current leg ends (for autopilots
+    # that fly to a goal, e.g. a trained policy, rather than along the path)
 
 
 @dataclass

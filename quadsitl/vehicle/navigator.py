@@ -105,6 +105,7 @@ class Leg:
             acceleration=-decel * self.direction,
             yaw=self.yaw,
             max_speed_xy=self.limits.cruise_xy,
+            destination=self.end.copy(),
         )
 
 

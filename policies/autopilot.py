@@ -1,0 +1,113 @@
+"""A trained policy as the simulator's autopilot (``quadsitl sim --autopilot CKPT``).
+
+It implements :class:`quadsitl.vehicle.controller.Autopilot`: given the vehicle state
+and the navigator's setpoint (take-off, goto, mission legs), it builds the task
+observation and returns the policy's rotor commands, held for the policy's control
+period (0.05 s). Waypoint policies learned goals 1–2.5 m away, so a farther target is
+approached through a carrot at most ``CARROT`` m ahead on the line to it (by the task
+the policy learned), re-anchored as each carrot is reached. The policy always faces the
+task's heading (east, yaw 0); setpoint yaw is ignored. Without a position setpoint
+(velocity or attitude control) it holds the position where that began.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from policies import checkpoint
+from policies.networks import ActorCritic
+from quadsitl.physics import Airframe
+from quadsitl.physics import layout as L
+from quadsitl.tasks import TaskOptions
+from quadsitl.tasks import features as F
+from quadsitl.vehicle.controller import Setpoint
+
+# m: the farthest goal shown to the policy, by the task it learned (hover: its start
+# offsets, ±0.3 m; waypoints: goals 1–2.5 m away).
+CARROT = {"hover": 0.25, "static_waypoint": 1.5, "random_waypoint": 2.0}
+REANCHOR = 0.5  # fraction of the carrot distance that counts as reached
+
+
+class PolicyAutopilot:
+    def __init__(
+        self,
+        net: ActorCritic,
+        airframe: Airframe,
+        options: TaskOptions,
+        carrot: float = 2.0,
+        goal_at_origin: bool = False,
+    ) -> None:
+        if net.obs_size != F.OBS_SIZE:
+            raise ValueError(
+                f"this policy needs {net.obs_size} observations; only the hover and waypoint "
+                f"policies ({F.OBS_SIZE}) can fly as the autopilot"
+            )
+        self.net = net
+        self.carrot = carrot
+        self.goal_at_origin = goal_at_origin
+        self.airframe = airframe
+        self.period = options.control_period
+        self.beta = options.beta
+        self.params = airframe.to_params(-np.inf)[None, :]
+        self.obs, self.dist, self.tilt = F.empty_buffers(1)
+        self.goal = np.zeros((1, 6))
+        self.command = np.zeros(L.N_ROTORS)
+        self.reset()
+
+    @classmethod
+    def from_checkpoint(cls, path: str, airframe: Airframe) -> PolicyAutopilot:
+        net, config, _ = checkpoint.load(path)
+        if config.task not in ("hover", "static_waypoint", "random_waypoint"):
+            raise ValueError(f"a {config.task} policy cannot fly goto and mission legs")
+        options = {k: v for k, v in config.task_options.items() if not k.startswith("init_")}
+        return cls(
+            net, airframe, TaskOptions.from_kwargs(**options), CARROT[config.task],
+            goal_at_origin=config.task == "hover",
+        )  # fmt: skip
+
+    def reset(self) -> None:
+        self.elapsed = np.inf
+        self.origin: np.ndarray | None = None
+        self.target: np.ndarray | None = None
+
+    def rotor_command(self, state: np.ndarray, setpoint: Setpoint, dt: float) -> np.ndarray:
+        self.elapsed += dt
+        if self.elapsed < self.period - 1e-9:
+            return self.command
+        self.elapsed = 0.0
+        if setpoint.idle:
+            self.command = np.zeros(L.N_ROTORS)
+            return self.command
+        position = state[L.POS]
+        goal = setpoint.destination if setpoint.destination is not None else setpoint.position
+        target = position.copy() if goal is None else np.asarray(goal, dtype=np.float64)
+        if goal is None and self.target is not None:
+            target = self.target  # hold where position control ended
+        if self.target is None or np.linalg.norm(target - self.target) > 0.01:
+            self.target, self.origin = target.copy(), position.copy()
+        assert self.origin is not None
+        goal = self._carrot(position)
+        # The task frame the policy learned: hover has its goal at the origin, the
+        # waypoint tasks start at the origin with the goal ahead.
+        origin = goal if self.goal_at_origin else self.origin
+        local = state.copy()[None, :]
+        local[0, L.POS] -= origin
+        self.goal[0, :3] = goal - origin
+        F.observe(local, self.params, self.goal, self.obs, self.dist, self.tilt)
+        action = self.net.act(torch.as_tensor(self.obs), deterministic=True).numpy()[0]
+        hover = self.airframe.hover_rotor_speed
+        self.command = np.clip(hover + self.beta * action, 0.0, self.airframe.max_rotor_speed)
+        return self.command
+
+    def _carrot(self, position: np.ndarray) -> np.ndarray:
+        assert self.origin is not None and self.target is not None
+        offset = self.target - self.origin
+        distance = float(np.linalg.norm(offset))
+        if distance <= self.carrot:
+            return self.target
+        carrot = self.origin + offset * (self.carrot / distance)
+        if np.linalg.norm(carrot - position) < REANCHOR * self.carrot:
+            self.origin = position.copy()  # the next segment starts here
+            return self._carrot(position)
+        return carrot
