@@ -144,7 +144,8 @@ class StaticWaypointEnv(QuadEnv):
             bonus=" + 100 while within 0.05 m of the goal",
         ),
         "At the origin, level, at rest, rotors at hover speed.",
-        "Terminated more than 2 m from the goal or beyond 90° roll/pitch; truncated after 3 s "
+        "Terminated more than 2 m from the goal (a flip does not end it, as in the paper); "
+        "truncated after 3 s "
         "(60 steps). Success: within 0.1 m at the end.",
         3.0,
     )
@@ -161,7 +162,7 @@ class RandomWaypointEnv(QuadEnv):
             bonus=" + 100 while within 0.05 m of the goal",
         ),
         "At the origin, level, at rest, rotors at hover speed.",
-        "Terminated more than 5 m from the goal or beyond 90° roll/pitch; truncated after "
+        "Terminated more than 5 m from the goal (a flip does not end it); truncated after "
         "3.5 s (70 steps). Success: within 0.1 m at the end.",
         3.5,
     )
@@ -180,8 +181,9 @@ class LandEnv(QuadEnv):
             "than 2 m/s",
         ),
         "x, y ~ U(−1.5, 1.5) m, z = 3 m, level, at rest, rotors at hover speed.",
-        "Terminated on landing (landed / landed_off_pad), crash, more than 6 m from the pad, "
-        "or beyond 90° roll/pitch; truncated after 6 s (120 steps). Success: landed on the pad.",
+        "Terminated on landing (landed / landed_off_pad), crash or more than 6 m from the pad "
+        "(a flip in the air does not end it); truncated after 6 s (120 steps). Success: "
+        "landed on the pad.",
         6.0,
     )
 

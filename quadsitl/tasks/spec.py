@@ -61,7 +61,9 @@ class TaskSpec:
     goal_bonus: float = 0.0
     bound_box: float = math.inf  # m: ends when any |x|, |y|, |z| exceeds it
     bound_goal_distance: float = math.inf  # m: ends when farther from the goal
-    max_tilt: float = math.pi / 2  # rad: ends when |roll| or |pitch| exceeds it
+    max_tilt: float = math.inf  # rad: ends when |roll| or |pitch| exceeds it (the paper:
+    # hover and target following only; a waypoint or landing episode goes on after a
+    # flip, so that ending it early can never be a way out of negative rewards)
     ground: bool = False  # a ground plane at z = 0
     sample_start: Callable[[np.random.Generator], np.ndarray] = level_start
     sample_goal: Callable[[np.random.Generator], np.ndarray] = origin_goal

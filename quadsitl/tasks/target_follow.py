@@ -8,6 +8,8 @@ the vector to the target (3, ENU m), its distance (1, m) and its velocity (3, EN
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from quadsitl.tasks import spec as S
@@ -95,6 +97,7 @@ TASK = S.TaskSpec(
     time_reward=0.0,
     goal_radius=RANGE,
     bound_box=4.0,
+    max_tilt=math.pi / 2,
     setup=setup,
     on_reset=on_reset,
     advance_goal=advance_goal,
