@@ -7,7 +7,6 @@ client connects on a private API port.
 
 from __future__ import annotations
 
-import socket
 import subprocess
 import sys
 import time
@@ -16,12 +15,7 @@ from pathlib import Path
 from gcs_tools.client import ClientError, VehicleClient
 from gcs_tools.replay import convert
 from gcs_tools.scripted_flight import DEFAULT_WAYPOINTS, fly_mission
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
+from quadsitl.mavlink.links import free_udp_port
 
 
 def start_simulator(*args: str) -> subprocess.Popen[str]:

@@ -23,6 +23,19 @@ BACKENDS = ("inprocess", "mavlink")
 BACKEND_OPTIONS = ("sim_address", "gcs", "system_id", "timeout", "signing_key")
 
 
+def reset_envs(engine: TaskEngine, backend: MavlinkBackend | None, mask: Any) -> None:
+    """``engine.reset_envs(mask)``; through the wire, first restart a simulator that died
+    (with a warning), and give errors the process's exit message."""
+    if backend is None:
+        engine.reset_envs(mask)
+        return
+    backend.check_alive()
+    try:
+        engine.reset_envs(mask)
+    except SimulatorError as error:
+        raise backend.explain(error) from None
+
+
 def split_backend_options(options: dict[str, Any]) -> dict[str, Any]:
     """Remove ``backend`` and BACKEND_OPTIONS from an env's keyword options; return them."""
     return {k: options.pop(k) for k in ("backend", *BACKEND_OPTIONS) if k in options}

@@ -12,18 +12,13 @@ import contextlib
 import ctypes
 import os
 import signal
-import socket
 import subprocess
 import sys
 import weakref
 
+from quadsitl.mavlink.links import free_udp_port
+
 PR_SET_PDEATHSIG = 1
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
 
 
 def _die_with_parent() -> None:  # runs in the child between fork and exec

@@ -8,7 +8,12 @@ import gymnasium as gym
 import numpy as np
 
 from quadsitl.envs import docs
-from quadsitl.envs.mavlink_backend import MavlinkBackend, attach_backend, split_backend_options
+from quadsitl.envs.mavlink_backend import (
+    MavlinkBackend,
+    attach_backend,
+    reset_envs,
+    split_backend_options,
+)
 from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
 from quadsitl.viz.episode_view import EpisodeView
@@ -73,12 +78,7 @@ class QuadEnv(gym.Env):
             raise ValueError(f"reset options are not supported, got {sorted(options)}")
         if seed is not None:
             self.engine.seed([seed])
-        if self.backend is not None:
-            self.backend.check_alive()
-        try:
-            self.engine.reset_envs(self._all)
-        except SimulatorError as error:
-            raise self._explain(error) from None
+        reset_envs(self.engine, self.backend, self._all)
         if self.view is not None:
             self.view.reset(self.engine)
         return self.engine.obs[0].copy(), {}

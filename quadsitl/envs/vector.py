@@ -14,7 +14,12 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from quadsitl.envs.mavlink_backend import MavlinkBackend, attach_backend, split_backend_options
+from quadsitl.envs.mavlink_backend import (
+    MavlinkBackend,
+    attach_backend,
+    reset_envs,
+    split_backend_options,
+)
 from quadsitl.envs.single import ENV_CLASSES, check_no_render, make_spaces
 from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
@@ -63,12 +68,7 @@ class QuadVectorEnv(VectorEnv):
             if len(seed) != self.num_envs:
                 raise ValueError(f"got {len(seed)} seeds for {self.num_envs} envs")
             self.engine.seed(list(seed))
-        if self.backend is not None:
-            self.backend.check_alive()
-        try:
-            self.engine.reset_envs(self._all)
-        except SimulatorError as error:
-            raise self._explain(error) from None
+        reset_envs(self.engine, self.backend, self._all)
         self._autoreset[:] = False
         return self.engine.obs.copy(), {}
 
