@@ -150,3 +150,12 @@ def test_train_and_eval_commands(tmp_path):
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert bad.returncode == 2 and "unknown algorithm" in bad.stderr
+
+
+@pytest.mark.parametrize("task", ["hover", "static_waypoint", "land"])
+def test_shipped_checkpoints_load_and_succeed(task):
+    torch.set_num_threads(1)
+    net, config, _ = checkpoint.load(CHECKPOINTS / f"{task}.pt")
+    assert config.task == task
+    result = evaluate(net, config, episodes=20)
+    assert result.success_rate >= 0.9, result.lines()
