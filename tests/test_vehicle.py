@@ -14,7 +14,8 @@ from quadsitl.vehicle.controller import ControllerGains
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.params import PARAMETERS
-from quadsitl.vehicle.vehicle import Outcome, Vehicle
+from quadsitl.vehicle.results import Outcome
+from quadsitl.vehicle.vehicle import Vehicle
 
 
 def _fly(vehicle: Vehicle, seconds: float, every: int = 20) -> np.ndarray:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import abc
+
 import numpy as np
 import torch
 from torch.nn import functional as F
@@ -13,7 +15,7 @@ from policies.rollout import BatchEnv, Rollout, compute_gae
 ACT_SIZE = 4  # rotor commands
 
 
-class Algorithm:
+class Algorithm(abc.ABC):
     """Subclasses implement :meth:`update`; ``two_headed`` picks the network shape."""
 
     two_headed = True
@@ -79,9 +81,9 @@ class Algorithm:
         )
 
     # --- learning ---------------------------------------------------------------------
+    @abc.abstractmethod
     def update(self, rollout: Rollout) -> dict[str, float]:
         """Improve the policy (and critic) from one batch; returns loss metrics."""
-        raise NotImplementedError
 
     def critic_loss(self, obs: torch.Tensor, returns: torch.Tensor) -> torch.Tensor:
         """Huber loss of the value estimate against the returns (the paper's critic)."""

@@ -27,7 +27,8 @@ from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.physics import layout as L
-from quadsitl.vehicle.vehicle import ACCEPTED, Outcome, Result, Vehicle
+from quadsitl.vehicle.results import ACCEPTED, Outcome, Result
+from quadsitl.vehicle.vehicle import Vehicle
 
 RESET_STATE = mav.MAV_CMD_USER_1  # 31010
 STAGE_MOTION = mav.MAV_CMD_USER_2  # 31011

@@ -27,7 +27,8 @@ from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.vehicle.controller import Setpoint
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.params import PARAMETERS
-from quadsitl.vehicle.vehicle import ACCEPTED, Outcome, Result, Vehicle
+from quadsitl.vehicle.results import ACCEPTED, Outcome, Result
+from quadsitl.vehicle.vehicle import Vehicle
 
 FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 that forces the action (PX4, ArduPilot)
 STATUSTEXT_LENGTH = 50

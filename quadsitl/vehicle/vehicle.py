@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
-from enum import Enum
 
 import numpy as np
 
@@ -24,41 +22,22 @@ from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
 from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg, Limits, Orbit
 from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
+from quadsitl.vehicle.results import (
+    ACCEPTED,
+    CRITICAL,
+    IN_AIR,
+    INFO,
+    LANDING,
+    NOTICE,
+    ON_GROUND,
+    TAKING_OFF,
+    WARNING,
+    Result,
+    denied,
+)
 
 MOTOR_TIMEOUT = 0.5  # s of simulated time without motor commands before the onboard
 # controller takes over again
-
-# Severities of events, as MAV_SEVERITY numbers them.
-CRITICAL, ERROR, WARNING, NOTICE, INFO = 2, 3, 4, 5, 6
-# Landed states, as MAV_LANDED_STATE numbers them.
-ON_GROUND, IN_AIR, TAKING_OFF, LANDING = 1, 2, 3, 4
-
-
-class Outcome(Enum):
-    """How a command ended, mapped one to one on MAV_RESULT by the server."""
-
-    ACCEPTED = 0
-    TEMPORARILY_REJECTED = 1
-    DENIED = 2
-    UNSUPPORTED = 3
-    FAILED = 4
-
-
-@dataclass(frozen=True)
-class Result:
-    outcome: Outcome
-    reason: str = ""
-
-    @property
-    def ok(self) -> bool:
-        return self.outcome is Outcome.ACCEPTED
-
-
-ACCEPTED = Result(Outcome.ACCEPTED)
-
-
-def _denied(reason: str) -> Result:
-    return Result(Outcome.DENIED, reason)
 
 
 class Vehicle:
@@ -158,11 +137,11 @@ class Vehicle:
         if self.armed:
             return ACCEPTED
         if self.crashed:
-            return _denied("arming denied: vehicle crashed, reboot or reset it first")
+            return denied("arming denied: vehicle crashed, reboot or reset it first")
         if not self.on_ground and not force:
-            return _denied("arming denied: not on the ground")
+            return denied("arming denied: not on the ground")
         if self.mode in NEEDS_PILOT:
-            return _denied(f"arming denied: {self.mode.name} needs a pilot (RC)")
+            return denied(f"arming denied: {self.mode.name} needs a pilot (RC)")
         self.armed = True
         self.armed_at = self.time
         self.flew = False
@@ -175,22 +154,22 @@ class Vehicle:
         if not self.armed:
             return ACCEPTED
         if not self.on_ground and not force:
-            return _denied("disarming denied: vehicle is flying (use force)")
+            return denied("disarming denied: vehicle is flying (use force)")
         self.armed = False
         self._event(INFO, "disarmed")
         return ACCEPTED
 
     def set_mode(self, mode: Mode) -> Result:
         if mode in NEEDS_PILOT:
-            return _denied(f"mode {mode.name} denied: needs a pilot (RC)")
+            return denied(f"mode {mode.name} denied: needs a pilot (RC)")
         if mode is Mode.MISSION and not self.mission:
-            return _denied("mission mode denied: no mission uploaded")
+            return denied("mission mode denied: no mission uploaded")
         if mode is Mode.OFFBOARD and not self._offboard_alive():
-            return _denied("offboard denied: stream setpoints first")
+            return denied("offboard denied: stream setpoints first")
         if mode is Mode.RTL and self.on_ground:
-            return _denied("return denied: vehicle is on the ground")
+            return denied("return denied: vehicle is on the ground")
         if mode is Mode.LAND and self.on_ground and not self.armed:
-            return _denied("land denied: vehicle is on the ground")
+            return denied("land denied: vehicle is on the ground")
         if self.motor_control:
             self.release_motors(f"mode {mode.name} requested")
         if mode is not self.mode:
@@ -201,9 +180,9 @@ class Vehicle:
     def takeoff(self, altitude: float | None = None) -> Result:
         """Climb above the current position to ``altitude`` m above home (None: param)."""
         if not self.armed:
-            return _denied("take-off denied: not armed")
+            return denied("take-off denied: not armed")
         if altitude is not None and not (math.isfinite(altitude) and 0.3 <= altitude <= 500):
-            return _denied(f"take-off denied: altitude {altitude} m above home out of range")
+            return denied(f"take-off denied: altitude {altitude} m above home out of range")
         self.takeoff_altitude = altitude if altitude is not None else None
         return self.set_mode(Mode.TAKEOFF)
 
@@ -218,7 +197,7 @@ class Vehicle:
     ) -> Result:
         """Go to a local point (NaN keeps the current coordinate) and hold there."""
         if not self.armed:
-            return _denied("reposition denied: not armed")
+            return denied("reposition denied: not armed")
         here = self.position
         target = np.array(
             [
@@ -228,7 +207,7 @@ class Vehicle:
             ]
         )
         if not np.isfinite(target).all() or abs(target).max() > 50_000:
-            return _denied("reposition denied: target not finite or too far")
+            return denied("reposition denied: target not finite or too far")
         if self.mode is not Mode.LOITER:
             self._event(INFO, "mode LOITER")
         self.mode = Mode.LOITER
@@ -269,14 +248,14 @@ class Vehicle:
         controller then holds the new position."""
         state = np.asarray(state, dtype=np.float64)
         if state.shape != (L.STATE_SIZE,) or not np.isfinite(state).all():
-            return _denied("reset denied: state must be 17 finite numbers")
+            return denied("reset denied: state must be 17 finite numbers")
         if np.linalg.norm(state[L.QUAT]) < 1e-6:
-            return _denied("reset denied: attitude quaternion is zero")
+            return denied("reset denied: attitude quaternion is zero")
         gear = self.airframe.gear_height
         if state[L.I_PZ] < gear - 1e-6:
-            return _denied("reset denied: position below the ground")
+            return denied("reset denied: position below the ground")
         if abs(state[L.POS]).max() > 50_000 or state[L.ROTORS].min() < 0:
-            return _denied("reset denied: position too far or negative rotor speed")
+            return denied("reset denied: position too far or negative rotor speed")
         state[L.ROTORS] = np.minimum(state[L.ROTORS], self.airframe.max_rotor_speed)
         resting = state[L.I_PZ] <= gear + 1e-6 and not np.any(state[L.VEL])
         self.fleet.reset(state, contact=L.ON_GROUND if resting else L.AIRBORNE)
@@ -300,7 +279,7 @@ class Vehicle:
         for seq, item in enumerate(items):
             problem = item.problem()
             if problem:
-                return _denied(f"mission item {seq}: {problem}")
+                return denied(f"mission item {seq}: {problem}")
         if self.mode is Mode.MISSION and self.armed:
             self._enter_mode(Mode.LOITER)
         self.mission = list(items)
@@ -309,7 +288,7 @@ class Vehicle:
 
     def set_mission_current(self, seq: int) -> Result:
         if not 0 <= seq < max(len(self.mission), 1):
-            return _denied(f"mission item {seq} does not exist")
+            return denied(f"mission item {seq} does not exist")
         self.mission_current = seq
         if self.mode is Mode.MISSION:
             self._start_item()
