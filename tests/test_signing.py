@@ -59,8 +59,11 @@ def test_signed_accepted_unsigned_bad_and_replayed_rejected_and_counted(signed_s
         beat = plain.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
         assert beat is not None and beat.get_srcSystem() == 1
         assert beat.get_header().incompat_flags & 1  # signed by the vehicle
-        frame = _request_home(good)
-        ack = _ack(good, 5)
+        for _attempt in range(3):  # UDP on a loaded machine: allow a lost datagram
+            frame = _request_home(good)
+            ack = _ack(good, 5)
+            if ack is not None:
+                break
         assert ack is not None and ack.result == mav.MAV_RESULT_ACCEPTED
         _request_home(plain)
         _request_home(forged)
