@@ -146,3 +146,24 @@ def test_a_forged_frame_does_not_lock_out_the_real_sender():
     assert check.verdict(roundtrip(forger)) == "bad_signature"
     assert check.verdict(roundtrip(sender)) is None
     assert check.verdict(roundtrip(sender)) is None
+
+
+def test_signing_timestamps_follow_the_wall_clock():
+    """After a minute of running, a new station must still accept the vehicle's stream."""
+    from quadsitl.mavlink.links import Link
+    from quadsitl.mavlink.signing import now_timestamp, sign_outgoing
+
+    key = key_from_passphrase(PASSPHRASE)
+    link = Link("udpin:127.0.0.1:0", "gcs", 1, 1)
+    try:
+        sign_outgoing(link.mav, key, 0)
+        link.mav.signing.timestamp -= 120 * 100_000  # as if started two minutes ago
+        frame = link.pack(link.mav.heartbeat_encode(2, 12, 0, 0, 3))
+        stamp = int.from_bytes(frame[-12:-6], "little")
+        assert abs(stamp - now_timestamp()) < 100_000  # within a second of now
+        station = mav.MAVLink(None)
+        station.signing.secret_key = key
+        station.signing.timestamp = now_timestamp()
+        assert station.parse_buffer(frame)[0].get_type() == "HEARTBEAT"
+    finally:
+        link.close()

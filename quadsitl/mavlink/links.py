@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from quadsitl.mavlink import mavlink
+from quadsitl.mavlink.signing import keep_signing_clock
 
 PEER_TIMEOUT = 10.0  # s without a packet before a learned UDP peer is dropped
 MAX_DATAGRAM = 65535
@@ -169,6 +170,8 @@ class Link:
     # --- sending ----------------------------------------------------------------------
     def pack(self, message: Any) -> bytes:
         """Encode ``message`` with this link's sequence numbers (and signing, if set)."""
+        if self.mav.signing.sign_outgoing:
+            keep_signing_clock(self.mav)
         self.mav.send(message)
         return self._out.frames.pop()
 

@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.mavlink.motor_path import ARMED_FLAG, LOCKSTEP_FLAG, RESET_STATE, STAGE_MOTION
-from quadsitl.mavlink.signing import sign_outgoing
+from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
 
 FORCE_MAGIC = 21196
@@ -81,6 +81,8 @@ class MotorClient:
 
     # --- plumbing ---------------------------------------------------------------------
     def _send(self, message: Any) -> None:
+        if self.mav.signing.sign_outgoing:
+            keep_signing_clock(self.mav)
         self.mav.send(message)
         self.sock.sendto(self._out.frame, self.address)
 

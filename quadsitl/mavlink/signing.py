@@ -55,6 +55,12 @@ def now_timestamp() -> int:
     return int((time.time() - EPOCH_2015) * 100_000)
 
 
+def keep_signing_clock(mav: Any) -> None:
+    """Keep a signer's timestamp on the wall clock (pymavlink only adds 1 a message):
+    a receiver rejects a new stream more than a minute behind its own clock."""
+    mav.signing.timestamp = max(mav.signing.timestamp, now_timestamp())
+
+
 def sign_outgoing(mav: Any, key: bytes, link_id: int) -> None:
     """Make a pymavlink MAVLink object sign everything it sends with ``key``."""
     mav.signing.secret_key = key
