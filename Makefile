@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 # CPU build of PyTorch from the local wheel cache; a looser pin pulls CUDA.
 TORCH_PIN := torch==2.13.0
 
-.PHONY: venv demo test test-slow bench lint format clean
+.PHONY: venv demo test test-slow bench bench-training lint format clean
 
 venv: $(VENV)/.installed
 
@@ -32,6 +32,9 @@ bench: venv
 	$(BIN)/python benchmarks/mavlink_env.py
 	$(BIN)/python benchmarks/mavlink_training.py
 	$(BIN)/python benchmarks/replay.py
+
+bench-training: venv
+	$(BIN)/python benchmarks/training.py
 
 lint: venv
 	$(BIN)/ruff check .
