@@ -41,6 +41,7 @@ class Evaluation:
     metric_name: str
     metric_unit: str
     metric_mean: float  # over episodes where it is defined (NaN-free)
+    reached_rate: float  # episodes that came within the goal radius at some time
     outcomes: dict[str, int] = field(default_factory=dict)
     trajectories: list[np.ndarray] = field(default_factory=list)  # (T, 3) positions
     goals: list[np.ndarray] = field(default_factory=list)  # (T, 3) goal positions
@@ -51,7 +52,8 @@ class Evaluation:
             f"{self.task}: {self.episodes} deterministic episodes",
             f"success rate {self.success_rate:.1%}; return {self.mean_return:.1f} ± "
             f"{self.std_return:.1f}",
-            f"{self.metric_name}: {self.metric_mean:.3f} {self.metric_unit} (mean)",
+            f"{self.metric_name}: {self.metric_mean:.3f} {self.metric_unit} (mean); goal "
+            f"reached (within its radius at some time) in {self.reached_rate:.0%}",
             f"outcomes: {outcomes}",
             f"success_rate: {self.success_rate:.4f}",
         ]
@@ -80,6 +82,7 @@ def evaluate(
         env.close()
         raise
     returns, success, metric, outcomes = [], [], [], {}  # type: ignore[var-annotated]
+    reached: list[bool] = []
     tracks: list[list[np.ndarray]] = [[] for _ in range(num_envs)]
     goal_tracks: list[list[np.ndarray]] = [[] for _ in range(num_envs)]
     trajectories: list[np.ndarray] = []
@@ -101,6 +104,7 @@ def evaluate(
             for k, i in enumerate(ended.tolist()):
                 returns.append(float(metrics["episode_return"][k]))
                 success.append(bool(metrics["success"][k]))
+                reached.append(bool(np.isfinite(metrics["reach_time"][k])))
                 value = float(metrics[key][k])
                 if np.isfinite(value):
                     metric.append(value)
@@ -116,5 +120,5 @@ def evaluate(
     return Evaluation(
         task, len(returns), float(np.mean(success)), float(np.mean(returns)),
         float(np.std(returns)), name, unit, float(np.mean(metric)) if metric else float("nan"),
-        outcomes, trajectories, goals,
+        float(np.mean(reached[:episodes])), outcomes, trajectories, goals,
     )  # fmt: skip
