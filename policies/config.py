@@ -107,6 +107,10 @@ FAST_STEPS = {
 }  # fmt: skip
 
 
+MAVLINK_ENVS = 2  # default envs (simulator processes) through the wire
+MAX_MAVLINK_ENVS = 16
+
+
 def make_config(
     task: str, algo: str, preset: str = "paper", seed: int = 0, **overrides: Any
 ) -> TrainConfig:
@@ -127,4 +131,13 @@ def make_config(
     if unknown:
         raise ValueError(f"unknown training option(s) {sorted(unknown)}")
     values.update({k: v for k, v in overrides.items() if v is not None})
+    if values.get("backend") == "mavlink":
+        # Every env is a simulator process: a few, each with a longer rollout.
+        if overrides.get("num_envs") is None:
+            values["num_envs"] = min(values.get("num_envs", 1), MAVLINK_ENVS)
+        if values["num_envs"] > MAX_MAVLINK_ENVS:
+            raise ValueError(
+                f"backend 'mavlink' runs one simulator process per env: at most "
+                f"{MAX_MAVLINK_ENVS}, got {values['num_envs']}"
+            )
     return TrainConfig(**values)

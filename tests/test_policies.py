@@ -159,3 +159,10 @@ def test_shipped_checkpoints_load_and_succeed(task):
     assert config.task == task
     result = evaluate(net, config, episodes=20)
     assert result.success_rate >= 0.9, result.lines()
+
+
+def test_training_through_the_wire_uses_a_few_simulator_processes():
+    config = make_config("hover", "ppo", "fast", backend="mavlink")
+    assert config.num_envs == 2
+    with pytest.raises(ValueError, match="one simulator process per env"):
+        make_config("hover", "ppo", "fast", backend="mavlink", num_envs=64)
