@@ -4,12 +4,26 @@ MAVLink server (which maps them one to one on MAV_RESULT and MAV_SEVERITY)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import Enum
+from enum import Enum, IntEnum
 
-# Severities of events, as MAV_SEVERITY numbers them.
-CRITICAL, ERROR, WARNING, NOTICE, INFO = 2, 3, 4, 5, 6
-# Landed states, as MAV_LANDED_STATE numbers them.
-ON_GROUND, IN_AIR, TAKING_OFF, LANDING = 1, 2, 3, 4
+
+class Severity(IntEnum):
+    """Of vehicle events, as MAV_SEVERITY numbers them."""
+
+    CRITICAL = 2
+    ERROR = 3
+    WARNING = 4
+    NOTICE = 5
+    INFO = 6
+
+
+class LandedState(IntEnum):
+    """As MAV_LANDED_STATE numbers them."""
+
+    ON_GROUND = 1
+    IN_AIR = 2
+    TAKING_OFF = 3
+    LANDING = 4
 
 
 class Outcome(Enum):

@@ -22,19 +22,7 @@ from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
 from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg, Limits, Orbit
 from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
-from quadsitl.vehicle.results import (
-    ACCEPTED,
-    CRITICAL,
-    IN_AIR,
-    INFO,
-    LANDING,
-    NOTICE,
-    ON_GROUND,
-    TAKING_OFF,
-    WARNING,
-    Result,
-    denied,
-)
+from quadsitl.vehicle.results import ACCEPTED, LandedState, Result, Severity, denied
 
 MOTOR_TIMEOUT = 0.5  # s of simulated time without motor commands before the onboard
 # controller takes over again
@@ -125,12 +113,12 @@ class Vehicle:
     @property
     def landed_state(self) -> int:
         if self.on_ground:
-            return ON_GROUND
+            return LandedState.ON_GROUND
         if isinstance(self.activity, Land):
-            return LANDING
+            return LandedState.LANDING
         if self.mode is Mode.TAKEOFF:
-            return TAKING_OFF
-        return IN_AIR
+            return LandedState.TAKING_OFF
+        return LandedState.IN_AIR
 
     # --- commands ---------------------------------------------------------------------
     def arm(self, force: bool = False) -> Result:
@@ -147,7 +135,7 @@ class Vehicle:
         self.flew = False
         self.controller.reset()
         self._enter_mode(self.mode)
-        self._event(INFO, "armed")
+        self._event(Severity.INFO, "armed")
         return ACCEPTED
 
     def disarm(self, force: bool = False) -> Result:
@@ -156,7 +144,7 @@ class Vehicle:
         if not self.on_ground and not force:
             return denied("disarming denied: vehicle is flying (use force)")
         self.armed = False
-        self._event(INFO, "disarmed")
+        self._event(Severity.INFO, "disarmed")
         return ACCEPTED
 
     def set_mode(self, mode: Mode) -> Result:
@@ -173,7 +161,7 @@ class Vehicle:
         if self.motor_control:
             self.release_motors(f"mode {mode.name} requested")
         if mode is not self.mode:
-            self._event(INFO, f"mode {mode.name}")
+            self._event(Severity.INFO, f"mode {mode.name}")
         self._enter_mode(mode)
         return ACCEPTED
 
@@ -209,7 +197,7 @@ class Vehicle:
         if not np.isfinite(target).all() or abs(target).max() > 50_000:
             return denied("reposition denied: target not finite or too far")
         if self.mode is not Mode.LOITER:
-            self._event(INFO, "mode LOITER")
+            self._event(Severity.INFO, "mode LOITER")
         self.mode = Mode.LOITER
         limits = self._limits(cruise=speed if speed and speed > 0 else None)
         self.activity = Leg(here.copy(), target, limits, self._acceptance(), yaw, face_travel=True)
@@ -228,7 +216,7 @@ class Vehicle:
         if not self.motor_control:
             self.motor_control = True
             self.mode = Mode.OFFBOARD
-            self._event(INFO, "external motor control")
+            self._event(Severity.INFO, "external motor control")
         self.motor_command_time = self.time
         self.rotor_cmd[:] = rotor_speeds if self.armed else 0.0
 
@@ -239,7 +227,7 @@ class Vehicle:
         self.motor_control = False
         self.controller.reset()
         self._enter_mode(Mode.LOITER)
-        self._event(NOTICE, f"motor control ended ({reason}): onboard controller holding")
+        self._event(Severity.NOTICE, f"motor control ended ({reason}): onboard controller holding")
 
     def reset_state(self, state: Vec) -> Result:
         """Put the vehicle in ``state`` (17 values, world ENU, layout of
@@ -299,7 +287,7 @@ class Vehicle:
         self.fleet.time = 0.0
         self._reset_flight_state()
         self.battery.recharge()
-        self._event(INFO, "rebooted")
+        self._event(Severity.INFO, "rebooted")
 
     # --- stepping ---------------------------------------------------------------------
     def step(self) -> None:
@@ -364,12 +352,12 @@ class Vehicle:
     def _navigate(self) -> None:
         """Mode logic at the controller rate: timeouts, mission progress, landing."""
         if self.mode is Mode.OFFBOARD and not self._offboard_alive():
-            self._event(WARNING, "offboard setpoints lost: holding position")
+            self._event(Severity.WARNING, "offboard setpoints lost: holding position")
             self._enter_mode(Mode.LOITER)
         if self.on_ground and not self.crashed:
             self._on_ground_timers()
         if self.mode is Mode.TAKEOFF and self.activity.done:
-            self._event(INFO, "take-off complete: holding")
+            self._event(Severity.INFO, "take-off complete: holding")
             self._enter_mode(Mode.LOITER)
         elif self.mode is Mode.RTL and self.activity.done and self.rtl_stages:
             self.activity = self.rtl_stages.pop(0)
@@ -384,7 +372,7 @@ class Vehicle:
                 self.landed_at = self.time
             if self.time - self.landed_at >= self.params["COM_DISARM_LAND"]:
                 self.disarm()
-                self._event(INFO, "landed: disarmed")
+                self._event(Severity.INFO, "landed: disarmed")
                 if self.mode is Mode.MISSION:
                     self._mission_item_reached()
                 self._enter_mode(Mode.LOITER)
@@ -392,7 +380,7 @@ class Vehicle:
         limit = self.params["COM_DISARM_PRFLT"]
         if self.armed and limit > 0 and self.time - self.armed_at > limit and not self.flew:
             self.disarm()
-            self._event(NOTICE, f"disarmed: no take-off within {limit:g} s")
+            self._event(Severity.NOTICE, f"disarmed: no take-off within {limit:g} s")
 
     def _watch_contact(self, before: int) -> None:
         after = int(self.fleet.contact[0])
@@ -402,14 +390,16 @@ class Vehicle:
             self.armed = False
             self.rotor_cmd[:] = 0.0
             speed = float(self.fleet.touchdown_speed[0])
-            self._event(CRITICAL, f"crashed (touchdown {speed:.1f} m/s): reboot to fly again")
+            self._event(
+                Severity.CRITICAL, f"crashed (touchdown {speed:.1f} m/s): reboot to fly again"
+            )
         elif after == L.ON_GROUND:
             self.landed_at = self.time
-            self._event(INFO, "landed")
+            self._event(Severity.INFO, "landed")
         elif after == L.AIRBORNE:
             self.flew = True
             self.landed_at = None
-            self._event(INFO, "took off")
+            self._event(Severity.INFO, "took off")
 
     # --- modes ------------------------------------------------------------------------
     def _enter_mode(self, mode: Mode) -> None:
@@ -444,14 +434,14 @@ class Vehicle:
             Land(above_home, self.params["MPC_LAND_SPEED"]),
         ]
         self.activity = Leg(here, climb_to, limits, radius, yaw)
-        self._event(INFO, "returning to launch")
+        self._event(Severity.INFO, "returning to launch")
 
     # --- missions ---------------------------------------------------------------------
     def _start_item(self) -> None:
         here = self.position.copy()
         self.item_hold_until = None
         if self.mission_current >= len(self.mission):
-            self._event(INFO, "mission finished: holding")
+            self._event(Severity.INFO, "mission finished: holding")
             self.mode = Mode.LOITER
             self.activity = Hold(here)
             return
@@ -535,7 +525,7 @@ class Vehicle:
             self._start_item()  # finishes the mission: hold
         else:
             self.mission_current = len(self.mission) - 1 if self.mission else 0
-            self._event(INFO, "mission finished")
+            self._event(Severity.INFO, "mission finished")
 
     # --- helpers ----------------------------------------------------------------------
     def _limits(self, cruise: float | None = None, climb: float | None = None) -> Limits:
@@ -579,7 +569,7 @@ class Vehicle:
                 self.fleet.airframes = [airframe]
                 if isinstance(self.controller, CascadedController):
                     self.controller.set_airframe(airframe)
-                self._event(INFO, f"airframe {airframe.name}")
+                self._event(Severity.INFO, f"airframe {airframe.name}")
 
     def _reset_flight_state(self) -> None:
         rest = np.zeros(L.STATE_SIZE)
