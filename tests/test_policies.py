@@ -152,7 +152,7 @@ def test_train_and_eval_commands(tmp_path):
     assert bad.returncode == 2 and "unknown algorithm" in bad.stderr
 
 
-@pytest.mark.parametrize("task", ["hover", "static_waypoint", "land"])
+@pytest.mark.parametrize("task", ["hover", "static_waypoint", "land", "target_follow"])
 def test_shipped_checkpoints_load_and_succeed(task):
     torch.set_num_threads(1)
     net, config, _ = checkpoint.load(CHECKPOINTS / f"{task}.pt")
