@@ -80,7 +80,15 @@ def test_same_seed_gives_identical_metrics(tmp_path):
     torch.set_num_threads(1)
     runs = []
     for name in ("a", "b"):
-        config = make_config("random_waypoint", "ppo", "fast", seed=3, total_steps=20_000)
+        config = make_config(
+            "random_waypoint",
+            "ppo",
+            "fast",
+            seed=3,
+            total_steps=20_000,
+            num_envs=32,
+            steps_per_env=32,
+        )
         train(config, tmp_path / name, progress=False)
         rows = _metrics(tmp_path / name)
         runs.append([{k: v for k, v in r.items() if k not in ("wall_seconds", "steps_per_second")}
