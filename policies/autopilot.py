@@ -7,7 +7,8 @@ period (0.05 s). Waypoint policies learned goals 1–2.5 m away, so a farther ta
 approached through a carrot at most ``CARROT`` m ahead on the line to it (by the task
 the policy learned), re-anchored as each carrot is reached. The policy always faces the
 task's heading (east, yaw 0); setpoint yaw is ignored. Without a position setpoint
-(velocity or attitude control) it holds the position where that began.
+(velocity or attitude control) it holds the position where that began. Landing (the
+final descent of LAND, RTL and mission land items) is flown by the cascaded controller.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from quadsitl.physics import Airframe
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TaskOptions
 from quadsitl.tasks import features as F
-from quadsitl.vehicle.controller import Setpoint
+from quadsitl.vehicle.controller import CascadedController, Setpoint
 
 # m: the farthest goal shown to the policy, by the task it learned (hover: its start
 # offsets, ±0.3 m; waypoints: goals 1–2.5 m away).
@@ -53,6 +54,7 @@ class PolicyAutopilot:
         self.obs, self.dist, self.tilt = F.empty_buffers(1)
         self.goal = np.zeros((1, 6))
         self.command = np.zeros(L.N_ROTORS)
+        self.landing = CascadedController(airframe)  # flies the final descent
         self.reset()
 
     @classmethod
@@ -67,11 +69,15 @@ class PolicyAutopilot:
         )  # fmt: skip
 
     def reset(self) -> None:
+        self.landing.reset()
         self.elapsed = np.inf
         self.origin: np.ndarray | None = None
         self.target: np.ndarray | None = None
 
     def rotor_command(self, state: np.ndarray, setpoint: Setpoint, dt: float) -> np.ndarray:
+        if setpoint.landing:  # the waypoint policies never learned to touch down
+            self.target = None
+            return self.landing.rotor_command(state, setpoint, dt)
         self.elapsed += dt
         if self.elapsed < self.period - 1e-9:
             return self.command

@@ -160,7 +160,9 @@ def test_train_and_eval_commands(tmp_path):
     assert bad.returncode == 2 and "unknown algorithm" in bad.stderr
 
 
-@pytest.mark.parametrize("task", ["hover", "static_waypoint", "land", "target_follow"])
+@pytest.mark.parametrize(
+    "task", ["hover", "static_waypoint", "random_waypoint", "land", "target_follow"]
+)
 def test_shipped_checkpoints_load_and_succeed(task):
     torch.set_num_threads(1)
     net, config, _ = checkpoint.load(CHECKPOINTS / f"{task}.pt")
@@ -174,3 +176,22 @@ def test_training_through_the_wire_uses_a_few_simulator_processes():
     assert config.num_envs == 2
     with pytest.raises(ValueError, match="one simulator process per env"):
         make_config("hover", "ppo", "fast", backend="mavlink", num_envs=64)
+
+
+def test_waypoint_policy_flies_take_off_and_goto_as_autopilot():
+    from policies.autopilot import PolicyAutopilot
+    from quadsitl.vehicle.vehicle import Vehicle
+
+    torch.set_num_threads(1)
+    vehicle = Vehicle()
+    vehicle.controller = PolicyAutopilot.from_checkpoint(
+        CHECKPOINTS / "random_waypoint.pt", vehicle.airframe
+    )
+    assert vehicle.arm().ok and vehicle.takeoff(3.0).ok
+    for _ in range(6_000):
+        vehicle.step()
+    assert vehicle.reposition(6.0, 4.0, 3.0, None, None).ok  # a 7.2 m leg: carrots
+    for _ in range(10_000):
+        vehicle.step()
+    target = np.array([6.0, 4.0, 3.0 + vehicle.airframe.gear_height])
+    assert np.linalg.norm(vehicle.position - target) < 0.2 and not vehicle.crashed

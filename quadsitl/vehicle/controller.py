@@ -49,6 +49,7 @@ class Setpoint:
     max_speed_xy: float | None = None  # m/s, overrides the parameter for this leg
     destination: Vec | None = None  # (3,) m, where the current leg ends (for autopilots
     # that fly to a goal, e.g. a trained policy, rather than along the path)
+    landing: bool = False  # descending to touch down (Land)
 
 
 @dataclass

@@ -150,7 +150,9 @@ class Land:
 
     def setpoint(self, position: Vec, velocity: Vec, t: float) -> Setpoint:
         target = np.array([self.point[0], self.point[1], position[2]])
-        return Setpoint(position=target, velocity=np.array([0.0, 0.0, -self.speed]), yaw=self.yaw)
+        return Setpoint(
+            position=target, velocity=np.array([0.0, 0.0, -self.speed]), yaw=self.yaw, landing=True
+        )
 
 
 Activity = Hold | Leg | Orbit | Land
