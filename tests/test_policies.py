@@ -195,3 +195,31 @@ def test_waypoint_policy_flies_take_off_and_goto_as_autopilot():
         vehicle.step()
     target = np.array([6.0, 4.0, 3.0 + vehicle.airframe.gear_height])
     assert np.linalg.norm(vehicle.position - target) < 0.2 and not vehicle.crashed
+
+
+def test_waypoint_policy_flies_a_whole_mission_as_autopilot():
+    from gcs_tools.scripted_flight import DEFAULT_WAYPOINTS
+    from policies.autopilot import PolicyAutopilot
+    from quadsitl.vehicle import mission as M
+    from quadsitl.vehicle.modes import Mode
+    from quadsitl.vehicle.vehicle import Vehicle
+
+    torch.set_num_threads(1)
+    vehicle = Vehicle()
+    vehicle.controller = PolicyAutopilot.from_checkpoint(
+        CHECKPOINTS / "random_waypoint.pt", vehicle.airframe
+    )
+    items = []
+    for k, w in enumerate(DEFAULT_WAYPOINTS):  # take-off, a 15 m square with a climb
+        lat, lon, _ = vehicle.home.to_global(w.east, w.north, 0.0)
+        command = M.NAV_TAKEOFF if k == 0 else M.NAV_WAYPOINT
+        items.append(M.MissionItem(command, param1=w.hold, x=round(lat * 1e7),
+                                   y=round(lon * 1e7), z=w.up))  # fmt: skip
+    items.append(M.MissionItem(M.NAV_LAND))  # land where it is
+    assert vehicle.set_mission(items).ok and vehicle.arm().ok
+    assert vehicle.set_mode(Mode.MISSION).ok
+    for _ in range(60_000):  # 60 s
+        vehicle.step()
+    assert list(vehicle.items_reached) == [0, 1, 2, 3, 4]
+    assert not vehicle.armed and not vehicle.crashed
+    assert np.linalg.norm(vehicle.position[:2] - [0.0, 15.0]) < 0.3
