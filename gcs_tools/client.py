@@ -59,13 +59,19 @@ class VehicleClient:
         self.reached: list[int] = []
         self.track = Track()
         self.home: Any = None
+        self.last_heartbeat = -1e9  # monotonic s of our last heartbeat
 
     def close(self) -> None:
         self.conn.close()
 
     # --- receiving --------------------------------------------------------------------
     def pump(self, timeout: float = 0.05) -> Any:
-        """Receive one message (or None after ``timeout``) and file it."""
+        """Receive one message (or None after ``timeout``) and file it; send our 1 Hz
+        heartbeat when due (a vehicle forgets a ground station that falls silent)."""
+        now = time.monotonic()
+        if now - self.last_heartbeat >= 1.0:
+            self.last_heartbeat = now
+            self.conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
         msg = self.conn.recv_match(blocking=True, timeout=timeout)
         if msg is None or msg.get_srcSystem() != self.target:
             return None

@@ -223,3 +223,27 @@ def test_waypoint_policy_flies_a_whole_mission_as_autopilot():
     assert list(vehicle.items_reached) == [0, 1, 2, 3, 4]
     assert not vehicle.armed and not vehicle.crashed
     assert np.linalg.norm(vehicle.position[:2] - [0.0, 15.0]) < 0.3
+
+
+def test_ground_station_mission_flown_by_the_policy_autopilot(tmp_path):
+    from gcs_tools.client import VehicleClient
+    from gcs_tools.scripted_flight import fly_mission
+    from quadsitl.mavlink.links import free_udp_port
+
+    port = free_udp_port()
+    sim = subprocess.Popen(
+        [sys.executable, "-m", "quadsitl.cli", "sim", "--gcs", f"udpin:127.0.0.1:{port}",
+         "--api", "none", "--logs", "none", "--speed", "4",
+         "--autopilot", str(CHECKPOINTS / "random_waypoint.pt")],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    client = VehicleClient(f"udpout:127.0.0.1:{port}")
+    try:
+        client.connect(timeout=40)
+        report = fly_mission(client, timeout=60)  # take-off, 15 m square with a climb, land
+    finally:
+        client.close()
+        sim.terminate()
+        sim.communicate(timeout=15)
+    assert report.landed
+    assert max(report.waypoint_errors) < 0.3
