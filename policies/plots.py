@@ -17,45 +17,65 @@ import numpy as np
 COLORS = {"gae": "tab:orange", "ppo": "tab:blue", "trpo": "tab:green"}
 
 
-def _read_run(run: Path) -> tuple[dict, np.ndarray, np.ndarray]:  # type: ignore[type-arg]
+def _read_run(run: Path) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # type: ignore[type-arg]
+    """config, then (steps, mean return) per iteration, then (steps, validation success)
+    at the iterations that ran a periodic evaluation."""
     config = json.loads((run / "config.json").read_text())
-    steps, returns = [], []
+    steps, returns, eval_steps, success = [], [], [], []
     with open(run / "metrics.csv") as f:
         for row in csv.DictReader(f):
-            value = float(row["mean_return"])
+            value, evaluated = float(row["mean_return"]), float(row["eval_success"] or "nan")
             if np.isfinite(value):
                 steps.append(float(row["env_steps"]))
                 returns.append(value)
-    return config, np.array(steps), np.array(returns)
+            if np.isfinite(evaluated):
+                eval_steps.append(float(row["env_steps"]))
+                success.append(evaluated)
+    return config, np.array(steps), np.array(returns), np.array(eval_steps), np.array(success)
+
+
+def _band(ax, curves: list[tuple[np.ndarray, np.ndarray]], algo: str) -> None:  # type: ignore[no-untyped-def]
+    """Mean ± std over seeds of curves sampled at different steps, on a common grid."""
+    end = min(s[-1] for s, _ in curves)
+    grid = np.linspace(min(s[0] for s, _ in curves), end, 200)
+    ys = np.array([np.interp(grid, s, r) for s, r in curves])
+    mean, std = ys.mean(0), ys.std(0)
+    ax.plot(grid, mean, color=COLORS.get(algo), label=f"{algo.upper()} ({len(curves)} seeds)")
+    ax.fill_between(grid, mean - std, mean + std, color=COLORS.get(algo), alpha=0.2)
 
 
 def learning_curves(runs: list[Path], out_dir: Path) -> list[Path]:
-    """One PNG per (task, preset): a curve per algorithm, mean ± std over its seeds."""
-    groups: dict[tuple[str, str], dict[str, list[tuple[np.ndarray, np.ndarray]]]] = defaultdict(
-        lambda: defaultdict(list)
-    )
+    """One PNG per (task, preset): a curve per algorithm, mean ± std over its seeds; with
+    a second panel of the periodic validation success where the runs evaluated."""
+    Curves = dict[str, list[tuple[np.ndarray, np.ndarray]]]
+    returns: dict[tuple[str, str], Curves] = defaultdict(lambda: defaultdict(list))
+    success: dict[tuple[str, str], Curves] = defaultdict(lambda: defaultdict(list))
     for run in runs:
-        config, steps, returns = _read_run(run)
+        config, steps, ret, eval_steps, eval_success = _read_run(run)
+        key = (config["task"], config["preset"])
         if steps.size:
-            groups[(config["task"], config["preset"])][config["algo"]].append((steps, returns))
+            returns[key][config["algo"]].append((steps, ret))
+        if eval_steps.size:
+            success[key][config["algo"]].append((eval_steps, eval_success))
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
-    for (task, preset), by_algo in sorted(groups.items()):
-        fig, ax = plt.subplots(figsize=(7, 4.2))
+    for (task, preset), by_algo in sorted(returns.items()):
+        panels = 2 if success[(task, preset)] else 1
+        fig, axes = plt.subplots(1, panels, figsize=(6.5 * panels, 4.2), squeeze=False)
         for algo, curves in sorted(by_algo.items()):
-            end = min(s[-1] for s, _ in curves)
-            grid = np.linspace(0, end, 200)
-            ys = np.array([np.interp(grid, s, r) for s, r in curves])
-            mean, std = ys.mean(0), ys.std(0)
-            ax.plot(
-                grid, mean, color=COLORS.get(algo), label=f"{algo.upper()} ({len(curves)} seeds)"
-            )
-            ax.fill_between(grid, mean - std, mean + std, color=COLORS.get(algo), alpha=0.2)
-        ax.set_xlabel("environment steps")
-        ax.set_ylabel("mean episode return (per iteration)")
-        ax.set_title(f"{task} — {preset} preset")
-        ax.grid(alpha=0.3)
-        ax.legend()
+            _band(axes[0, 0], curves, algo)
+        axes[0, 0].set_ylabel("mean episode return (per iteration)")
+        axes[0, 0].set_title(f"{task} — {preset} preset")
+        if panels == 2:
+            for algo, curves in sorted(success[(task, preset)].items()):
+                _band(axes[0, 1], curves, algo)
+            axes[0, 1].set_ylabel("validation success (deterministic)")
+            axes[0, 1].set_ylim(-0.05, 1.05)
+            axes[0, 1].set_title(f"{task} — success on validation starts")
+        for ax in axes[0]:
+            ax.set_xlabel("environment steps")
+            ax.grid(alpha=0.3)
+            ax.legend()
         path = out_dir / f"learning_{task}_{preset}.png"
         fig.tight_layout()
         fig.savefig(path, dpi=110)

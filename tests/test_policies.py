@@ -65,6 +65,25 @@ def test_clipped_surrogate_matches_a_hand_worked_case():
     assert loss.item() == pytest.approx(0.15)
 
 
+def test_paper_preset_is_table_one():
+    gae, ppo, trpo = (make_config("hover", a, "paper") for a in ("gae", "ppo", "trpo"))
+    for c in (gae, ppo, trpo):
+        assert (c.hidden, c.gamma, c.learning_rate, c.batch_size, c.iterations, c.num_envs) == (
+            128,
+            0.99,
+            1e-4,
+            256,
+            5000,
+            1,
+        )
+    assert (gae.gae_lambda, gae.epochs) == (0.92, 2)
+    assert (ppo.gae_lambda, ppo.epochs, ppo.clip_coef, ppo.minibatches) == (0.92, 4, 0.1, 1)
+    assert (trpo.gae_lambda, trpo.max_kl, trpo.cg_damping, trpo.cg_iters) == (0.97, 0.01, 0.1, 10)
+    assert (trpo.line_search_steps, trpo.line_search_shrink) == (10, 0.5)
+    with pytest.raises(ValueError, match="unknown training option"):
+        make_config("hover", "ppo", "paper", learning_rat=1e-3)
+
+
 @pytest.mark.parametrize("algo", ["gae", "ppo", "trpo"])
 def test_each_algorithm_improves_the_return_on_a_short_budget(algo, tmp_path):
     torch.set_num_threads(1)
