@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 # CPU build of PyTorch from the local wheel cache; a looser pin pulls CUDA.
 TORCH_PIN := torch==2.13.0
 
-.PHONY: venv demo test test-slow bench bench-training lint format clean
+.PHONY: venv demo test test-slow bench bench-training bench-algorithms lint format clean
 
 venv: $(VENV)/.installed
 
@@ -35,6 +35,10 @@ bench: venv
 
 bench-training: venv
 	$(BIN)/python benchmarks/training.py
+
+bench-algorithms: venv
+	$(BIN)/python benchmarks/algorithms.py
+	$(BIN)/python benchmarks/algorithms.py --preset paper --tasks hover
 
 lint: venv
 	$(BIN)/ruff check .

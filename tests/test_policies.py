@@ -4,6 +4,7 @@ checkpoints and the commands."""
 from __future__ import annotations
 
 import csv
+import json
 import math
 import subprocess
 import sys
@@ -177,6 +178,32 @@ def test_train_and_eval_commands(tmp_path):
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert bad.returncode == 2 and "unknown algorithm" in bad.stderr
+
+
+def test_learning_curves_average_seeds_and_add_a_success_panel(tmp_path):
+    from PIL import Image
+
+    from policies.plots import learning_curves
+
+    fields = ["iteration", "env_steps", "mean_return", "eval_success"]
+    for algo, seeds, evaluated in (("ppo", 3, True), ("trpo", 2, False)):
+        for seed in range(seeds):
+            run = tmp_path / f"hover-{algo}-fast-seed{seed}"
+            run.mkdir()
+            config = make_config("hover", algo, "fast", seed=seed)
+            (run / "config.json").write_text(json.dumps(config.to_dict()))
+            with open(run / "metrics.csv", "w", newline="") as f:
+                writer = csv.DictWriter(f, fields)
+                writer.writeheader()
+                for it in range(1, 41):
+                    success = it / 40 if evaluated and it % 5 == 0 else float("nan")
+                    row = [it, 4096 * it, 10.0 * it + seed, success]
+                    writer.writerow(dict(zip(fields, row, strict=True)))
+    paths = learning_curves(sorted(tmp_path.glob("hover-*")), tmp_path / "png")
+    assert [p.name for p in paths] == ["learning_hover_fast.png"]
+    with Image.open(paths[0]) as image:
+        width, height = image.size
+    assert width > 1.8 * height  # two panels: returns, validation success
 
 
 @pytest.mark.parametrize(
