@@ -81,12 +81,13 @@ def table_row(rows: list[dict]) -> str:
         reach = f"{len(reached)}/{len(rows)} seeds; median {seconds:.0f} s, {steps:.2f} M steps"
     else:
         reach = f"0/{len(rows)} seeds"
-    metric = np.nanmean([r["metric"] for r in rows]) if rows else math.nan
+    defined = [r["metric"] for r in rows if not math.isnan(r["metric"])]
+    metric = f"{np.mean(defined):.3g} {rows[0]['unit']}" if defined else "—"
     first = rows[0]
     return (
         f"| {first['task']} | {first['algo'].upper()} | "
         f"{success.mean():.0%} ± {success.std():.0%} ({', '.join(f'{s:.0%}' for s in success)}) | "
-        f"{first['metric_name']} {metric:.3g} {first['unit']} | {reach} | "
+        f"{first['metric_name']} {metric} | {reach} | "
         f"{np.mean([r['seconds'] for r in rows]):.0f} s, {rows[0]['steps'] / 1e6:.2f} M |"
     )
 
