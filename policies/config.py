@@ -1,7 +1,8 @@
 """Training configuration: one typed dataclass, and the presets that fill it.
 
 ``paper`` is the paper's Table I (one env, 256 steps a batch, learning rate 1e-4, 5000
-iterations; see ../shared/spec/paper-reference.md). ``fast`` uses the native vector env
+iterations; see ../shared/spec/paper-reference.md), with rewards scaled for the critic
+(PAPER_COMMON). ``fast`` uses the native vector env
 (many envs, bigger batches, observation normalisation) to learn in little wall-clock
 time on a 2-core CPU; its numbers were tuned by measurement (docs/results.md).
 """
