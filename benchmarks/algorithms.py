@@ -41,13 +41,13 @@ FAST_BUDGET = {
 
 
 def one_run(
-    task: str, algo: str, preset: str, seed: int, steps: int, runs: Path,
+    task: str, algo: str, preset: str, seed: int, steps: int | None, runs: Path,
     target: float = TARGET_SUCCESS,
 ) -> dict:  # fmt: skip
-    """Train one run, evaluate its best checkpoint on 100 test episodes; the run's
-    figures as a dict. ``reach_seconds``/``reach_steps``: wall clock (evaluations
-    included) and steps at the first periodic validation with success ≥ ``target``;
-    NaN if none."""
+    """Train one run (``steps`` None: the preset's budget), evaluate its best checkpoint
+    on 100 test episodes; the run's figures as a dict. ``reach_seconds``/``reach_steps``:
+    wall clock (evaluations included) and steps at the first periodic validation with
+    success ≥ ``target``; NaN if none."""
     torch.set_num_threads(1)
     config = make_config(task, algo, preset, seed, total_steps=steps)
     result = train(config, runs / f"{task}-{algo}-{preset}-seed{seed}", progress=False)
@@ -104,25 +104,24 @@ def main() -> None:
     parser.add_argument("--images", default=str(ROOT / "docs" / "images"))
     args = parser.parse_args()
     runs = Path(args.runs)
+    budget = FAST_BUDGET if args.preset == "fast" else {}  # paper: Table I's 1.28 M
     jobs = [
-        (task, algo, args.preset, seed,
-         args.steps or (FAST_BUDGET[task] if args.preset == "fast" else 1_280_000), runs)
+        (task, algo, args.preset, seed, args.steps or budget.get(task), runs)
         for task in args.tasks for algo in args.algos for seed in args.seeds
     ]  # fmt: skip
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         results = list(pool.map(one_run, *zip(*jobs, strict=True)))
+    by_cell: dict[tuple[str, str], list[dict]] = {}
+    for r in results:
+        by_cell.setdefault((r["task"], r["algo"]), []).append(r)
     print("| task | algorithm | test success (mean ± std; per seed) | task metric "
           f"| validation ≥ {TARGET_SUCCESS:.0%} | run (mean), steps |")  # fmt: skip
     print("|---|---|---|---|---|---|")
-    for task in args.tasks:
-        for algo in args.algos:
-            print(table_row([r for r in results if r["task"] == task and r["algo"] == algo]))
-    for task in args.tasks:
-        for algo in args.algos:
-            mean = np.mean(
-                [r["success"] for r in results if r["task"] == task and r["algo"] == algo]
-            )
-            print(f"{task}_{algo}_{args.preset}_success: {mean:.3f}")
+    for rows in by_cell.values():
+        print(table_row(rows))
+    for (task, algo), rows in by_cell.items():
+        mean = np.mean([r["success"] for r in rows])
+        print(f"{task}_{algo}_{args.preset}_success: {mean:.3f}")
     for png in learning_curves([Path(r["run_dir"]) for r in results], Path(args.images)):
         print(png)
     sys.stdout.flush()
