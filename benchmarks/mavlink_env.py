@@ -21,7 +21,6 @@ import gymnasium as gym
 import numpy as np
 
 import quadsitl  # noqa: F401  (registers the envs)
-from quadsitl.envs.parallel import mavlink_vector_env
 
 ENV_ID = "QuadSITL/Hover-v0"
 SECONDS = 3.0
@@ -65,9 +64,6 @@ def main() -> None:
     envs = gym.make_vec(ENV_ID, 2, vectorization_mode="vector_entry_point", backend="mavlink")
     two = vector_rate(envs)
     envs.close()
-    envs = mavlink_vector_env(ENV_ID, 2)
-    two_async = vector_rate(envs)
-    envs.close()
     print(f"in-process single env: {in_process:,.0f} env steps/s")
     verdict = "meets" if one >= 2500 else "BELOW"
     print(
@@ -77,10 +73,6 @@ def main() -> None:
     print(
         f"MAVLink envs, 2 simulator processes (native vector env): {two:,.0f} env steps/s, "
         f"scaling {two / one:.2f}x of one"
-    )
-    print(
-        f"MAVLink envs, 2 simulator processes (AsyncVectorEnv, 2 workers): "
-        f"{two_async:,.0f} env steps/s, scaling {two_async / one:.2f}x of one"
     )
     print(f"mavlink_env_steps_per_s: {one:.0f}")
     print(f"mavlink_env_steps_per_s_2proc: {two:.0f}")

@@ -23,7 +23,7 @@ import rerun as rr
 
 from gcs_tools.tlog_reader import ReadStats, read_tlog
 from quadsitl.viz.flight_view import FlightView, Sample
-from quadsitl.viz.scene import TIMELINE, open_recording
+from quadsitl.viz.scene import TIMELINE, check_output_path, open_recording
 
 
 @dataclass
@@ -131,8 +131,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"gcs-replay: error: no such file: {args.tlog}", file=sys.stderr)
         return 2
     try:
+        if args.output is not None:
+            check_output_path(args.output)
         result = convert(args.tlog, args.output, spawn=args.output is None)
-    except OSError as error:
+    except (OSError, ValueError, RuntimeError) as error:  # rerun's sinks raise RuntimeError
         print(f"gcs-replay: error: {error}", file=sys.stderr)
         return 2
     for warning in result.warnings:

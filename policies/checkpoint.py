@@ -1,5 +1,12 @@
 """Checkpoints: the network's weights with the configuration and task they were trained
-for, checked on loading so a policy is never run on the wrong task or observation."""
+for, checked on loading so a policy is never run on the wrong task or observation.
+
+A checkpoint is data, never code: it holds only tensors, numbers, strings, lists and
+dicts, and is read with ``torch.load(..., weights_only=True)``, which refuses anything
+else (a pickled object whose ``__reduce__`` would run a command is an error, and runs
+nothing). Every field is then checked against the schema below, with an error that
+names the field.
+"""
 
 from __future__ import annotations
 
@@ -12,10 +19,12 @@ from policies.config import TrainConfig
 from policies.networks import ActorCritic
 
 FORMAT = "quadsitl-policy-1"
+MAX_SIZE = 1_000_000  # observations, actions: anything larger is not one of ours
 
 
 def save(path: str | Path, net: ActorCritic, config: TrainConfig, **extra: Any) -> None:
-    """Write atomically (a crash mid-write never leaves a broken checkpoint)."""
+    """Write atomically (a crash mid-write never leaves a broken checkpoint). ``extra``:
+    plain data only (numbers, strings, tensors, lists and dicts of them)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = {
@@ -38,19 +47,69 @@ def load(path: str | Path) -> tuple[ActorCritic, TrainConfig, dict[str, Any]]:
     if not path.is_file():
         raise ValueError(f"no checkpoint at {path}")
     try:
-        payload = torch.load(path, map_location="cpu", weights_only=False)
+        payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as error:  # torch raises several kinds for a file that is not one
-        raise ValueError(f"{path} is not a quadsitl checkpoint ({error})") from None
+        first_line = str(error).strip().splitlines()[0] if str(error).strip() else repr(error)
+        raise ValueError(
+            f"{path} is not a quadsitl checkpoint, or holds more than data ({first_line})"
+        ) from None
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise ValueError(f"{path} is not a quadsitl checkpoint (format {FORMAT} expected)")
+    try:
+        net, config = _build(payload)
+    except ValueError as error:
+        raise ValueError(f"checkpoint {path}: {error}") from None
+    return net, config, payload
+
+
+def _build(payload: dict[str, Any]) -> tuple[ActorCritic, TrainConfig]:
+    missing = [k for k in ("config", "obs_size", "act_size", "two_headed", "state_dict")
+               if k not in payload]  # fmt: skip
+    if missing:
+        raise ValueError(f"missing {', '.join(missing)}")
     config = TrainConfig.from_dict(payload["config"])
+    for name in ("obs_size", "act_size"):
+        value = payload[name]
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 < value <= MAX_SIZE:
+            raise ValueError(f"{name} must be an integer in 1..{MAX_SIZE}, got {value!r}")
+    if not isinstance(payload["two_headed"], bool):
+        raise ValueError(f"two_headed must be true or false, got {payload['two_headed']!r}")
     net = ActorCritic(
-        payload["obs_size"], payload["act_size"], config.hidden, payload["two_headed"],
-        config.normalize_obs, config.init_log_std,
-    )  # fmt: skip
+        obs_size=payload["obs_size"],
+        act_size=payload["act_size"],
+        hidden=config.hidden,
+        two_headed=payload["two_headed"],
+        normalize_obs=config.normalize_obs,
+        init_log_std=config.init_log_std,
+    )
+    _check_state_dict(payload["state_dict"], net.state_dict())
     net.load_state_dict(payload["state_dict"])
     net.eval()
-    return net, config, payload
+    return net, config
+
+
+def _check_state_dict(given: Any, expected: dict[str, torch.Tensor]) -> None:
+    """Same names, shapes and dtypes as the network built from the config; finite."""
+    if not isinstance(given, dict):
+        raise ValueError(f"state_dict must be a dict of tensors, got {type(given).__name__}")
+    missing = sorted(set(expected) - set(given))
+    unexpected = sorted(set(given) - set(expected))
+    if missing or unexpected:
+        raise ValueError(
+            f"state_dict does not fit the network its config describes (missing {missing}, "
+            f"unexpected {unexpected})"
+        )
+    for name, tensor in given.items():
+        want = expected[name]
+        if not isinstance(tensor, torch.Tensor):
+            raise ValueError(f"state_dict[{name!r}] is not a tensor")
+        if tensor.shape != want.shape:
+            raise ValueError(
+                f"state_dict[{name!r}] has shape {tuple(tensor.shape)}, the network "
+                f"needs {tuple(want.shape)}"
+            )
+        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
+            raise ValueError(f"state_dict[{name!r}] holds NaN or infinite values")
 
 
 def check_fits(net: ActorCritic, config: TrainConfig, task: str, obs_size: int) -> None:

@@ -19,14 +19,27 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
     train.add_argument("--task", required=True, choices=TASK_NAMES)
     train.add_argument("--algo", required=True, help=f"one of {', '.join(ALGORITHMS)}")
     train.add_argument("--preset", default="paper", help="paper (Table I) or fast (default: paper)")
-    train.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    train.add_argument("--seed", type=_count(0), default=0, help="random seed ≥ 0 (default: 0)")
     train.add_argument(
         "--backend", default="inprocess", choices=("inprocess", "mavlink"),
         help="physics in-process, or in quadsitl sim processes over MAVLink",
     )  # fmt: skip
-    train.add_argument("--steps", type=int, help="environment steps (default: the preset's)")
-    train.add_argument("--num-envs", type=int, help="parallel envs (default: the preset's)")
+    train.add_argument(
+        "--steps", type=_count(1), help="environment steps, at least one batch (default: the "
+        "preset's)",
+    )  # fmt: skip
+    train.add_argument("--num-envs", type=_count(1), help="parallel envs (default: the preset's)")
     train.add_argument("--runs", default="runs", help="folder of run folders (default: runs)")
+    existing = train.add_mutually_exclusive_group()
+    existing.add_argument(
+        "--resume", action="store_true",
+        help="continue the run in the run folder from its last.pt, appending to metrics.csv",
+    )  # fmt: skip
+    existing.add_argument(
+        "--overwrite", action="store_true",
+        help="replace the run in the run folder (without this or --resume, an existing run "
+        "is refused)",
+    )  # fmt: skip
     train.add_argument("--quiet", action="store_true", help="no progress bar")
 
     evaluate = commands.add_parser(
@@ -53,6 +66,21 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
     plot.add_argument("-o", "--output", default="docs/images", help="folder for the PNGs")
 
 
+def _count(low: int):  # type: ignore[no-untyped-def]
+    """An argparse type: an integer ≥ ``low``, else a clear usage error."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be ≥ {low}, got {value}")
+        return value
+
+    return parse
+
+
 def run(args: argparse.Namespace) -> int:
     import torch
 
@@ -73,12 +101,19 @@ def _train(args: argparse.Namespace) -> int:
         total_steps=args.steps, num_envs=args.num_envs,
     )  # fmt: skip
     run_dir = Path(args.runs) / f"{args.task}-{args.algo}-{args.preset}-seed{args.seed}"
+    mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
     print(f"quadsitl train: {config.iterations} iterations of {config.batch_size} steps "
           f"-> {run_dir}", file=sys.stderr)  # fmt: skip
-    result = train(config, run_dir, progress=not args.quiet)
+    result = train(config, run_dir, progress=not args.quiet, mode=mode)
+    last = run_dir / "checkpoints" / "last.pt"
+    if result.interrupted:
+        saved = f"{last} saved at iteration {result.iterations}" if last.is_file() else (
+            "no checkpoint saved yet")  # fmt: skip
+        print(f"quadsitl train: interrupted; {saved}; continue with --resume", file=sys.stderr)
+        return 130
     print(f"{result.env_steps:,} steps in {result.seconds:.1f} s; last 100 episodes: return "
           f"{result.final_return:.1f}, success {result.final_success:.0%}")  # fmt: skip
-    print(f"checkpoint: {run_dir / 'checkpoints' / 'last.pt'}")
+    print(f"checkpoint: {last}")
     return 1 if result.diverged else 0
 
 

@@ -1,19 +1,21 @@
 """Training configuration: one typed dataclass, and the presets that fill it.
 
 ``paper`` is the paper's Table I (one env, 256 steps a batch, learning rate 1e-4, 5000
-iterations; see ../shared/spec/paper-reference.md), with rewards scaled for the critic
-(PAPER_COMMON). ``fast`` uses the native vector env
-(many envs, bigger batches, observation normalisation) to learn in little wall-clock
-time on a 2-core CPU; its numbers were tuned by measurement (docs/results.md).
+iterations; docs/training.md), with rewards scaled for the critic (PAPER_COMMON).
+``fast`` uses the native vector env (many envs, bigger batches, observation
+normalisation) to learn in little wall-clock time on a 2-core CPU; its numbers were
+tuned by measurement (docs/results.md).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
 ALGORITHMS = ("gae", "ppo", "trpo")
+BACKENDS = ("inprocess", "mavlink")
 TASK_NAMES = ("hover", "static_waypoint", "random_waypoint", "land", "target_follow")
 
 
@@ -56,6 +58,9 @@ class TrainConfig:
     eval_episodes: int = 50  # episodes of each such evaluation (fixed starts)
     task_options: dict[str, Any] = field(default_factory=dict)  # e.g. init_position_noise
 
+    def __post_init__(self) -> None:
+        _check(self)
+
     @property
     def batch_size(self) -> int:
         return self.num_envs * self.steps_per_env
@@ -69,8 +74,59 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> TrainConfig:
+        """From saved values; an unknown or missing-type value raises ValueError."""
+        if not isinstance(values, dict):
+            raise ValueError(f"config must be a dict, got {type(values).__name__}")
         known = {f.name for f in dataclasses.fields(cls)}
-        return cls(**{k: v for k, v in values.items() if k in known})
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"unknown config key(s) {unknown}")
+        return cls(**values)
+
+
+_POSITIVE_INTS = ("num_envs", "steps_per_env", "total_steps", "hidden", "cg_iters",
+                  "line_search_steps", "critic_epochs", "checkpoint_every", "eval_episodes",
+                  "epochs", "minibatches")  # fmt: skip
+_NON_NEGATIVE_INTS = ("seed", "eval_every")
+_FLOATS = {  # name: (low, high), inclusive
+    "gamma": (0.0, 1.0), "gae_lambda": (0.0, 1.0), "learning_rate": (1e-12, 10.0),
+    "clip_coef": (0.0, 10.0), "max_kl": (1e-12, 10.0), "cg_damping": (0.0, 10.0),
+    "line_search_shrink": (1e-6, 1.0 - 1e-6), "value_coef": (0.0, 1e3),
+    "huber_delta": (1e-12, 1e6), "entropy_coef": (-1e3, 1e3), "max_grad_norm": (0.0, 1e6),
+    "reward_scale": (1e-12, 1e6), "init_log_std": (-20.0, 5.0),
+}  # fmt: skip
+_BOOLS = ("anneal_lr", "normalize_obs", "normalize_advantages")
+
+
+def _check(config: TrainConfig) -> None:
+    """A clear ValueError for any value a run cannot use (types included: a checkpoint's
+    config comes from a file)."""
+    for name in ("task", "algo", "preset", "backend"):
+        if not isinstance(getattr(config, name), str):
+            raise ValueError(f"{name} must be a string, got {getattr(config, name)!r}")
+    if config.task not in TASK_NAMES:
+        raise ValueError(f"unknown task {config.task!r}; choose one of {TASK_NAMES}")
+    if config.algo not in ALGORITHMS:
+        raise ValueError(f"unknown algorithm {config.algo!r}; choose one of {ALGORITHMS}")
+    if config.backend not in BACKENDS:
+        raise ValueError(f"unknown backend {config.backend!r}; choose one of {BACKENDS}")
+    for name in (*_POSITIVE_INTS, *_NON_NEGATIVE_INTS):
+        value = getattr(config, name)
+        least = 1 if name in _POSITIVE_INTS else 0
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            raise ValueError(f"{name} must be an integer ≥ {least}, got {value!r}")
+    for name, (low, high) in _FLOATS.items():
+        value = getattr(config, name)
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if not (ok and math.isfinite(value) and low <= value <= high):
+            raise ValueError(f"{name} must be a number in [{low:g}, {high:g}], got {value!r}")
+    for name in _BOOLS:
+        if not isinstance(getattr(config, name), bool):
+            raise ValueError(f"{name} must be true or false, got {getattr(config, name)!r}")
+    if not isinstance(config.task_options, dict) or not all(
+        isinstance(k, str) for k in config.task_options
+    ):
+        raise ValueError(f"task_options must be a dict of names, got {config.task_options!r}")
 
 
 # Not in Table I: rewards scaled by 0.01 for learning, so that the Huber critic fits
@@ -163,4 +219,10 @@ def make_config(
                 f"backend 'mavlink' runs one simulator process per env: at most "
                 f"{MAX_MAVLINK_ENVS}, got {values['num_envs']}"
             )
-    return TrainConfig(**values)
+    config = TrainConfig(**values)
+    if config.total_steps < config.batch_size:
+        raise ValueError(
+            f"total_steps ({config.total_steps:,}) is less than one batch "
+            f"({config.num_envs} envs × {config.steps_per_env} steps = {config.batch_size:,})"
+        )
+    return config

@@ -2,9 +2,15 @@
 
 The run folder holds ``config.json`` (the resolved configuration), ``metrics.csv`` (one
 row per iteration) and ``checkpoints/`` (``last.pt`` every ``checkpoint_every``
-iterations and at the end; ``best.pt`` at the best deterministic evaluation, every
-``eval_every`` iterations, whose success rate is the ``eval_success`` column). A loss
-that turns NaN stops the run with a message; the last good checkpoint stays.
+iterations, at the end and on Ctrl-C, with the optimiser state; ``best.pt`` at the best
+deterministic evaluation, every ``eval_every`` iterations, whose success rate is the
+``eval_success`` column). A loss that turns NaN stops the run with a message; the last
+good checkpoint stays.
+
+Nothing is overwritten by accident: a folder that already holds a run is refused
+unless the run is resumed (``mode="resume"``: from ``last.pt``, metrics appended) or
+replaced (``mode="overwrite"``). A resumed run reseeds its envs and generators from
+(seed, iteration), so it does not replay the episodes it started with.
 """
 
 from __future__ import annotations
@@ -13,16 +19,19 @@ import csv
 import json
 import math
 import random
+import shutil
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
 
 from policies import checkpoint
 from policies.algos import ALGORITHM_CLASSES
+from policies.algos.base import Algorithm
 from policies.config import TrainConfig
 from policies.evaluate import VALIDATION_SEED, evaluate
 from policies.rollout import BatchEnv
@@ -32,6 +41,8 @@ COLUMNS = (
     "success_rate", "eval_success", "policy_loss", "value_loss", "entropy", "kl",
     "steps_per_second",
 )  # fmt: skip
+MODES = ("new", "resume", "overwrite")
+RUN_FILES = ("config.json", "metrics.csv", "checkpoints")
 
 
 @dataclass
@@ -43,6 +54,18 @@ class RunResult:
     final_success: float
     final_return: float
     diverged: bool
+    interrupted: bool = False
+
+
+@dataclass
+class _Start:
+    """Where a run begins: iteration 0, or the state saved in a run's last.pt."""
+
+    iteration: int = 0
+    wall_seconds: float = 0.0
+    best: float = -1.0
+    net_state: dict[str, Any] | None = None
+    optimizer_states: list[Any] | None = None
 
 
 def seed_everything(seed: int) -> None:
@@ -51,17 +74,49 @@ def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-def train(config: TrainConfig, run_dir: str | Path, progress: bool = True) -> RunResult:
+def holds_run(run_dir: Path) -> bool:
+    return any((run_dir / name).exists() for name in RUN_FILES)
+
+
+def train(
+    config: TrainConfig, run_dir: str | Path, progress: bool = True, mode: str = "new"
+) -> RunResult:
+    """Train ``config`` into ``run_dir``; ``mode``: "new", "resume" or "overwrite"."""
     run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n")
-    seed_everything(config.seed)
-    env = BatchEnv(config.task, config.num_envs, config.seed, config.backend,
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    if mode == "new" and holds_run(run_dir):
+        raise ValueError(
+            f"{run_dir} already holds a run; resume it with --resume or replace it with "
+            "--overwrite (nothing was changed)"
+        )
+    start = _resume_point(config, run_dir) if mode == "resume" else _Start()
+    if start.iteration >= config.iterations:
+        raise ValueError(
+            f"{run_dir} has already run {start.iteration} of {config.iterations} iterations; "
+            "give more --steps to train further"
+        )
+    # Everything that can fail at start happens before the folder is touched.
+    seed = _seed(config.seed, start.iteration)
+    seed_everything(seed)
+    env = BatchEnv(config.task, config.num_envs, seed, config.backend,
                    **config.task_options)  # fmt: skip
-    algo = ALGORITHM_CLASSES[config.algo](config, env.obs_size, 4)
-    log = _Log(config, run_dir, progress)
     try:
-        for it in range(1, config.iterations + 1):
+        algo = ALGORITHM_CLASSES[config.algo](config, env.obs_size, 4)
+        _restore(algo, start)
+        if mode == "overwrite":
+            for name in RUN_FILES:
+                target = run_dir / name
+                shutil.rmtree(target) if target.is_dir() else target.unlink(missing_ok=True)
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n")
+        log = _Log(config, run_dir, progress, start)
+    except BaseException:
+        env.close()
+        raise
+    it = start.iteration
+    try:
+        for it in range(start.iteration + 1, config.iterations + 1):
             rollout = algo.collect(env)
             algo.set_progress((it - 1) / config.iterations)
             stats = algo.update(rollout)
@@ -71,27 +126,86 @@ def train(config: TrainConfig, run_dir: str | Path, progress: bool = True) -> Ru
                       "finite); the last good checkpoint is kept", file=sys.stderr)  # fmt: skip
                 break
             log.iteration(it, rollout, stats, algo)
+    except KeyboardInterrupt:
+        log.interrupted = True
+        if log.last_iteration > start.iteration and not log.diverged:
+            log.save_last(algo)
     finally:
         env.close()
         log.close()
     return log.result()
 
 
+def _seed(seed: int, iteration: int) -> int:
+    """The run's seed at its start; a resumed run draws a new stream from both."""
+    if iteration == 0:
+        return seed
+    return int(np.random.SeedSequence([seed, iteration]).generate_state(1)[0] % 2**31)
+
+
+def _resume_point(config: TrainConfig, run_dir: Path) -> _Start:
+    """The state saved in ``run_dir``'s last.pt, checked against ``config``."""
+    last = run_dir / "checkpoints" / "last.pt"
+    if not last.is_file():
+        raise ValueError(f"cannot resume: {last} does not exist")
+    _, saved, payload = checkpoint.load(last)
+    differences = sorted(
+        k for k, v in saved.to_dict().items() if k != "total_steps" and config.to_dict()[k] != v
+    )
+    if differences:
+        raise ValueError(
+            f"cannot resume {run_dir}: its run was trained with other {differences} "
+            "(only --steps may change)"
+        )
+    iteration = payload.get("iteration")
+    if isinstance(iteration, bool) or not isinstance(iteration, int) or iteration < 1:
+        raise ValueError(f"cannot resume: {last} has no iteration count")
+    rows = _kept_rows(run_dir / "metrics.csv", iteration)
+    best = max((float(r["eval_success"]) for r in rows if r["eval_success"] not in ("", "nan")),
+               default=-1.0)  # fmt: skip
+    wall = float(rows[-1]["wall_seconds"]) if rows else 0.0
+    return _Start(iteration, wall, best, payload["state_dict"], payload.get("optimizers"))
+
+
+def _kept_rows(metrics: Path, iteration: int) -> list[dict[str, str]]:
+    """Rows up to the checkpoint's iteration (later ones are trained again)."""
+    if not metrics.is_file():
+        return []
+    with open(metrics, newline="") as file:
+        return [r for r in csv.DictReader(file) if int(r["iteration"]) <= iteration]
+
+
+def _restore(algo: Algorithm, start: _Start) -> None:
+    if start.net_state is None:
+        return
+    algo.net.load_state_dict(start.net_state)
+    optimizers = algo.optimizers()
+    if start.optimizer_states is not None and len(start.optimizer_states) == len(optimizers):
+        for optimizer, state in zip(optimizers, start.optimizer_states, strict=True):
+            optimizer.load_state_dict(state)
+
+
 class _Log:
     """metrics.csv, the progress line, checkpoints, and the running episode statistics."""
 
-    def __init__(self, config: TrainConfig, run_dir: Path, progress: bool) -> None:
+    def __init__(self, config: TrainConfig, run_dir: Path, progress: bool, start: _Start) -> None:
         self.config, self.run_dir, self.progress = config, run_dir, progress
-        self.file = open(run_dir / "metrics.csv", "w", newline="")  # noqa: SIM115
+        metrics = run_dir / "metrics.csv"
+        kept = _kept_rows(metrics, start.iteration) if start.iteration else []
+        self.file = open(metrics, "w", newline="")  # noqa: SIM115
         self.writer = csv.DictWriter(self.file, fieldnames=COLUMNS)
         self.writer.writeheader()
-        self.started = time.perf_counter()
+        self.writer.writerows(kept)
+        self.file.flush()
+        self.started = time.perf_counter() - start.wall_seconds
         self.shown = 0.0
         self.returns: list[float] = []  # of the last 100 episodes
         self.success: list[bool] = []
-        self.best = -1.0
-        self.last_iteration = 0
+        self.best = start.best
+        self.first_iteration = start.iteration
+        self.last_iteration = start.iteration
         self.diverged = False
+        self.interrupted = False
         self.eval_seconds = 0.0  # spent in evaluations (included in wall_seconds)
 
     def iteration(self, it: int, rollout, stats: dict[str, float], algo) -> None:  # type: ignore[no-untyped-def]
@@ -108,8 +222,15 @@ class _Log:
             self.shown = time.perf_counter()
             _progress(config, row)
         if it % config.checkpoint_every == 0 or it == config.iterations:
-            folder = self.run_dir / "checkpoints"
-            checkpoint.save(folder / "last.pt", algo.net, config, iteration=it)
+            self.save_last(algo)
+
+    def save_last(self, algo: Algorithm) -> None:
+        """last.pt: the network and the optimiser state, enough to resume."""
+        checkpoint.save(
+            self.run_dir / "checkpoints" / "last.pt", algo.net, self.config,
+            iteration=self.last_iteration,
+            optimizers=[optimizer.state_dict() for optimizer in algo.optimizers()],
+        )  # fmt: skip
 
     def _evaluate(self, algo, it: int) -> float:  # type: ignore[no-untyped-def]
         """Deterministic success on fixed starts; keeps the best network as best.pt."""
@@ -132,11 +253,15 @@ class _Log:
 
     def result(self) -> RunResult:
         return RunResult(
-            self.run_dir, self.last_iteration, self.last_iteration * self.config.batch_size,
-            time.perf_counter() - self.started,
-            float(np.mean(self.success)) if self.success else 0.0,
-            float(np.mean(self.returns)) if self.returns else math.nan, self.diverged,
-        )  # fmt: skip
+            run_dir=self.run_dir,
+            iterations=self.last_iteration,
+            env_steps=self.last_iteration * self.config.batch_size,
+            seconds=time.perf_counter() - self.started,
+            final_success=float(np.mean(self.success)) if self.success else 0.0,
+            final_return=float(np.mean(self.returns)) if self.returns else math.nan,
+            diverged=self.diverged,
+            interrupted=self.interrupted,
+        )
 
 
 def _finite(algo) -> bool:  # type: ignore[no-untyped-def]

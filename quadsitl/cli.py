@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from collections.abc import Sequence
@@ -171,22 +172,20 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
 
 
 def _signing_key(args: argparse.Namespace) -> bytes | None:
-    from quadsitl.mavlink.signing import key_from_file, key_from_passphrase
+    """The key from the options or the environment; a variable that is set but empty is an
+    error (an empty secret must never quietly mean "no signing")."""
+    from quadsitl.mavlink.signing import key_from_file, key_from_hex, key_from_passphrase
 
-    if args.signing_key:
+    if args.signing_key is not None:
         return key_from_file(args.signing_key)
-    passphrase = args.signing_passphrase or os.environ.get("QUADSITL_SIGNING_PASSPHRASE")
-    if passphrase:
-        return key_from_passphrase(passphrase)
+    if args.signing_passphrase is not None:
+        return key_from_passphrase(args.signing_passphrase, "--signing-passphrase")
+    passphrase = os.environ.get("QUADSITL_SIGNING_PASSPHRASE")
+    if passphrase is not None:
+        return key_from_passphrase(passphrase, "QUADSITL_SIGNING_PASSPHRASE")
     key_hex = os.environ.get("QUADSITL_SIGNING_KEY")  # 64 hex digits, off the command line
-    if key_hex:
-        try:
-            key = bytes.fromhex(key_hex)
-        except ValueError:
-            key = b""
-        if len(key) != 32:
-            raise ValueError("QUADSITL_SIGNING_KEY must be 64 hexadecimal digits")
-        return key
+    if key_hex is not None:
+        return key_from_hex(key_hex, "QUADSITL_SIGNING_KEY")
     return None
 
 
@@ -207,12 +206,16 @@ def _sim_config(args: argparse.Namespace) -> object:
     params = {}
     for item in args.param:
         name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise ValueError(f"--param must be NAME=VALUE, got {item!r}")
         try:
             params[name.strip().upper()] = float(value)
         except ValueError:
-            raise ValueError(f"--param must be NAME=VALUE, got {item!r}") from None
-        if not sep:
-            raise ValueError(f"--param must be NAME=VALUE, got {item!r}")
+            raise ValueError(
+                f"--param {item!r}: the value {value!r} of {name.strip()} is not a number"
+            ) from None
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise ValueError(f"--duration must be a positive number of seconds, got {args.duration}")
     return SimConfig(
         gcs_url=url(args.gcs), api_url=url(args.api), extra_urls=args.link,
         hil_url=url(args.hil) if args.hil else None, lockstep=args.lockstep,
@@ -227,6 +230,14 @@ def _sim_config(args: argparse.Namespace) -> object:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``quadsitl`` console script."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # Ctrl-C before a command set up its own handling
+        print("quadsitl: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv: Sequence[str] | None = None) -> int:
     parser = _build_parser()
     args = parser.parse_args(argv)
     if args.command is None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import subprocess
 import sys
 import time
@@ -72,6 +74,33 @@ class MotorSim:
             self.process.kill()
             out, _ = self.process.communicate()
         return out
+
+
+def run_cli(*args: str, env: dict[str, str] | None = None, timeout: float = 120):
+    """``quadsitl ARGS`` to completion, output captured."""
+    return subprocess.run(
+        [sys.executable, "-m", "quadsitl.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, **(env or {})},
+    )
+
+
+def start_quiet_sim(*args: str) -> subprocess.Popen[str]:
+    """``quadsitl sim --logs none ARGS``; its first stdout line is the banner."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "quadsitl.cli", "sim", "--logs", "none", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def interrupt(process: subprocess.Popen[str]) -> tuple[str, str]:
+    """Ctrl-C, then (stdout, stderr)."""
+    process.send_signal(signal.SIGINT)
+    return process.communicate(timeout=15)
 
 
 @pytest.fixture

@@ -8,17 +8,26 @@ included); the next ``reset`` starts fresh processes and warns that it did.
 
 from __future__ import annotations
 
+import math
+import os
 import time
 import warnings
 from typing import Any
 
+from gymnasium.error import ClosedEnvironmentError
+
 from quadsitl.envs.remote_fleet import RemoteFleet
 from quadsitl.envs.sim_process import SimProcess
+from quadsitl.mavlink.links import parse_url
 from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
+from quadsitl.mavlink.signing import checked_key
 from quadsitl.physics import AIRFRAMES
 from quadsitl.tasks import TaskEngine
 
 START_TIMEOUT = 30.0  # s for a new simulator process to answer (imports, kernel load)
+MAX_TIMEOUT = 3600.0  # s: longer than this, a stuck simulator looks like a hang
+SIM_PROCESS_BYTES = 200 * 2**20  # memory of one `quadsitl sim` process, measured
+MAX_SIMULATORS = 254  # one MAVLink system id each
 BACKENDS = ("inprocess", "mavlink")
 BACKEND_OPTIONS = ("sim_address", "gcs", "system_id", "timeout", "signing_key")
 
@@ -55,11 +64,60 @@ def attach_backend(engine: TaskEngine, backend_options: dict[str, Any]) -> Mavli
 
 
 def parse_address(address: str) -> tuple[str, int]:
-    host, _, port = address.rpartition(":")
+    if not isinstance(address, str):
+        raise ValueError(f"sim_address must be a 'HOST:PORT' string, got {address!r}")
+    host, _, port_text = address.rpartition(":")
     try:
-        return host or "127.0.0.1", int(port)
+        port = int(port_text)
     except ValueError:
         raise ValueError(f"sim_address must be HOST:PORT, got {address!r}") from None
+    if not 1 <= port <= 65535:
+        raise ValueError(f"sim_address {address!r}: port must be 1..65535, got {port}")
+    return host or "127.0.0.1", port
+
+
+def max_spawned_simulators() -> int:
+    """How many simulator processes this machine's free memory holds."""
+    try:
+        available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # not on this platform: do not guess low
+        return MAX_SIMULATORS
+    return max(1, min(MAX_SIMULATORS, int(available // SIM_PROCESS_BYTES)))
+
+
+def _check_options(
+    n: int, sim_address: Any, gcs: Any, system_id: Any, timeout: Any, signing_key: Any
+) -> None:
+    """A clear ValueError at construction for any option the backend cannot use."""
+    if sim_address is None:
+        limit = max_spawned_simulators()
+        if n > limit:
+            raise ValueError(
+                f"{n} envs would start {n} simulator processes (about "
+                f"{SIM_PROCESS_BYTES // 2**20} MB each); this machine's free memory holds "
+                f"{limit}; use fewer envs or start simulators elsewhere (sim_address)"
+            )
+    if (
+        isinstance(timeout, bool)
+        or not isinstance(timeout, (int, float))
+        or not (math.isfinite(timeout) and 0 < timeout <= MAX_TIMEOUT)
+    ):
+        raise ValueError(f"timeout must be in (0, {MAX_TIMEOUT:g}] s, got {timeout!r}")
+    if isinstance(system_id, bool) or not isinstance(system_id, int):
+        raise ValueError(f"system_id must be an integer, got {system_id!r}")
+    if not (system_id >= 1 and system_id + n - 1 <= 254):
+        raise ValueError(f"system ids {system_id}..{system_id + n - 1} must lie in 1..254")
+    if signing_key is not None:
+        if not isinstance(signing_key, (bytes, bytearray)):
+            raise ValueError(
+                f"signing_key must be 32 bytes (e.g. bytes.fromhex(...)), got "
+                f"{type(signing_key).__name__}"
+            )
+        checked_key(bytes(signing_key), "signing_key")
+    if gcs is not None:
+        if not isinstance(gcs, str):
+            raise ValueError(f"gcs must be a link URL such as udpout:127.0.0.1:14550, got {gcs!r}")
+        parse_url(gcs)
 
 
 class MavlinkBackend:
@@ -94,14 +152,16 @@ class MavlinkBackend:
                 f"backend='mavlink' needs a preset airframe ({sorted(AIRFRAMES)}), "
                 f"got a custom one named {airframe.name!r}"
             )
+        _check_options(engine.n, sim_address, gcs, system_id, timeout, signing_key)
         addresses = [sim_address] if isinstance(sim_address, str) else sim_address
         if addresses is not None and len(addresses) != engine.n:
             raise ValueError(f"got {len(addresses)} simulator addresses for {engine.n} envs")
         self.engine = engine
         self.addresses = [parse_address(a) for a in addresses] if addresses else None
         self.timeout = timeout
-        self.signing_key = signing_key
+        self.signing_key = bytes(signing_key) if signing_key is not None else None
         self.gcs = gcs
+        self.closed = False
         self.system_id = system_id
         self.processes: list[SimProcess] = []
         self.clients: list[MotorClient] = []
@@ -129,7 +189,7 @@ class MavlinkBackend:
                 self.clients.append(MotorClient(host, port, self.timeout, self.signing_key))
                 self._wait_for_heartbeat(len(self.clients) - 1)
         except BaseException:
-            self.close()
+            self._release()
             raise
         engine, o = self.engine, self.engine.options
         engine.fleet = RemoteFleet(
@@ -149,12 +209,17 @@ class MavlinkBackend:
                 if time.monotonic() > deadline:
                     raise
 
+    def check_open(self) -> None:
+        if self.closed:
+            raise ClosedEnvironmentError("env is closed: make a new one")
+
     def check_alive(self) -> None:
         """Before a reset: restart simulator processes if one has died, with a warning."""
+        self.check_open()
         dead = [p for p in self.processes if not p.alive]
         if dead:
             reason = dead[0].exit_message()
-            self.close()
+            self._release()
             warnings.warn(f"quadsitl sim {reason}; starting new ones", RuntimeWarning, 3)
             self._connect()
 
@@ -166,6 +231,12 @@ class MavlinkBackend:
         return error
 
     def close(self) -> None:
+        self.closed = True
+        if isinstance(self.engine.fleet, RemoteFleet):
+            self.engine.fleet.close()
+        self._release()
+
+    def _release(self) -> None:
         for client in self.clients:
             client.close()
         for process in self.processes:

@@ -1,28 +1,26 @@
-"""Parallel collection through the wire: N simulator processes behind one vector env."""
+"""Parallel collection through the wire: N simulator processes behind one vector env.
+
+This is the native vector env with ``backend="mavlink"``: one ``quadsitl sim`` per env,
+all stepped together (commands go out to every simulator before any answer is read,
+so the processes work in parallel). It needs no worker processes, hence no
+``if __name__ == "__main__"`` guard, and a simulator that dies is restarted by the next
+``reset`` (with a warning), as in every MAVLink env.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
-
-from quadsitl.registration import register_envs
-
-
-def _maker(env_id: str, index: int, kwargs: dict[str, Any]) -> Callable[[], gym.Env]:
-    def make() -> gym.Env:
-        register_envs()  # a spawned worker starts with an empty registry
-        return gym.make(env_id, backend="mavlink", system_id=index + 1, **kwargs)
-
-    return make
+from gymnasium.vector import VectorEnv
 
 
-def mavlink_vector_env(env_id: str, num_envs: int, **kwargs: Any) -> gym.vector.AsyncVectorEnv:
-    """``num_envs`` MAVLink envs of ``env_id``, each in its own worker process with its
-    own ``quadsitl sim`` (system ids 1..N, free ports). ``close()`` stops them all; a
-    killed parent takes them down too (see :mod:`quadsitl.envs.sim_process`)."""
-    if num_envs < 1:
-        raise ValueError(f"num_envs must be ≥ 1, got {num_envs}")
-    makers = [_maker(env_id, i, kwargs) for i in range(num_envs)]
-    return gym.vector.AsyncVectorEnv(makers, context="spawn")
+def mavlink_vector_env(env_id: str, num_envs: int, **kwargs: Any) -> VectorEnv:
+    """``num_envs`` MAVLink envs of ``env_id`` (system ids 1..N, free ports); ``close()``
+    stops their simulators, and a killed parent takes them down too (see
+    :mod:`quadsitl.envs.sim_process`)."""
+    if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+        raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+    return gym.make_vec(
+        env_id, num_envs, vectorization_mode="vector_entry_point", backend="mavlink", **kwargs
+    )

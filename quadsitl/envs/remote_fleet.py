@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from gymnasium.error import ClosedEnvironmentError
 from numpy.typing import ArrayLike
 
 from quadsitl import frames
@@ -45,6 +46,15 @@ class RemoteFleet(Fleet):
         self.period_usec = round(period * 1e6)
         self.gear = airframe.gear_height
         self.offset = np.array([0.0, 0.0, 0.0 if ground else FLYING_ALTITUDE])
+        self.closed = False
+
+    def close(self) -> None:
+        """After this, ``reset`` and ``step`` raise ClosedEnvironmentError."""
+        self.closed = True
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise ClosedEnvironmentError("env is closed: make a new one")
 
     def reset(
         self,
@@ -52,6 +62,7 @@ class RemoteFleet(Fleet):
         contact: ArrayLike | int = L.AIRBORNE,
         mask: ArrayLike | None = None,
     ) -> None:
+        self._check_open()
         super().reset(state, contact, mask)  # checks the input, as the local fleet does
         rows = range(self.n) if mask is None else np.flatnonzero(mask).tolist()
         for i in rows:
@@ -69,6 +80,7 @@ class RemoteFleet(Fleet):
             self._take(i, answer)
 
     def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
+        self._check_open()
         cmd = np.asarray(rotor_cmd, dtype=np.float64).reshape(self.n, L.N_ROTORS)
         if not np.isfinite(cmd).all():
             raise ValueError(f"rotor commands must be finite, got {cmd}")

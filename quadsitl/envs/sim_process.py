@@ -3,6 +3,10 @@
 It is started on a free UDP port (or a given one) and dies with its parent: on
 ``stop()``, on interpreter exit, and, through Linux's parent-death signal, even when the
 parent is killed outright. Nothing is left running and the port is released.
+
+That signal follows the *thread* that started the child, not its process, so every
+child is started from one long-lived spawner thread: an env made in a worker thread
+keeps its simulator when that thread ends.
 """
 
 from __future__ import annotations
@@ -11,10 +15,14 @@ import atexit
 import contextlib
 import ctypes
 import os
+import queue
 import signal
 import subprocess
 import sys
+import threading
 import weakref
+from concurrent.futures import Future
+from typing import Any
 
 from quadsitl.mavlink.links import free_udp_port
 
@@ -24,6 +32,37 @@ PR_SET_PDEATHSIG = 1
 def _die_with_parent() -> None:  # runs in the child between fork and exec
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+class _Spawner:
+    """Runs ``subprocess.Popen`` on one daemon thread that lives as long as the process."""
+
+    def __init__(self) -> None:
+        self._requests: queue.SimpleQueue[tuple[Future[Any], dict[str, Any]]] = queue.SimpleQueue()
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+
+    def popen(self, **kwargs: Any) -> subprocess.Popen[bytes]:
+        with self._lock:  # a forked child inherits a dead thread: start a new one
+            if self._thread is None or not self._thread.is_alive():
+                self._thread = threading.Thread(
+                    target=self._serve, name="quadsitl-sim-spawner", daemon=True
+                )
+                self._thread.start()
+        future: Future[subprocess.Popen[bytes]] = Future()
+        self._requests.put((future, kwargs))
+        return future.result()
+
+    def _serve(self) -> None:
+        while True:
+            future, kwargs = self._requests.get()
+            try:
+                future.set_result(subprocess.Popen(**kwargs))
+            except BaseException as error:  # handed to the caller
+                future.set_exception(error)
+
+
+_SPAWNER = _Spawner()
 
 
 def _terminate(process: subprocess.Popen[bytes]) -> None:
@@ -48,8 +87,8 @@ class SimProcess:
             sys.executable, "-m", "quadsitl.cli", "sim", "--lockstep", "--quiet",
             "--hil", f"udpin:127.0.0.1:{self.port}", "--logs", "none", *args,
         ]  # fmt: skip
-        self.process = subprocess.Popen(
-            self.command,
+        self.process = _SPAWNER.popen(
+            args=self.command,
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE,

@@ -3,7 +3,13 @@
 URLs follow pymavlink: ``udpout:HOST:PORT`` sends to HOST:PORT (where QGroundControl,
 MAVProxy or MAVSDK listen) and also answers anyone else who writes to it;
 ``udpin:HOST:PORT`` listens and answers every peer heard from; ``tcpin:HOST:PORT``
-accepts TCP clients. Each peer has its own parser, so a garbled datagram from one
+accepts TCP clients.
+
+Loopback unless asked otherwise: a ``udpout`` link to a loopback address binds the
+loopback interface (nobody off this host can reach it), an empty HOST means
+127.0.0.1, and listening on other interfaces takes an explicit address such as
+``udpin:0.0.0.0:14551``. :attr:`Link.exposed` says whether a link can be reached from
+other hosts. Each peer has its own parser, so a garbled datagram from one
 never corrupts another's frames. Sending packs a message once per link (one sequence
 number stream per link) and writes it to every live peer.
 """
@@ -11,6 +17,7 @@ number stream per link) and writes it to every live peer.
 from __future__ import annotations
 
 import contextlib
+import ipaddress
 import socket
 import time
 from dataclasses import dataclass, field
@@ -19,6 +26,7 @@ from typing import Any
 from quadsitl.mavlink import mavlink
 from quadsitl.mavlink.signing import keep_signing_clock
 
+LOOPBACK = "127.0.0.1"
 PEER_TIMEOUT = 10.0  # s without a packet before a learned UDP peer is dropped
 MAX_DATAGRAM = 65535
 
@@ -43,7 +51,15 @@ def parse_url(url: str) -> tuple[str, str, int]:
         raise ValueError(f"link {url!r}: kind must be udpout, udpin or tcpin, got {kind!r}")
     if not 0 <= port <= 65535:
         raise ValueError(f"link {url!r}: port {port} out of range")
-    return kind, host or "0.0.0.0", port
+    return kind, host or LOOPBACK, port
+
+
+def is_loopback(host: str) -> bool:
+    """True for an address (or name) of this host's loopback interface."""
+    try:
+        return ipaddress.ip_address(socket.gethostbyname(host)).is_loopback
+    except (OSError, ValueError):
+        return False
 
 
 class _Capture:
@@ -93,8 +109,11 @@ class Link:
                 if self.kind == "udpin":
                     self.sock.bind((host, port))
                 else:
-                    self.sock.bind(("0.0.0.0", 0))
                     self.destination = (socket.gethostbyname(host), port)
+                    # Answers come from where we send: to a loopback destination, nobody
+                    # off this host needs to reach us (a remote one needs every interface).
+                    local = LOOPBACK if is_loopback(host) else "0.0.0.0"
+                    self.sock.bind((local, 0))
         except OSError as error:
             raise OSError(f"link {url!r}: cannot open ({error.strerror or error})") from None
         self.sock.setblocking(False)
@@ -102,6 +121,11 @@ class Link:
     @property
     def local_port(self) -> int:
         return int(self.sock.getsockname()[1])
+
+    @property
+    def exposed(self) -> bool:
+        """Whether hosts other than this one can send to this link."""
+        return not is_loopback(str(self.sock.getsockname()[0]))
 
     def sockets(self) -> list[socket.socket]:
         """Sockets to wait on with select()."""

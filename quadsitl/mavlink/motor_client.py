@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike
 
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.hil_state import WireState
+from quadsitl.mavlink.links import is_loopback
 from quadsitl.mavlink.motor_path import ARMED_FLAG, LOCKSTEP_FLAG, RESET_STATE, STAGE_MOTION
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
@@ -63,7 +64,7 @@ class MotorClient:
         self.address = (host, port)
         self.timeout = timeout
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1" if host in ("127.0.0.1", "localhost") else "0.0.0.0", 0))
+        self.sock.bind(("127.0.0.1" if is_loopback(host) else "0.0.0.0", 0))
         self.sock.setblocking(False)
         self._out = _Capture()
         self.mav = mav.MAVLink(self._out, srcSystem=system_id, srcComponent=component_id)

@@ -28,6 +28,7 @@ from quadsitl.mavlink.links import Link
 from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.vehicle.geo import Home
+from quadsitl.vehicle.results import Severity
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.viz.sim_view import SimView
 
@@ -183,7 +184,7 @@ class Simulator:
                 self.server.tick(now)
                 wait = start + (steps + 1) * wall_per_step - time.monotonic()
             if self.tlog is not None:
-                self.tlog.flush()
+                self._flush_log(self.tlog)
             if self.view is not None:
                 self.view.tick(now)
             sockets = {s: link for link in self.links for s in link.sockets()}
@@ -193,6 +194,17 @@ class Simulator:
             received_at = time.time()
             for link in {sockets[s] for s in readable}:
                 self.server.receive(link, received_at)
+
+    def _flush_log(self, tlog: TlogWriter) -> None:
+        """Write the log; if it fails, say so on the console and to every ground station,
+        and fly on without it."""
+        tlog.flush()
+        if tlog.failure is None:
+            return
+        self.tlog = self.server.tlog = None
+        print(f"quadsitl sim: warning: {tlog.failure}; the flight goes on unlogged",
+              file=sys.stderr, flush=True)  # fmt: skip
+        self.server.statustext(Severity.WARNING, "telemetry log stopped: write failed")
 
     def _real_time_steps(self, start: float, steps: int, wall_per_step: float) -> int:
         """Take the physics steps due by now; returns the new step count."""
@@ -225,7 +237,14 @@ def run_simulator(config: SimConfig) -> int:
     signal.signal(signal.SIGINT, sim.stop)
     signal.signal(signal.SIGTERM, sim.stop)
     links = ", ".join(f"{link.name} {link.url} (port {link.local_port})" for link in sim.links)
-    sim._print(f"quadsitl sim: system {config.system_id}, links: {links}")
+    signing = "on" if config.signing_key is not None else "off"
+    sim._print(f"quadsitl sim: system {config.system_id}, signing {signing}, links: {links}")
+    exposed = [link for link in sim.links if link.exposed]
+    if exposed and config.signing_key is None:
+        names = ", ".join(f"{link.name} ({link.url})" for link in exposed)
+        print(f"quadsitl sim: warning: {names} can be reached from other hosts and signing "
+              "is off: anyone there can command the vehicle (docs/security.md)",
+              file=sys.stderr, flush=True)  # fmt: skip
     if sim.tlog is not None:
         sim._print(f"quadsitl sim: telemetry log {sim.tlog.path}")
     try:

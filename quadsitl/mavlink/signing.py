@@ -26,11 +26,22 @@ NEW_STREAM_SLACK = 60 * 100_000  # one minute, in 10 µs units
 REASONS = ("unsigned", "bad_signature", "replayed")
 
 
-def key_from_passphrase(passphrase: str) -> bytes:
+def key_from_passphrase(passphrase: str, source: str = "signing passphrase") -> bytes:
     """SHA-256 of the passphrase: the key MAVProxy's ``signing setup`` makes."""
-    if not passphrase:
-        raise ValueError("signing passphrase must not be empty")
+    if not passphrase.strip():
+        raise ValueError(f"{source}: an empty passphrase would turn signing off; give one")
     return hashlib.sha256(passphrase.encode("utf-8")).digest()
+
+
+def key_from_hex(text: str, source: str = "signing key") -> bytes:
+    """A key written as 64 hexadecimal digits."""
+    try:
+        key = bytes.fromhex(text.strip())
+    except ValueError:
+        key = b""
+    if len(key) != 32:
+        raise ValueError(f"{source} must be 64 hexadecimal digits")
+    return checked_key(key, source)
 
 
 def key_from_file(path: str | Path) -> bytes:
@@ -42,12 +53,21 @@ def key_from_file(path: str | Path) -> bytes:
     text = data.strip()
     try:
         if len(text) == 64:
-            return bytes.fromhex(text.decode("ascii"))
+            return checked_key(bytes.fromhex(text.decode("ascii")), f"signing key file {path}")
     except (UnicodeDecodeError, ValueError):
         pass
     if len(data) == 32:
-        return data
+        return checked_key(data, f"signing key file {path}")
     raise ValueError(f"signing key file {path}: expected 64 hex digits or 32 raw bytes")
+
+
+def checked_key(key: bytes, source: str = "signing key") -> bytes:
+    """``key`` if it is usable: 32 bytes, not all zeros (which MAVLink reads as "off")."""
+    if not isinstance(key, (bytes, bytearray)) or len(key) != 32:
+        raise ValueError(f"{source} must be 32 bytes, got {key!r:.40}")
+    if not any(key):
+        raise ValueError(f"{source} is all zeros, which means 'signing off'; use a real key")
+    return bytes(key)
 
 
 def now_timestamp() -> int:

@@ -31,6 +31,17 @@ RANDOMIZABLE = {
 }
 
 
+# Time steps a simulation can sensibly take: finer than 0.1 ms costs seconds per env
+# step for nothing (RK4 at 0.01 s is already accurate, docs/physics.md); coarser than
+# 50 ms is unstable for this airframe.
+LIMITS = {"physics_dt": (1e-4, 0.05), "control_period": (1e-4, 1.0)}
+MAX_EPISODE_SECONDS = 3600.0
+
+
+def _is_real(value: object) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+
+
 @dataclass(frozen=True)
 class TaskOptions:
     """Options every task accepts as keyword arguments.
@@ -75,24 +86,33 @@ class TaskOptions:
         get_airframe(self.airframe)  # type: ignore[arg-type]
         for name in ("physics_dt", "control_period", "beta"):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
+            if not (_is_real(value) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
+        for name, (low, high) in LIMITS.items():
+            value = getattr(self, name)
+            if not low <= value <= high:
+                raise ValueError(f"{name} must be in [{low:g}, {high:g}] s, got {value!r}")
         ratio = self.control_period / self.physics_dt
         if abs(ratio - round(ratio)) > 1e-9:
             raise ValueError(
                 f"control_period ({self.control_period}) must be a whole number of "
                 f"physics_dt ({self.physics_dt})"
             )
-        if self.episode_seconds is not None and not self.episode_seconds >= self.control_period:
+        seconds = self.episode_seconds
+        if seconds is not None and not (
+            _is_real(seconds) and self.control_period <= seconds <= MAX_EPISODE_SECONDS
+        ):
             raise ValueError(
-                f"episode_seconds must be ≥ control_period, got {self.episode_seconds}"
+                f"episode_seconds must be in [control_period, {MAX_EPISODE_SECONDS:g}] s, "
+                f"got {seconds!r}"
             )
         for name in ("init_position_noise", "init_attitude_noise", "init_velocity_noise"):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
+            if not (_is_real(value) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be ≥ 0, got {value!r}")
-        if not (math.isfinite(self.init_rate_noise) and self.init_rate_noise >= 0):
-            raise ValueError(f"init_rate_noise must be ≥ 0, got {self.init_rate_noise!r}")
+        rate = self.init_rate_noise
+        if not (_is_real(rate) and math.isfinite(rate) and rate >= 0):
+            raise ValueError(f"init_rate_noise must be ≥ 0, got {rate!r}")
         if self.init_attitude_noise > math.pi / 2:
             raise ValueError("init_attitude_noise must be at most π/2 rad")
         for name, fraction in (self.param_randomization or {}).items():
@@ -197,7 +217,10 @@ class TaskEngine:
 
         Actions of envs not ``active`` are ignored (replaced by 0) before the check.
         """
-        a = np.asarray(action, dtype=np.float64)
+        raw = np.asarray(action)
+        if not (np.issubdtype(raw.dtype, np.floating) or np.issubdtype(raw.dtype, np.integer)):
+            raise ValueError(f"action must hold real numbers, got dtype {raw.dtype}")
+        a = raw.astype(np.float64, copy=False)
         if a.shape != (self.n, L.N_ROTORS):
             if self.n == 1 and a.shape == (L.N_ROTORS,):
                 a = a.reshape(1, L.N_ROTORS)

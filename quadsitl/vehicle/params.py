@@ -93,6 +93,6 @@ class ParameterStore:
             raise ValueError(f"{name}: value must be finite, got {value}")
         if not spec.minimum <= value <= spec.maximum:
             raise ValueError(f"{name}: {value:g} is outside [{spec.minimum:g}, {spec.maximum:g}]")
-        if name == "SIM_AIRFRAME":
-            value = float(round(value))
+        if name == "SIM_AIRFRAME" and value != round(value):
+            raise ValueError(f"SIM_AIRFRAME: an airframe index is a whole number, got {value:g}")
         return value

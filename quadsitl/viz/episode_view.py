@@ -8,12 +8,14 @@ Each episode starts a new ``episode`` on its own timeline so they can be compare
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import rerun as rr
 
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TaskEngine
-from quadsitl.viz.scene import quat_xyzw, setup
+from quadsitl.viz.scene import blueprint, open_recording, quat_xyzw
 
 STEP_TIMELINE = "step"
 
@@ -22,13 +24,9 @@ class EpisodeView:
     """Logs env ``index`` of an engine. ``save``: an .rrd path, else a viewer is spawned."""
 
     def __init__(self, name: str, save: str | None = None, index: int = 0) -> None:
-        self.rec = rr.RecordingStream("quadsitl_episodes")
+        layout = blueprint(("reward", "distance_to_goal"))
+        self.rec = open_recording("quadsitl_episodes", save, spawn=True, default_blueprint=layout)
         self.rec.send_recording_name(name)
-        if save is not None:
-            self.rec.save(save)
-        else:
-            self.rec.spawn()
-        setup(self.rec)
         self.index = index
         self.episode = -1
         self.steps = 0
@@ -65,5 +63,10 @@ class EpisodeView:
             rec.log("plots/reward", rr.Scalars(float(reward)))
 
     def close(self) -> None:
-        self.rec.flush()
-        self.rec.disconnect()
+        """Flush and let go of the recording; a viewer that went away is not an error."""
+        try:
+            self.rec.flush()
+            self.rec.disconnect()
+        except Exception as error:  # rerun raises RuntimeError from its sinks
+            warnings.warn(f"Rerun recording could not be closed cleanly: {error}",
+                          RuntimeWarning, stacklevel=2)  # fmt: skip

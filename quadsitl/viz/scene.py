@@ -14,7 +14,15 @@ NED/FRD values are converted with :mod:`quadsitl.frames` before logging. Entitie
 
 from __future__ import annotations
 
+import itertools
 import math
+import os
+import shutil
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -101,12 +109,77 @@ def pose_from_ned(position_ned: Any, q_ned_frd: Any) -> tuple[np.ndarray, np.nda
     return translation, quat_xyzw(q)
 
 
-def open_recording(name: str, save: str | None = None, spawn: bool = False) -> rr.RecordingStream:
-    """A recording stream saved to ``save`` (an .rrd path) or sent to a spawned viewer."""
+def viewer_executable() -> str | None:
+    """The Rerun viewer: beside this interpreter (a venv's ``bin``, so it is found without
+    activating the venv), else on PATH."""
+    beside = Path(sys.executable).parent / ("rerun.exe" if os.name == "nt" else "rerun")
+    if beside.is_file() and os.access(beside, os.X_OK):
+        return str(beside)
+    return shutil.which("rerun")
+
+
+def why_no_viewer() -> str | None:
+    """Why no viewer window can be shown here (None: one can)."""
+    if viewer_executable() is None:
+        return "the Rerun viewer executable is not installed"
+    if sys.platform.startswith("linux") and not (
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    ):
+        return "there is no display (DISPLAY and WAYLAND_DISPLAY are unset)"
+    return None
+
+
+def fallback_path(name: str) -> Path:
+    """Where a recording goes when no viewer can be shown."""
+    folder = Path(os.environ.get("QUADSITL_RERUN_DIR") or Path(tempfile.gettempdir()) / "quadsitl")
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{next(_COUNTER)}.rrd"
+
+
+_COUNTER = itertools.count()
+
+
+def check_output_path(path: str | Path) -> Path:
+    """A clear ValueError for an .rrd path that cannot be written."""
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise ValueError(f"cannot write {path}: folder {folder} does not exist")
+    if path.is_dir():
+        raise ValueError(f"cannot write {path}: it is a folder")
+    if not os.access(folder, os.W_OK):
+        raise ValueError(f"cannot write {path}: folder {folder} is not writable")
+    return path
+
+
+def open_recording(
+    name: str,
+    save: str | Path | None = None,
+    spawn: bool = False,
+    default_blueprint: rrb.Blueprint | None = None,
+) -> rr.RecordingStream:
+    """A recording stream saved to ``save`` (an .rrd path) or sent to a spawned viewer.
+
+    Where a viewer cannot be shown (no display, no viewer installed), the recording goes
+    to a file instead (under QUADSITL_RERUN_DIR or the temporary folder) and a warning
+    says where: rendering never fails because of the machine it runs on.
+    """
     rec = rr.RecordingStream(name)
+    layout = blueprint() if default_blueprint is None else default_blueprint
+    if spawn and save is None:
+        reason = why_no_viewer()
+        executable = viewer_executable()
+        if reason is None and executable is not None:
+            rr.spawn(executable_path=executable, default_blueprint=layout, recording=rec)
+        else:
+            save = fallback_path(name)
+            warnings.warn(
+                f"no Rerun viewer can be shown: {reason}; recording to {save} "
+                f"(open it with: rerun {save})",
+                RuntimeWarning,
+                stacklevel=2,
+            )
     if save is not None:
-        rec.save(save, default_blueprint=blueprint())
-    elif spawn:
-        rec.spawn(default_blueprint=blueprint())
+        rec.save(check_output_path(save), default_blueprint=layout)
     setup(rec)
     return rec
