@@ -16,6 +16,9 @@ from typing import Any
 os.environ.setdefault("MAVLINK20", "1")  # before pymavlink.mavutil is imported
 from pymavlink import mavutil
 
+from quadsitl.mavlink.param_protocol import decode_value as decode_param
+from quadsitl.mavlink.param_protocol import encode_raw as encode_param
+
 mav = mavutil.mavlink
 
 # PX4 custom modes (main << 16 | sub << 24), as the vehicle reports them.
@@ -55,6 +58,7 @@ class VehicleClient:
         )
         self.target = target
         self.latest: dict[str, Any] = {}
+        self.param_types: dict[str, int] = {}  # MAV_PARAM_TYPE of each parameter seen
         self.texts: list[str] = []
         self.reached: list[int] = []
         self.track = Track()
@@ -95,12 +99,17 @@ class VehicleClient:
             self.pump()
 
     def wait_message(
-        self, kind: str, timeout: float = 5.0, check: Callable[[Any], bool] | None = None
+        self,
+        kind: str | tuple[str, ...],
+        timeout: float = 5.0,
+        check: Callable[[Any], bool] | None = None,
     ) -> Any:
+        """The next message of ``kind`` (one name, or any of several) passing ``check``."""
+        kinds = (kind,) if isinstance(kind, str) else kind
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             msg = self.pump()
-            if msg is not None and msg.get_type() == kind and (check is None or check(msg)):
+            if msg is not None and msg.get_type() in kinds and (check is None or check(msg)):
                 return msg
         raise ClientError(f"no {kind} within {timeout:g} s")
 
@@ -200,6 +209,7 @@ class VehicleClient:
 
     # --- parameters -------------------------------------------------------------------
     def get_params(self, timeout: float = 5.0) -> dict[str, float]:
+        """Every parameter, integers decoded from their bytewise encoding (PX4's)."""
         self.conn.mav.param_request_list_send(self.target, 1)
         params: dict[str, float] = {}
         count = None
@@ -209,16 +219,23 @@ class VehicleClient:
                 raise ClientError(f"parameter list incomplete: {len(params)} of {count}")
             msg = self.pump()
             if msg is not None and msg.get_type() == "PARAM_VALUE":
-                params[msg.param_id] = msg.param_value
+                self.param_types[msg.param_id] = msg.param_type
+                params[msg.param_id] = decode_param(msg.param_value, msg.param_type)
                 count = msg.param_count
         return params
 
     def set_param(self, name: str, value: float) -> float:
-        """PARAM_SET; returns the value echoed back (the old one if refused)."""
-        self.conn.mav.param_set_send(self.target, 1, name.encode(), value,
-                                     mav.MAV_PARAM_TYPE_REAL32)  # fmt: skip
-        echo = self.wait_message("PARAM_VALUE", 3.0, lambda m: m.param_id == name)
-        return float(echo.param_value)
+        """PARAM_SET with the parameter's type; returns the value now held, or raises
+        ClientError with the vehicle's PARAM_ERROR code when it refuses."""
+        param_type = self.param_types.get(name, mav.MAV_PARAM_TYPE_REAL32)
+        raw = encode_param(value, param_type)
+        self.conn.mav.param_set_send(self.target, 1, name.encode(), raw, param_type)
+        answer = self.wait_message(
+            ("PARAM_VALUE", "PARAM_ERROR"), 3.0, lambda m: m.param_id == name
+        )
+        if answer.get_type() == "PARAM_ERROR":
+            raise ClientError(f"{name} refused (PARAM_ERROR {answer.error})")
+        return decode_param(answer.param_value, answer.param_type)
 
     # --- missions ---------------------------------------------------------------------
     def upload_mission(self, items: Iterable[tuple[int, float, float, float, float]]) -> int:

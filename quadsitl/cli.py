@@ -109,6 +109,14 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
     )
     sim.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default: 1)")
     sim.add_argument(
+        "--autopilot-id",
+        choices=("px4", "generic"),
+        default="px4",
+        help="what the vehicle presents itself as: px4 (QGroundControl's PX4 plugin, MAVSDK's "
+        "and MAVProxy's PX4 paths; take-off param7 AMSL) or generic (a plain MAVLink vehicle; "
+        "take-off param7 relative to home) (default: px4)",
+    )
+    sim.add_argument(
         "--home",
         default=None,
         metavar="LAT,LON,ALT",
@@ -220,7 +228,7 @@ def _sim_config(args: argparse.Namespace) -> object:
         gcs_url=url(args.gcs), api_url=url(args.api), extra_urls=args.link,
         hil_url=url(args.hil) if args.hil else None, lockstep=args.lockstep,
         signing_key=_signing_key(args),
-        system_id=args.sysid, home=home, airframe=args.airframe,
+        system_id=args.sysid, autopilot_id=args.autopilot_id, home=home, airframe=args.airframe,
         physics_rate=args.physics_rate, control_rate=args.control_rate, speed=args.speed,
         log_dir=None if args.logs.lower() == "none" else args.logs,
         duration=args.duration, params=params, quiet=args.quiet,

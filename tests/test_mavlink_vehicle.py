@@ -28,7 +28,7 @@ def _hold_position(client, seconds: float) -> np.ndarray:
 def test_heartbeat_identifies_a_disarmed_quadrotor(client):
     hb = client.latest["HEARTBEAT"]
     assert hb.get_srcSystem() == 1 and hb.get_srcComponent() == 1
-    assert hb.type == mav.MAV_TYPE_QUADROTOR and hb.autopilot == mav.MAV_AUTOPILOT_GENERIC
+    assert hb.type == mav.MAV_TYPE_QUADROTOR and hb.autopilot == mav.MAV_AUTOPILOT_PX4
     assert hb.system_status == mav.MAV_STATE_STANDBY and not client.armed
     assert hb.base_mode & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     assert client.mode == "LOITER"
@@ -42,8 +42,13 @@ def test_parameters_list_set_and_refuse(client):
     params = client.get_params()
     assert set(params) == {p.name for p in PARAMETERS}
     assert client.set_param("MPC_XY_CRUISE", 3.0) == pytest.approx(3.0)
-    assert client.set_param("MPC_XY_CRUISE", 999.0) == pytest.approx(3.0)  # refused: old value
+    with pytest.raises(ClientError, match=r"PARAM_ERROR 2"):  # VALUE_OUT_OF_RANGE
+        client.set_param("MPC_XY_CRUISE", 999.0)
     client.wait(lambda: any("outside" in t for t in client.texts), 3, "a refusal STATUSTEXT")
+    with pytest.raises(ClientError, match=r"PARAM_ERROR 5"):  # READ_ONLY
+        client.set_param("SYS_AUTOSTART", 10016)
+    assert params["SYS_AUTOSTART"] == 4001 and params["COM_RC_IN_MODE"] == 1  # INT32, bytewise
+    assert client.set_param("NAV_DLL_ACT", 2) == 2
     client.conn.mav.param_request_read_send(1, 1, b"MPC_XY_CRUISE", -1)
     assert client.wait_message("PARAM_VALUE", 3).param_value == pytest.approx(3.0)
 

@@ -257,7 +257,7 @@ def test_waypoint_policy_flies_a_whole_mission_as_autopilot():
     )
     items = []
     for k, w in enumerate(DEFAULT_WAYPOINTS):  # take-off, a 15 m square with a climb
-        lat, lon, _ = vehicle.home.to_global(w.east, w.north, 0.0)
+        lat, lon, _ = vehicle.origin.to_global(w.east, w.north, 0.0)
         command = M.NAV_TAKEOFF if k == 0 else M.NAV_WAYPOINT
         items.append(M.MissionItem(command, param1=w.hold, x=round(lat * 1e7),
                                    y=round(lon * 1e7), z=w.up))  # fmt: skip

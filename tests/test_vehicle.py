@@ -30,7 +30,7 @@ def _fly(vehicle: Vehicle, seconds: float, every: int = 20) -> np.ndarray:
 
 
 def _item(vehicle: Vehicle, command: int, east: float, north: float, up: float, **kw):
-    lat, lon, _ = vehicle.home.to_global(east, north, 0.0)
+    lat, lon, _ = vehicle.origin.to_global(east, north, 0.0)
     return M.MissionItem(command, x=round(lat * 1e7), y=round(lon * 1e7), z=up, **kw)
 
 
@@ -94,7 +94,8 @@ def test_mode_rules():
     assert v.set_mode(Mode.OFFBOARD).outcome is Outcome.DENIED  # no setpoint stream
     assert v.set_mode(Mode.RTL).outcome is Outcome.DENIED  # on the ground
     assert v.set_mode(Mode.MANUAL).outcome is Outcome.DENIED  # needs RC
-    assert v.takeoff().outcome is Outcome.DENIED  # not armed
+    assert v.takeoff(0.1).outcome is Outcome.DENIED  # below 0.3 m
+    assert v.takeoff(-5.0).outcome is Outcome.DENIED  # below the ground
     for mode in Mode:
         assert Mode.from_custom_mode(mode.custom_mode) is mode
     assert Mode.from_name("auto.loiter") is Mode.LOITER and Mode.from_name("hold") is Mode.LOITER

@@ -15,9 +15,22 @@ from typing import Any
 
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.vehicle import mission as M
+from quadsitl.vehicle.results import Severity
 from quadsitl.vehicle.vehicle import Vehicle
 
 REQUEST_TIMEOUT = 1.0  # s of wall time before re-requesting an item
+# Item problem (quadsitl.vehicle.mission.Problem.field) -> MISSION_ACK result.
+RESULTS = {
+    "command": mav.MAV_MISSION_UNSUPPORTED,
+    "frame": mav.MAV_MISSION_UNSUPPORTED_FRAME,
+    "param1": mav.MAV_MISSION_INVALID_PARAM1,
+    "param2": mav.MAV_MISSION_INVALID_PARAM2,
+    "param3": mav.MAV_MISSION_INVALID_PARAM3,
+    "param4": mav.MAV_MISSION_INVALID_PARAM4,
+    "x": mav.MAV_MISSION_INVALID_PARAM5_X,
+    "y": mav.MAV_MISSION_INVALID_PARAM6_Y,
+    "z": mav.MAV_MISSION_INVALID_PARAM7,
+}
 MAX_RETRIES = 5
 
 Reply = Callable[[Any], None]  # sends a message back on the link the request came from
@@ -48,7 +61,9 @@ class MissionProtocol:
             self._ack(reply, peer, mav.MAV_MISSION_UNSUPPORTED, mission_type)
             return
         if msg.count > M.MAX_ITEMS:
-            self.notify(4, f"mission of {msg.count} items refused: limit {M.MAX_ITEMS}")
+            self.notify(
+                Severity.WARNING, f"mission of {msg.count} items refused: limit {M.MAX_ITEMS}"
+            )
             self._ack(reply, peer, mav.MAV_MISSION_NO_SPACE)
             return
         if msg.count == 0:
@@ -64,25 +79,10 @@ class MissionProtocol:
             return
         if msg.seq != len(up.items):
             return  # a duplicate or out of order: the pending request will be repeated
-        is_int = msg.get_type() == "MISSION_ITEM_INT"
-        values = (msg.param1, msg.param2, msg.param3, msg.param4, msg.z)
-        x = msg.x if is_int else (round(msg.x * 1e7) if math.isfinite(msg.x) else 2**31)
-        y = msg.y if is_int else (round(msg.y * 1e7) if math.isfinite(msg.y) else 2**31)
-        if not all(math.isfinite(v) for v in values[:3] + values[4:]):
-            self._fail(mav.MAV_MISSION_INVALID, f"mission item {msg.seq}: parameters not finite")
-            return
-        item = M.MissionItem(
-            msg.command, msg.frame, msg.param1, msg.param2, msg.param3, msg.param4,
-            int(x), int(y), float(msg.z), bool(msg.autocontinue),
-        )  # fmt: skip
-        problem = item.problem()
+        item = _item(msg)
+        problem = item.problem()  # a DO_JUMP's target is checked once all items are in
         if problem:
-            code = (
-                mav.MAV_MISSION_UNSUPPORTED_FRAME
-                if "frame" in problem
-                else mav.MAV_MISSION_UNSUPPORTED
-            )
-            self._fail(code, f"mission item {msg.seq}: {problem}")
+            self._fail(RESULTS[problem.field], f"mission item {msg.seq}: {problem.text}")
             return
         up.items.append(item)
         if len(up.items) < up.count:
@@ -93,10 +93,10 @@ class MissionProtocol:
         self.upload = None
         if result.ok:
             self._ack(up.reply, up.peer, mav.MAV_MISSION_ACCEPTED)
-            self.notify(6, f"mission of {len(up.items)} items accepted")
-        else:
-            self._ack(up.reply, up.peer, mav.MAV_MISSION_ERROR)
-            self.notify(4, result.reason)
+            self.notify(Severity.INFO, f"mission of {len(up.items)} items accepted")
+        else:  # e.g. a jump to an item that does not exist: the old mission stays
+            self._ack(up.reply, up.peer, mav.MAV_MISSION_INVALID_SEQUENCE)
+            self.notify(Severity.WARNING, f"mission refused, {result.reason}")
 
     def tick(self, now: float) -> None:
         """Repeat a request that went unanswered; give up after a few tries."""
@@ -117,7 +117,7 @@ class MissionProtocol:
 
     def _fail(self, code: int, text: str) -> None:
         assert self.upload is not None
-        self.notify(4, text)
+        self.notify(Severity.WARNING, f"mission refused, {text}; the previous one stays")
         self._ack(self.upload.reply, self.upload.peer, code)
         self.upload = None
 
@@ -158,3 +158,26 @@ class MissionProtocol:
             self.upload = None
             self.vehicle.set_mission([])
         self._ack(reply, src, mav.MAV_MISSION_ACCEPTED, mission_type)
+
+
+def _item(msg: Any) -> M.MissionItem:
+    """A MISSION_ITEM_INT (or legacy float MISSION_ITEM) as stored: fields unchanged, so a
+    download returns what was uploaded. A float item's NaN latitude/longitude (unused,
+    e.g. on a DO item) is stored as 0."""
+    if msg.get_type() == "MISSION_ITEM_INT":
+        x, y = msg.x, msg.y
+    else:
+        x = round(msg.x * 1e7) if math.isfinite(msg.x) else 0
+        y = round(msg.y * 1e7) if math.isfinite(msg.y) else 0
+    return M.MissionItem(
+        command=msg.command,
+        frame=msg.frame,
+        param1=msg.param1,
+        param2=msg.param2,
+        param3=msg.param3,
+        param4=msg.param4,
+        x=int(x),
+        y=int(y),
+        z=float(msg.z),
+        autocontinue=bool(msg.autocontinue),
+    )

@@ -198,7 +198,7 @@ class MotorPath:
         v = self.vehicle
         s = v.state
         up = float(s[L.I_PZ]) - v.airframe.gear_height
-        lat, lon, alt = v.home.to_global(s[L.I_PX], s[L.I_PY], up)
+        lat, lon, alt = v.origin.to_global(s[L.I_PX], s[L.I_PY], up)
         velocity_ned = np.array([s[L.I_VY], s[L.I_VX], -s[L.I_VZ]])
         # Specific force (what an accelerometer reads), body FRD, over the last period.
         accel_frd = np.array([0.0, 0.0, -9.80665])

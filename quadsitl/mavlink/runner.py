@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from quadsitl.mavlink.identity import get_identity
 from quadsitl.mavlink.links import Link
 from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
@@ -52,6 +53,7 @@ class SimConfig:
     rerun_save: str | None = None  # ... or to this .rrd file
     autopilot: str | None = None  # checkpoint of a trained policy flying instead of the cascade
     system_id: int = 1
+    autopilot_id: str = "px4"  # what the vehicle presents itself as: "px4" or "generic"
     home: Home = field(default_factory=Home)
     airframe: str = "paper"
     physics_rate: float = 1000.0  # Hz
@@ -63,6 +65,7 @@ class SimConfig:
     quiet: bool = False
 
     def validate(self) -> None:
+        get_identity(self.autopilot_id)
         if not 1 <= self.system_id <= 254:
             raise ValueError(f"system id must be 1..254, got {self.system_id}")
         if not (math.isfinite(self.physics_rate) and 100 <= self.physics_rate <= 10_000):
@@ -142,6 +145,7 @@ class Simulator:
         self.server = MavlinkServer(
             self.vehicle, self.links, self.tlog, config.system_id, 1, echo=self._print,
             lockstep=config.lockstep, signing_key=config.signing_key,
+            identity=get_identity(config.autopilot_id),
         )  # fmt: skip
         self.timing = Timing()
         self.stopping = False
@@ -238,7 +242,10 @@ def run_simulator(config: SimConfig) -> int:
     signal.signal(signal.SIGTERM, sim.stop)
     links = ", ".join(f"{link.name} {link.url} (port {link.local_port})" for link in sim.links)
     signing = "on" if config.signing_key is not None else "off"
-    sim._print(f"quadsitl sim: system {config.system_id}, signing {signing}, links: {links}")
+    sim._print(
+        f"quadsitl sim: system {config.system_id} ({config.autopilot_id}), signing {signing}, "
+        f"links: {links}"
+    )
     exposed = [link for link in sim.links if link.exposed]
     if exposed and config.signing_key is None:
         names = ", ".join(f"{link.name} ({link.url})" for link in exposed)

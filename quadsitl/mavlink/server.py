@@ -5,6 +5,8 @@ link they came from, and calls :meth:`MavlinkServer.tick` after stepping the phy
 Every frame sent or received goes to the telemetry log, except on the motor-command
 link (``hil``), whose thousands of round trips a second would swamp it. With a signing
 key, messages other than HEARTBEAT and RADIO_STATUS must be signed (:mod:`.signing`).
+What the vehicle presents itself as (PX4-compatible or generic) is :mod:`.identity`;
+parameters, missions and offboard setpoints have their own modules.
 """
 
 from __future__ import annotations
@@ -14,23 +16,24 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
-
 from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
+from quadsitl.mavlink import offboard
 from quadsitl.mavlink import telemetry as T
+from quadsitl.mavlink.identity import AVAILABLE_MODES, IDENTITIES, Identity, available_modes_message
 from quadsitl.mavlink.links import Link
 from quadsitl.mavlink.mission_protocol import MissionProtocol
 from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_MOTION, MotorPath
+from quadsitl.mavlink.param_protocol import ParamProtocol
 from quadsitl.mavlink.signing import SignatureCheck, sign_outgoing
 from quadsitl.mavlink.tlog import TlogWriter
-from quadsitl.vehicle.controller import Setpoint
 from quadsitl.vehicle.modes import Mode
-from quadsitl.vehicle.params import PARAMETERS
-from quadsitl.vehicle.results import ACCEPTED, Outcome, Result
+from quadsitl.vehicle.results import ACCEPTED, Outcome, Result, Severity
 from quadsitl.vehicle.vehicle import Vehicle
 
-FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 that forces the action (PX4, ArduPilot)
+# COMPONENT_ARM_DISARM param2 values that force the action: PX4's and ArduPilot's
+# emergency 21196, and 2989, which QGroundControl's "force arm" sends (src/Vehicle/Vehicle.cc).
+FORCE_MAGIC = (21196, 2989)
 STATUSTEXT_LENGTH = 50
 SIGNING_REPORT_PERIOD = 10.0  # wall s between STATUSTEXT summaries of rejected messages
 MOTOR_LINK = "hil"  # the link name whose traffic is not logged and has no streams
@@ -69,8 +72,10 @@ class MavlinkServer:
         echo: Callable[[str], None] | None = None,
         lockstep: bool = False,
         signing_key: bytes | None = None,
+        identity: Identity = IDENTITIES["px4"],
     ) -> None:
         self.vehicle = vehicle
+        self.identity = identity
         self.links = links
         self.tlog = tlog
         self.system_id, self.component_id = system_id, component_id
@@ -84,7 +89,10 @@ class MavlinkServer:
         if signing_key is not None:
             self.set_signing_key(signing_key)
         self.missions = MissionProtocol(vehicle, self.encoder, self.statustext)
+        self.params = ParamProtocol(vehicle, self.encoder, self.statustext)
         self.last_heartbeat = -math.inf
+        self.gcs_heard: float | None = None  # wall s of the last ground-station heartbeat
+        self.gcs_lost = False
         self.last_state: tuple[bool, Mode, bool, bool] | None = None
         self._after_ack: list[Any] = []
         self.commands = self._commands()
@@ -123,11 +131,15 @@ class MavlinkServer:
                 self.tlog.record(frame)
 
     def statustext(self, severity: int, text: str) -> None:
-        """STATUSTEXT on every link; long texts are split into chunks (MAVLink 2)."""
+        """STATUSTEXT on every link; long texts are split into chunks (MAVLink 2). A
+        chunked text ends with a chunk shorter than 50 bytes, an empty one if need be
+        (QGroundControl waits for it, src/MAVLink/StatusTextHandler.cc)."""
         if self.echo is not None:
             self.echo(f"[{self.vehicle.time:8.2f} s] {text}")
         data = text.encode("utf-8", "replace")
         chunks = [data[i : i + STATUSTEXT_LENGTH] for i in range(0, len(data), STATUSTEXT_LENGTH)]
+        if len(chunks) > 1 and len(chunks[-1]) == STATUSTEXT_LENGTH:
+            chunks.append(b"")
         chunk_id = (int(time.monotonic() * 1000) % 65535) + 1 if len(chunks) > 1 else 0
         for seq, chunk in enumerate(chunks or [b""]):
             self.send(self.encoder.statustext_encode(severity, chunk, chunk_id, seq))
@@ -169,7 +181,7 @@ class MavlinkServer:
         except (ValueError, TypeError, OverflowError) as error:
             # Out-of-range fields must never stop the vehicle: report and carry on.
             self.counters["bad_values"] += 1
-            self.statustext(4, f"rejected {message.get_type()}: {error}")
+            self.statustext(Severity.WARNING, f"rejected {message.get_type()}: {error}")
 
     def tick(self, wall_now: float) -> None:
         """After the physics: events, heartbeat (wall clock), telemetry (sim clock; in
@@ -183,7 +195,8 @@ class MavlinkServer:
         state = (v.armed, v.mode, v.crashed, v.motor_control)
         if wall_now - self.last_heartbeat >= T.HEARTBEAT_PERIOD or state != self.last_state:
             self.last_heartbeat, self.last_state = wall_now, state  # at once on a change
-            self.send(T.build_heartbeat(v))
+            self.send(T.build_heartbeat(v, self.identity.autopilot))
+        self._watch_ground_station(wall_now)
         self.missions.tick(wall_now)
         if self.signing is not None and wall_now - self._signing_reported[0] > 1.0:
             self._report_signing(wall_now)
@@ -194,9 +207,31 @@ class MavlinkServer:
             if not due:
                 continue
             if snapshot is None:
-                snapshot = T.Snapshot(v, self.comm_errors, self.error_counts)
+                snapshot = self._snapshot()
             for message_id in due:
                 self.send(T.BUILDERS[message_id](snapshot), link)
+
+    def _snapshot(self) -> T.Snapshot:
+        return T.Snapshot(self.vehicle, self.comm_errors, self.error_counts, self.identity)
+
+    # --- the ground station's heartbeat: link-loss failsafe (PX4's NAV_DLL_ACT) --------
+    def handle_heartbeat(self, msg: Any, link: Link) -> None:
+        if msg.type != mav.MAV_TYPE_GCS or link.name == MOTOR_LINK:
+            return
+        self.gcs_heard = time.monotonic()
+        if self.gcs_lost:
+            self.gcs_lost = False
+            self.vehicle.datalink_regained()
+
+    def _watch_ground_station(self, wall_now: float) -> None:
+        """Link loss counts on the wall clock (the link lives there, not in simulated
+        time) and only after a ground station has been heard."""
+        if self.gcs_heard is None or self.gcs_lost:
+            return
+        silence = wall_now - self.gcs_heard
+        if silence > self.vehicle.params["COM_DL_LOSS_T"]:
+            self.gcs_lost = True
+            self.vehicle.datalink_lost(silence)
 
     def _report_signing(self, wall_now: float | None = None) -> None:
         """STATUSTEXT at the first rejection, then a summary at most every 10 s."""
@@ -207,13 +242,13 @@ class MavlinkServer:
         first = last_total == 0 and total > 0
         if total != last_total and (first or now - last_time >= SIGNING_REPORT_PERIOD):
             self._signing_reported = (now, total)
-            self.statustext(4, self.signing.summary())
+            self.statustext(Severity.WARNING, self.signing.summary())
 
     # --- motor path ---------------------------------------------------------------------
     def handle_hil_actuator_controls(self, msg: Any, link: Link) -> None:
         problem = self.motors.command(msg)
         if problem is not None:
-            self.statustext(4, problem)
+            self.statustext(Severity.WARNING, problem)
         self.send_together(self.motors.state_messages(self._hil_state(link)), link)
 
     def handle_setup_signing(self, msg: Any, link: Link) -> None:
@@ -223,7 +258,7 @@ class MavlinkServer:
         if getattr(msg, "target_component", 0) not in (0, self.component_id):
             return
         self.set_signing_key(None if not any(key) else key)
-        self.statustext(5, "signing " + ("off" if not any(key) else "key set"))
+        self.statustext(Severity.NOTICE, "signing " + ("off" if not any(key) else "key set"))
 
     def _hil_state(self, link: Link) -> bool:
         return id(link) not in self.without_hil_state
@@ -248,41 +283,17 @@ class MavlinkServer:
         if msg.tc1 == 0:
             self.send(self.encoder.timesync_encode(time.monotonic_ns(), msg.ts1), link)
 
-    # --- parameters -------------------------------------------------------------------
-    def _param_value(self, name: str) -> Any:
-        names = self.vehicle.params.names()
-        return self.encoder.param_value_encode(
-            name.encode(), self.vehicle.params[name], mav.MAV_PARAM_TYPE_REAL32,
-            len(names), names.index(name),
-        )  # fmt: skip
-
+    # --- parameters (param_protocol.py) ------------------------------------------------
     def handle_param_request_list(self, msg: Any, link: Link) -> None:
-        for spec in PARAMETERS:
-            self.send(self._param_value(spec.name), link)
+        self.params.on_request_list(msg, self._reply(link))
 
     def handle_param_request_read(self, msg: Any, link: Link) -> None:
-        names = self.vehicle.params.names()
-        if msg.param_index >= 0:
-            if msg.param_index >= len(names):
-                self.statustext(4, f"no parameter with index {msg.param_index}")
-                return
-            name = names[msg.param_index]
-        else:
-            name = _param_name(msg.param_id)
-            if name not in names:
-                self.statustext(4, f"unknown parameter {name!r}")
-                return
-        self.send(self._param_value(name), link)
+        self.params.on_request_read(msg, self._reply(link))
 
     def handle_param_set(self, msg: Any, link: Link) -> None:
-        name = _param_name(msg.param_id)
-        try:
-            self.vehicle.set_param(name, msg.param_value)
-        except ValueError as error:
-            self.statustext(4, f"param set refused: {error}")
-            if name not in self.vehicle.params.names():
-                return
-        self.send(self._param_value(name))  # echo: the acknowledgement (or the old value)
+        if getattr(msg, "target_component", 0) not in (0, self.component_id):
+            return
+        self.params.on_set(msg, self._reply(link), self.send)
 
     # --- commands ---------------------------------------------------------------------
     def handle_command_long(self, msg: Any, link: Link) -> None:
@@ -305,7 +316,7 @@ class MavlinkServer:
             except ValueError as error:
                 result = Result(Outcome.DENIED, str(error))
         if result.reason:
-            self.statustext(4, result.reason)
+            self.statustext(Severity.WARNING if not result.ok else Severity.INFO, result.reason)
         self.send(
             self.encoder.command_ack_encode(
                 cmd.id, RESULTS[result.outcome], 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
@@ -329,6 +340,8 @@ class MavlinkServer:
             mav.MAV_CMD_GET_HOME_POSITION: lambda c, link: self._send_once(
                 mav.MAVLINK_MSG_ID_HOME_POSITION, link
             ),
+            mav.MAV_CMD_GET_MESSAGE_INTERVAL: self._cmd_get_message_interval,
+            mav.MAV_CMD_DO_SET_HOME: self._cmd_set_home,
             mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: lambda c, link: self._send_once(
                 mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, link
             ),
@@ -343,7 +356,7 @@ class MavlinkServer:
         }
 
     def _cmd_arm_disarm(self, c: Command, link: Link) -> Result:
-        force = round(c.params[1]) == FORCE_MAGIC if math.isfinite(c.params[1]) else False
+        force = math.isfinite(c.params[1]) and round(c.params[1]) in FORCE_MAGIC
         if c.params[0] == 1:
             return self.vehicle.arm(force)
         if c.params[0] == 0:
@@ -351,13 +364,40 @@ class MavlinkServer:
         return Result(Outcome.DENIED, f"arm/disarm: param1 must be 0 or 1, got {c.params[0]}")
 
     def _cmd_takeoff(self, c: Command, link: Link) -> Result:
+        """Param7: AMSL for the PX4 identity (NaN: MIS_TAKEOFF_ALT), relative to home for
+        the generic one; COMMAND_INT says which by its frame. An AMSL altitude below the
+        ground is what MAVProxy and other ArduPilot-style clients send as a height above
+        home: it is read so, with a message."""
+        v = self.vehicle
         altitude = c.params[6]
         if math.isnan(altitude):
-            return self.vehicle.takeoff(None)
-        relative = c.is_int and c.frame in (
-            mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
-        )  # fmt: skip
-        return self.vehicle.takeoff(altitude if relative else altitude - self.vehicle.home.altitude)
+            return v.takeoff(None)
+        if c.is_int:
+            amsl = c.frame in (mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_INT)
+        else:
+            amsl = self.identity.takeoff_param7_amsl
+        if amsl and altitude < v.origin.altitude:
+            self.statustext(Severity.INFO, f"take-off altitude {altitude:g} m is below the "
+                            "ground as AMSL: taken as metres above home")  # fmt: skip
+            amsl = False
+        return v.takeoff(altitude - v.home_altitude if amsl else altitude)
+
+    def _cmd_set_home(self, c: Command, link: Link) -> Result:
+        """DO_SET_HOME: param1 = 1 the current position, else params 5-7 (AMSL)."""
+        v = self.vehicle
+        if c.params[0] == 1:
+            east, north, _ = v.position
+            up = v.altitude
+        else:
+            lat, lon, alt = c.params[4], c.params[5], c.params[6]
+            if not all(math.isfinite(x) for x in (lat, lon, alt)):
+                return Result(Outcome.DENIED, "set home denied: latitude, longitude and "
+                              "altitude must be numbers")  # fmt: skip
+            east, north, up = v.origin.to_local(lat, lon, alt)
+        result = v.set_home(float(east), float(north), float(up))
+        if result.ok:  # ground stations learn the new home at once
+            self._after_ack.append(T.build_home_position(self._snapshot()))
+        return result
 
     def _cmd_set_mode(self, c: Command, link: Link) -> Result:
         base, main, sub = c.params[0], c.params[1], c.params[2]
@@ -369,15 +409,29 @@ class MavlinkServer:
         )
 
     def handle_set_mode(self, msg: Any, link: Link) -> None:
-        """Deprecated SET_MODE message (MAVProxy still sends it); no ACK exists for it."""
+        """SET_MODE (QGroundControl's PX4 plugin and MAVProxy send it); no ACK exists for
+        it: the heartbeat shows the new mode, a STATUSTEXT the refusal."""
         try:
             mode = Mode.from_custom_mode(msg.custom_mode)
         except ValueError as error:
-            self.statustext(4, str(error))
+            self.statustext(Severity.WARNING, str(error))
             return
         result = self.vehicle.set_mode(mode)
         if result.reason:
-            self.statustext(4, result.reason)
+            self.statustext(Severity.WARNING, result.reason)
+
+    def handle_manual_control(self, msg: Any, link: Link) -> None:
+        """Joystick (QGroundControl's): x forward, y right, r yaw in ±1000, z thrust
+        0..1000 with 500 = hold altitude. Flown in POSCTL/ALTCTL; COM_RC_IN_MODE = 4
+        turns stick input off."""
+        if self.vehicle.params["COM_RC_IN_MODE"] == 4:
+            return
+        centre = (0, 0, 500, 0)  # an axis out of range (INT16_MAX: not in use) is centred
+        x, y, z, r = (
+            a if -1000 <= a <= 1000 else c
+            for a, c in zip((msg.x, msg.y, msg.z, msg.r), centre, strict=True)
+        )
+        self.vehicle.stick_input(x / 1000, y / 1000, (z - 500) / 500, r / 1000)
 
     def _cmd_reposition(self, c: Command, link: Link) -> Result:
         speed, yaw_deg, lat, lon, alt = (
@@ -387,15 +441,18 @@ class MavlinkServer:
             c.params[5],
             c.params[6],
         )
-        home = self.vehicle.home
+        v = self.vehicle
         relative = c.frame in (
             mav.MAV_FRAME_GLOBAL_RELATIVE_ALT,
             mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
         )
         east = north = math.nan
         if math.isfinite(lat) and math.isfinite(lon):
-            east, north, _ = home.to_local(lat, lon, home.altitude)
-        up = alt if relative or math.isnan(alt) else alt - home.altitude
+            east, north, _ = v.origin.to_local(lat, lon, v.origin.altitude)
+        if math.isnan(alt):
+            up = math.nan
+        else:  # m above the ground
+            up = alt + float(v.home_position[2]) if relative else alt - v.origin.altitude
         yaw = None if math.isnan(yaw_deg) else float(frames.yaw_ned_to_enu(math.radians(yaw_deg)))
         speed_ok = math.isfinite(speed) and speed > 0
         return self.vehicle.reposition(east, north, up, speed if speed_ok else None, yaw)
@@ -424,17 +481,43 @@ class MavlinkServer:
     def _cmd_request_message(self, c: Command, link: Link) -> Result:
         message_id = _int(c.params[0], "message id")
         if message_id == mav.MAVLINK_MSG_ID_HEARTBEAT:
-            self._after_ack.append(T.build_heartbeat(self.vehicle))
+            self._after_ack.append(T.build_heartbeat(self.vehicle, self.identity.autopilot))
             return ACCEPTED
+        if message_id == mav.MAVLINK_MSG_ID_AVAILABLE_MODES:
+            return self._available_modes(c.params[1])
+        if message_id == mav.MAVLINK_MSG_ID_MESSAGE_INTERVAL:
+            return self._message_interval(_int(c.params[1], "param2 (message id)"), link)
         return self._send_once(message_id, link)
+
+    def _available_modes(self, index_param: float) -> Result:
+        """Param2: the mode's index, 1..N; 0 (or NaN) for all of them."""
+        index = 0 if math.isnan(index_param) else _int(index_param, "mode index")
+        if not 0 <= index <= len(AVAILABLE_MODES):
+            return Result(Outcome.DENIED, f"no mode with index {index}")
+        indices = range(1, len(AVAILABLE_MODES) + 1) if index == 0 else [index]
+        self._after_ack.extend(available_modes_message(self.encoder, i) for i in indices)
+        return ACCEPTED
+
+    def _cmd_get_message_interval(self, c: Command, link: Link) -> Result:
+        return self._message_interval(_int(c.params[0], "message id"), link)
+
+    def _message_interval(self, message_id: int, link: Link) -> Result:
+        """MESSAGE_INTERVAL: µs between sends on this link; -1 not sent, 0 unknown id."""
+        if message_id == mav.MAVLINK_MSG_ID_HEARTBEAT:
+            interval_us = round(T.HEARTBEAT_PERIOD * 1e6)
+        elif message_id in T.BUILDERS or message_id in T.DEFAULT_RATES:
+            seconds = self.schedules[id(link)].intervals.get(message_id)
+            interval_us = -1 if seconds is None else round(seconds * 1e6)
+        else:
+            interval_us = 0
+        self._after_ack.append(self.encoder.message_interval_encode(message_id, interval_us))
+        return ACCEPTED
 
     def _send_once(self, message_id: int, link: Link) -> Result:
         builder = T.BUILDERS.get(message_id)
         if builder is None:
             return Result(Outcome.UNSUPPORTED)
-        self._after_ack.append(
-            builder(T.Snapshot(self.vehicle, self.comm_errors, self.error_counts))
-        )
+        self._after_ack.append(builder(self._snapshot()))
         return ACCEPTED
 
     def handle_request_data_stream(self, msg: Any, link: Link) -> None:
@@ -494,80 +577,30 @@ class MavlinkServer:
     def handle_mission_set_current(self, msg: Any, link: Link) -> None:
         result = self.vehicle.set_mission_current(msg.seq)
         if result.reason:
-            self.statustext(4, result.reason)
-        self.send(T.build_mission_current(T.Snapshot(self.vehicle)), link)
+            self.statustext(Severity.WARNING, result.reason)
+        self.send(T.build_mission_current(self._snapshot()), link)
 
-    # --- offboard ---------------------------------------------------------------------
+    # --- offboard (offboard.py) ---------------------------------------------------------
     def handle_set_position_target_local_ned(self, msg: Any, link: Link) -> None:
-        values = (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz, msg.afx, msg.afy, msg.afz)
-        mask = msg.type_mask
-        used = [v for i, v in enumerate(values) if not mask & (1 << i)]
-        if not all(math.isfinite(v) for v in used) or not all(
-            math.isfinite(v) for bit, v in ((1024, msg.yaw), (2048, msg.yaw_rate)) if not mask & bit
-        ):
-            self._bad_value("offboard setpoint with NaN or inf ignored")
-            return
         v = self.vehicle
         yaw_now = float(frames.euler_from_quat(v.fleet.quaternion[0])[2])
-        frame = msg.coordinate_frame
-        body = frame in (mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED)
-        if not body and frame not in (mav.MAV_FRAME_LOCAL_NED, mav.MAV_FRAME_LOCAL_OFFSET_NED):
-            self._bad_value(f"offboard frame {frame} unsupported: use LOCAL_NED or BODY_NED")
-            return
-        heading = frames.quat_from_axis_angle([0.0, 0.0, 1.0], yaw_now)
-
-        def to_enu(ned: tuple[float, float, float]) -> np.ndarray:
-            if body:  # x forward, y right, z down, turned with the vehicle's heading
-                return frames.quat_rotate(heading, np.array([ned[0], -ned[1], -ned[2]]))
-            return frames.ned_to_enu(np.array(ned))
-
-        setpoint = Setpoint()
-        if not mask & 0b111:
-            position = to_enu((msg.x, msg.y, msg.z))
-            if frame in (mav.MAV_FRAME_LOCAL_OFFSET_NED, mav.MAV_FRAME_BODY_OFFSET_NED):
-                position = position + v.position
-            else:
-                position[2] += v.airframe.gear_height  # NED z is the ground-level frame's
-            setpoint.position = position
-        if not mask & 0b111000:
-            setpoint.velocity = to_enu((msg.vx, msg.vy, msg.vz))
-        if not mask & 0b111000000:
-            setpoint.acceleration = to_enu((msg.afx, msg.afy, msg.afz))
-        if not mask & 1024:
-            setpoint.yaw = float(frames.yaw_ned_to_enu(msg.yaw))
-        if not mask & 2048:
-            setpoint.yaw_rate = -msg.yaw_rate  # NED (down) -> ENU (up)
-        v.offboard_setpoint(setpoint)
+        setpoint = offboard.position_target(msg, v.position, yaw_now, v.airframe.gear_height)
+        if isinstance(setpoint, str):
+            self._bad_value(setpoint)
+        else:
+            v.offboard_setpoint(setpoint)
 
     def handle_set_attitude_target(self, msg: Any, link: Link) -> None:
-        mask = msg.type_mask
-        rates = (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate)
-        checked = [*list(msg.q), msg.thrust, *list(rates)]
-        if not all(math.isfinite(x) for x in checked):
-            self._bad_value("attitude setpoint with NaN or inf ignored")
-            return
-        setpoint = Setpoint(thrust=float(np.clip(msg.thrust, 0.0, 1.0)))
-        if not mask & 128:
-            q = np.array(msg.q, dtype=np.float64)
-            if np.linalg.norm(q) < 1e-6:
-                self._bad_value("attitude setpoint with a zero quaternion ignored")
-                return
-            setpoint.attitude = frames.quat_ned_frd_to_enu_flu(q / np.linalg.norm(q))
-        if not mask & 0b111 or mask & 128:
-            frd = np.array([0.0 if mask & (1 << i) else r for i, r in enumerate(rates)])
-            setpoint.body_rates = frames.frd_to_flu(frd)
-        self.vehicle.offboard_setpoint(setpoint)
+        setpoint = offboard.attitude_target(msg)
+        if isinstance(setpoint, str):
+            self._bad_value(setpoint)
+        else:
+            self.vehicle.offboard_setpoint(setpoint)
 
     def _bad_value(self, text: str) -> None:
         self.counters["bad_values"] += 1
         if self.counters["bad_values"] % 100 == 1:  # do not flood the links
-            self.statustext(4, text)
-
-
-def _param_name(raw: Any) -> str:
-    if isinstance(raw, bytes):
-        raw = raw.decode("ascii", "replace")
-    return str(raw).split("\x00", 1)[0].strip()
+            self.statustext(Severity.WARNING, text)
 
 
 def _int(value: float, what: str) -> int:

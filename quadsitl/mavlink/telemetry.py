@@ -15,8 +15,15 @@ from typing import Any
 
 import numpy as np
 
-from quadsitl import __version__, frames
+from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
+from quadsitl.mavlink.identity import (
+    AVAILABLE_MODES,
+    CUSTOM_VERSION,
+    IDENTITIES,
+    MIDDLEWARE_VERSION,
+    Identity,
+)
 from quadsitl.physics import layout as L
 from quadsitl.vehicle.modes import MAIN_AUTO, MAIN_OFFBOARD, MAIN_POSCTL, Mode
 from quadsitl.vehicle.vehicle import Vehicle
@@ -42,6 +49,7 @@ SENSORS = (
 CAPABILITIES = (
     mav.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
     | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
     | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
     | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
     | mav.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
@@ -51,19 +59,18 @@ CAPABILITIES = (
 HEARTBEAT_PERIOD = 1.0  # s, wall clock
 
 
-def _version_number() -> int:
-    """AUTOPILOT_VERSION flight_sw_version: major << 24 | minor << 16 | patch << 8 | type."""
-    parts = [int(p) for p in __version__.split(".")[:3] if p.isdigit()] + [0, 0, 0]
-    return (parts[0] << 24) | (parts[1] << 16) | (parts[2] << 8) | 0xFF  # 0xFF: release
-
-
 class Snapshot:
     """The vehicle's state in wire frames and units, computed once per telemetry tick."""
 
     def __init__(
-        self, vehicle: Vehicle, comm_errors: int = 0, error_counts: tuple[int, ...] = (0,) * 4
+        self,
+        vehicle: Vehicle,
+        comm_errors: int = 0,
+        error_counts: tuple[int, ...] = (0,) * 4,
+        identity: Identity = IDENTITIES["px4"],
     ) -> None:
         self.vehicle = vehicle
+        self.identity = identity
         self.comm_errors = min(comm_errors, 65535)  # malformed frames received
         self.error_counts = [min(n, 65535) for n in error_counts]  # signing, motor commands
         s = vehicle.state
@@ -78,13 +85,13 @@ class Snapshot:
         self.rates_frd = frames.flu_to_frd(s[L.RATES])  # rad/s
         self.rotor_speeds = s[L.ROTORS]  # rad/s
         up = float(s[L.I_PZ]) - vehicle.airframe.gear_height
-        self.lat, self.lon, self.alt_amsl = vehicle.home.to_global(s[L.I_PX], s[L.I_PY], up)
-        self.relative_alt = up
+        self.lat, self.lon, self.alt_amsl = vehicle.origin.to_global(s[L.I_PX], s[L.I_PY], up)
+        self.relative_alt = up - float(vehicle.home_position[2])  # m above home
         self.heading_deg = math.degrees(self.yaw) % 360.0
         self.ground_speed = math.hypot(self.velocity_ned[0], self.velocity_ned[1])
 
 
-def build_heartbeat(v: Vehicle) -> Any:
+def build_heartbeat(v: Vehicle, autopilot: int = mav.MAV_AUTOPILOT_PX4) -> Any:
     main = v.mode.value[0]
     base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_STABILIZE_ENABLED
     if main in (MAIN_AUTO,):
@@ -100,7 +107,7 @@ def build_heartbeat(v: Vehicle) -> Any:
     else:
         status = mav.MAV_STATE_ACTIVE if v.armed else mav.MAV_STATE_STANDBY
     return _encoder.heartbeat_encode(
-        mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_GENERIC, base, v.mode.custom_mode, status
+        mav.MAV_TYPE_QUADROTOR, autopilot, base, v.mode.custom_mode, status
     )
 
 
@@ -154,11 +161,22 @@ def build_gps_raw_int(s: Snapshot) -> Any:
 
 
 def build_home_position(s: Snapshot) -> Any:
-    h = s.vehicle.home
+    v = s.vehicle
+    lat, lon, alt = v.origin.to_global(*v.home_position)
+    north, east, down = frames.enu_to_ned(v.home_position)  # local NED, m
     return _encoder.home_position_encode(
-        round(h.latitude * 1e7), round(h.longitude * 1e7), round(h.altitude * 1000),
-        0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, s.time_usec,
-    )  # fmt: skip
+        latitude=round(lat * 1e7),
+        longitude=round(lon * 1e7),
+        altitude=round(alt * 1000),
+        x=float(north),
+        y=float(east),
+        z=float(down),
+        q=[1.0, 0.0, 0.0, 0.0],
+        approach_x=0.0,
+        approach_y=0.0,
+        approach_z=0.0,
+        time_usec=s.time_usec,
+    )
 
 
 def build_vfr_hud(s: Snapshot) -> Any:
@@ -195,19 +213,46 @@ def build_system_time(s: Snapshot) -> Any:
     return _encoder.system_time_encode(int(time.time() * 1e6), s.time_boot_ms)
 
 
+def mission_state(v: Vehicle) -> int:
+    """MISSION_CURRENT's mission_state (MAVSDK's is_mission_finished waits for COMPLETE)."""
+    runner = v.missions
+    if not runner.items:
+        return mav.MISSION_STATE_NO_MISSION
+    if runner.finished:
+        return mav.MISSION_STATE_COMPLETE
+    if v.mode is Mode.MISSION:
+        return mav.MISSION_STATE_ACTIVE
+    return mav.MISSION_STATE_PAUSED if runner.started else mav.MISSION_STATE_NOT_STARTED
+
+
 def build_mission_current(s: Snapshot) -> Any:
     v = s.vehicle
-    state = mav.MISSION_STATE_NO_MISSION
-    if v.mission:
-        state = mav.MISSION_STATE_ACTIVE if v.mode is Mode.MISSION else mav.MISSION_STATE_PAUSED
-    return _encoder.mission_current_encode(v.mission_current, len(v.mission), state, 0)
+    in_mission = int(v.mode is Mode.MISSION)
+    return _encoder.mission_current_encode(
+        v.mission_current, len(v.mission), mission_state(v), in_mission
+    )
 
 
 def build_autopilot_version(s: Snapshot) -> Any:
-    version = _version_number()
     return _encoder.autopilot_version_encode(
-        CAPABILITIES, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x5153_4954_4C00_0001
+        capabilities=CAPABILITIES,
+        flight_sw_version=s.identity.flight_sw_version,
+        middleware_sw_version=MIDDLEWARE_VERSION,
+        os_sw_version=0,
+        board_version=0,
+        flight_custom_version=list(CUSTOM_VERSION),
+        middleware_custom_version=[0] * 8,
+        os_custom_version=[0] * 8,
+        vendor_id=0,
+        product_id=0,
+        uid=0x5153_4954_4C00_0001,
     )
+
+
+def build_current_mode(s: Snapshot) -> Any:
+    v = s.vehicle
+    standard = next((e.standard_mode for e in AVAILABLE_MODES if e.mode is v.mode), 0)
+    return _encoder.current_mode_encode(standard, v.mode.custom_mode, v.mode.custom_mode)
 
 
 BUILDERS: dict[int, Callable[[Snapshot], Any]] = {
@@ -226,6 +271,7 @@ BUILDERS: dict[int, Callable[[Snapshot], Any]] = {
     mav.MAVLINK_MSG_ID_SYSTEM_TIME: build_system_time,
     mav.MAVLINK_MSG_ID_MISSION_CURRENT: build_mission_current,
     mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: build_autopilot_version,
+    mav.MAVLINK_MSG_ID_CURRENT_MODE: build_current_mode,
 }
 
 # Default rates, Hz (the spec's typical rates; position and attitude at 50 Hz).

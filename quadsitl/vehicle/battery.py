@@ -19,6 +19,8 @@ class Battery:
 
     capacity_mah: float = 2200.0
     cells: int = 4
+    cell_full_v: float = CELL_FULL_V
+    cell_empty_v: float = CELL_EMPTY_V
     efficiency: float = 0.7  # shaft power / electrical power
     avionics_current: float = 0.3  # A, drawn whenever powered
     used_mah: float = 0.0
@@ -32,7 +34,7 @@ class Battery:
     @property
     def voltage(self) -> float:
         """V, linear in the remaining charge between empty and full."""
-        cell = CELL_EMPTY_V + (CELL_FULL_V - CELL_EMPTY_V) * self.remaining
+        cell = self.cell_empty_v + (self.cell_full_v - self.cell_empty_v) * self.remaining
         return self.cells * cell
 
     def drain(self, shaft_power: float, dt: float) -> None:

@@ -9,15 +9,8 @@ from __future__ import annotations
 from enum import Enum
 
 # PX4 main modes and AUTO sub modes.
-MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_AUTO, MAIN_ACRO, MAIN_OFFBOARD, MAIN_STABILIZED = (
-    1,
-    2,
-    3,
-    4,
-    5,
-    6,
-    7,
-)
+MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_AUTO = 1, 2, 3, 4
+MAIN_ACRO, MAIN_OFFBOARD, MAIN_STABILIZED = 5, 6, 7
 SUB_READY, SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = 1, 2, 3, 4, 5, 6
 
 
@@ -70,5 +63,8 @@ class Mode(Enum):
             ) from None
 
 
-# Modes that need a pilot's sticks; there is no RC input in the simulator.
+# Modes that need a pilot's sticks on the attitude; the simulator takes no such input.
 NEEDS_PILOT = frozenset({Mode.MANUAL, Mode.STABILIZED, Mode.ACRO})
+# Modes flown with joystick input (MANUAL_CONTROL) as velocity commands, holding
+# position with the sticks centred (ALTCTL is flown as POSCTL).
+STICK_MODES = frozenset({Mode.POSCTL, Mode.ALTCTL})

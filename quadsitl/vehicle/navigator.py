@@ -155,4 +155,55 @@ class Land:
         )
 
 
-Activity = Hold | Leg | Orbit | Land
+class Sticks:
+    """Position-hold stick flying, as PX4's Position mode: a deflected stick commands a
+    velocity (forward/right in the heading frame, up) and a yaw rate; with the sticks
+    centred the vehicle holds the position (and heading) where it came to rest.
+
+    Stick values are MANUAL_CONTROL's, normalised: ``forward``, ``right``, ``up`` (the
+    thrust stick, centre = hold altitude) and ``yaw`` in [-1, 1]. The vehicle calls
+    :meth:`update` every control tick with the latest sticks and its heading.
+    """
+
+    DEADBAND = 0.05
+
+    def __init__(self, point: Vec, yaw: float, limits: Limits, max_yaw_rate: float) -> None:
+        self.point = np.array(point, dtype=np.float64)  # held while the sticks are centred
+        self.yaw = yaw  # ENU rad, held while the yaw stick is centred
+        self.limits = limits
+        self.max_yaw_rate = max_yaw_rate  # rad/s
+        self.sticks = np.zeros(4)  # forward, right, up, yaw
+        self.heading = yaw
+        self.moving = False
+        self.done = True  # nothing to finish: it holds until the mode changes
+
+    def update(self, sticks: Vec, heading: float) -> None:
+        sticks = np.clip(np.asarray(sticks, dtype=np.float64), -1.0, 1.0)
+        self.sticks = np.where(abs(sticks) < self.DEADBAND, 0.0, sticks)
+        self.heading = heading
+        if self.sticks[3] != 0.0:
+            self.yaw = heading  # turning: the heading to hold is wherever it stops
+
+    def setpoint(self, position: Vec, velocity: Vec, t: float) -> Setpoint:
+        forward, right, up, yaw = self.sticks
+        yaw_rate = -yaw * self.max_yaw_rate  # stick right turns clockwise (ENU yaw falls)
+        if not self.sticks[:3].any():
+            if self.moving:  # just released: hold where it is now
+                self.point = np.array(position, dtype=np.float64)
+                self.moving = False
+            if yaw_rate:
+                return Setpoint(position=self.point.copy(), yaw=None, yaw_rate=yaw_rate)
+            return Setpoint(position=self.point.copy(), yaw=self.yaw)
+        self.moving = True
+        c, s = math.cos(self.heading), math.sin(self.heading)
+        # Heading frame FLU: forward = (c, s), right = (s, -c) in world ENU.
+        v_xy = self.limits.cruise_xy * np.array([forward * c + right * s, forward * s - right * c])
+        v_z = up * (self.limits.climb if up > 0 else self.limits.descent)
+        return Setpoint(
+            velocity=np.array([v_xy[0], v_xy[1], v_z]),
+            yaw=None if yaw_rate else self.yaw,
+            yaw_rate=yaw_rate,
+        )
+
+
+Activity = Hold | Leg | Orbit | Land | Sticks

@@ -1,8 +1,13 @@
 """The vehicle's parameters: what a ground station lists, reads and sets.
 
-Names follow PX4 where the meaning matches, so that users recognise them. All are
-sent as MAV_PARAM_TYPE_REAL32. Every one changes behaviour: gains and limits go to the
-flight controller, the rest to the navigator, the battery and the airframe.
+Names follow PX4 where the meaning matches, so that users recognise them and so that
+QGroundControl's PX4 plugin finds every parameter its setup pages and Fly view read
+(src/AutoPilotPlugins/PX4, src/FirmwarePlugin/PX4 in its source). Integer parameters
+are MAV_PARAM_TYPE_INT32 (as in PX4), the rest REAL32. Almost every one changes
+behaviour: gains and limits go to the flight controller, the rest to the navigator,
+the failsafes, the battery and the airframe. The few marked read-only describe the
+simulated hardware (airframe id, sensor calibration ids) and exist because QGroundControl
+checks them to decide whether the vehicle is set up.
 """
 
 from __future__ import annotations
@@ -22,6 +27,35 @@ class ParamSpec:
     unit: str
     description: str
     gain: str | None = None  # field of ControllerGains written by this parameter
+    integer: bool = False  # MAV_PARAM_TYPE_INT32 (whole numbers only), else REAL32
+    read_only: bool = False  # describes the simulated hardware; writes are refused
+    choices: tuple[int, ...] | None = None  # the values the simulator implements
+
+
+class ParamError(ValueError):
+    """A refused parameter write; ``code`` is the MAV_PARAM_ERROR value to answer with."""
+
+    DOES_NOT_EXIST, VALUE_OUT_OF_RANGE, PERMISSION_DENIED, READ_ONLY = 1, 2, 3, 5
+
+    def __init__(self, text: str, code: int) -> None:
+        super().__init__(text)
+        self.code = code
+
+
+def _int(
+    name: str,
+    default: int,
+    low: int,
+    high: int,
+    unit: str,
+    text: str,
+    read_only: bool = False,
+    choices: tuple[int, ...] | None = None,
+) -> ParamSpec:
+    """An INT32 parameter."""
+    return ParamSpec(
+        name, default, low, high, unit, text, integer=True, read_only=read_only, choices=choices
+    )
 
 
 AIRFRAME_NAMES = tuple(AIRFRAMES)  # SIM_AIRFRAME value = index into this tuple
@@ -59,9 +93,38 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("COM_DISARM_LAND", 2.0, 0.0, 60.0, "s", "auto-disarm delay after landing"),
     ParamSpec("COM_DISARM_PRFLT", 10.0, 0.0, 300.0, "s",
               "auto-disarm if armed without taking off (0: never)"),
-    ParamSpec("BAT_CAPACITY", 2200.0, 100.0, 100_000.0, "mAh", "battery capacity"),
-    ParamSpec("SIM_AIRFRAME", 0.0, 0.0, len(AIRFRAME_NAMES) - 1, "-",
-              "airframe preset: " + ", ".join(f"{i} {n}" for i, n in enumerate(AIRFRAME_NAMES))),
+    ParamSpec("BAT1_CAPACITY", 2200.0, 100.0, 100_000.0, "mAh", "battery capacity"),
+    _int("BAT1_N_CELLS", 4, 1, 10, "-", "battery cells in series"),
+    ParamSpec("BAT1_V_CHARGED", 4.2, 3.5, 4.4, "V", "cell voltage when full"),
+    ParamSpec("BAT1_V_EMPTY", 3.5, 2.5, 3.9, "V", "cell voltage when empty"),
+    _int("BAT1_SOURCE", 0, 0, 0, "-", "battery source: 0 power module", read_only=True),
+    ParamSpec("BAT_LOW_THR", 0.15, 0.12, 0.5, "-", "low battery: warning below this charge"),
+    ParamSpec("BAT_CRIT_THR", 0.07, 0.05, 0.25, "-", "critical battery: COM_LOW_BAT_ACT"),
+    ParamSpec("BAT_EMERGEN_THR", 0.05, 0.03, 0.1, "-", "emergency battery: land"),
+    _int("COM_LOW_BAT_ACT", 0, 0, 3, "-", "at critical charge: 0 warn, 2 land, 3 return "
+         "(land at emergency charge in every case)", choices=(0, 2, 3)),
+    _int("NAV_DLL_ACT", 0, 0, 3, "-", "ground-station link lost: 0 nothing, 1 hold, "
+         "2 return, 3 land"),
+    ParamSpec("COM_DL_LOSS_T", 10.0, 5.0, 300.0, "s", "ground-station heartbeat silence "
+              "that counts as link loss"),
+    _int("GF_ACTION", 2, 0, 5, "-", "geofence breach: 0 nothing, 1 warn, 2 hold, 3 return, "
+         "5 land", choices=(0, 1, 2, 3, 5)),
+    ParamSpec("GF_MAX_HOR_DIST", 0.0, 0.0, 10_000.0, "m", "geofence radius from home (0: none)"),
+    ParamSpec("GF_MAX_VER_DIST", 0.0, 0.0, 10_000.0, "m", "geofence height above home "
+              "(0: none)"),
+    _int("COM_RC_IN_MODE", 1, 1, 4, "-", "stick input: 1 joystick (MANUAL_CONTROL), "
+         "4 none (there is no RC receiver)", choices=(1, 4)),
+    _int("SYS_AUTOSTART", 4001, 4001, 4001, "-", "airframe id (PX4's generic quadrotor)",
+         read_only=True),
+    _int("SYS_HAS_MAG", 1, 1, 1, "-", "a magnetometer is fitted", read_only=True),
+    _int("CAL_GYRO0_ID", 1310988, 1310988, 1310988, "-", "gyroscope calibration id",
+         read_only=True),
+    _int("CAL_ACC0_ID", 1310988, 1310988, 1310988, "-", "accelerometer calibration id",
+         read_only=True),
+    _int("CAL_MAG0_ID", 197388, 197388, 197388, "-", "magnetometer calibration id",
+         read_only=True),
+    _int("SIM_AIRFRAME", 0, 0, len(AIRFRAME_NAMES) - 1, "-",
+         "airframe preset: " + ", ".join(f"{i} {n}" for i, n in enumerate(AIRFRAME_NAMES))),
 )  # fmt: skip
 
 SPECS: dict[str, ParamSpec] = {p.name: p for p in PARAMETERS}
@@ -84,15 +147,31 @@ class ParameterStore:
         return self.names().index(name)
 
     def check(self, name: str, value: float) -> float:
-        """The value ``name`` would take; ValueError (naming the problem) if invalid."""
+        """The value ``name`` would take; ParamError (naming the problem) if invalid."""
         spec = SPECS.get(name)
         if spec is None:
-            raise ValueError(f"unknown parameter {name!r}")
+            raise ParamError(f"unknown parameter {name!r}", ParamError.DOES_NOT_EXIST)
         value = float(value)
+        if spec.read_only and value != self.values[name]:
+            raise ParamError(
+                f"{name} is read-only (it describes the simulated hardware)", ParamError.READ_ONLY
+            )
         if not math.isfinite(value):
-            raise ValueError(f"{name}: value must be finite, got {value}")
+            raise ParamError(
+                f"{name}: value must be finite, got {value}", ParamError.VALUE_OUT_OF_RANGE
+            )
         if not spec.minimum <= value <= spec.maximum:
-            raise ValueError(f"{name}: {value:g} is outside [{spec.minimum:g}, {spec.maximum:g}]")
-        if name == "SIM_AIRFRAME" and value != round(value):
-            raise ValueError(f"SIM_AIRFRAME: an airframe index is a whole number, got {value:g}")
+            raise ParamError(
+                f"{name}: {value:g} is outside [{spec.minimum:g}, {spec.maximum:g}]",
+                ParamError.VALUE_OUT_OF_RANGE,
+            )
+        if spec.integer and value != round(value):
+            raise ParamError(
+                f"{name}: takes whole numbers, got {value:g}", ParamError.VALUE_OUT_OF_RANGE
+            )
+        if spec.choices is not None and round(value) not in spec.choices:
+            raise ParamError(
+                f"{name}: {value:g} is not implemented; choose one of {list(spec.choices)}",
+                ParamError.VALUE_OUT_OF_RANGE,
+            )
         return value

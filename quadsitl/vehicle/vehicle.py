@@ -1,8 +1,11 @@
-"""One simulated quadrotor with its flight software: arming, modes, missions, offboard.
+"""One simulated quadrotor with its flight software: arming, modes, missions, offboard,
+stick input and failsafes.
 
 Pure: no sockets, no files, no clocks. The MAVLink server calls the command methods
 (each returns a :class:`Result`) and :meth:`Vehicle.step`, and reads state, events and
-reached mission items back. Local frame ENU (origin at home, on the ground), SI units.
+reached mission items back. Local frame ENU, SI units: its origin (``origin``, fixed) is
+the start position on the flat ground; home (``home_position``, where RTL returns and
+what relative altitudes count from) starts there and can be moved (DO_SET_HOME).
 """
 
 from __future__ import annotations
@@ -18,14 +21,18 @@ from quadsitl.physics import layout as L
 from quadsitl.vehicle import mission as M
 from quadsitl.vehicle.battery import Battery
 from quadsitl.vehicle.controller import Autopilot, CascadedController, Setpoint, Vec
+from quadsitl.vehicle.failsafe import Failsafes, Reaction
 from quadsitl.vehicle.geo import Home
-from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
-from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg, Limits, Orbit
-from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
+from quadsitl.vehicle.mission_runner import MissionRunner
+from quadsitl.vehicle.modes import NEEDS_PILOT, STICK_MODES, Mode
+from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg, Limits, Orbit, Sticks
+from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParamError, ParameterStore
 from quadsitl.vehicle.results import ACCEPTED, LandedState, Result, Severity, denied
 
 MOTOR_TIMEOUT = 0.5  # s of simulated time without motor commands before the onboard
 # controller takes over again
+STICK_TIMEOUT = 0.5  # s of simulated time without MANUAL_CONTROL before sticks count as
+# centred (PX4's COM_RC_LOSS_T default)
 
 
 class Vehicle:
@@ -33,7 +40,8 @@ class Vehicle:
 
     Args:
         airframe: preset name (also settable with the SIM_AIRFRAME parameter).
-        home: origin of the local frame on the globe.
+        home: the start position on the globe: origin of the local frame, and the first
+            home position.
         physics_dt: physics step, s.
         control_period: onboard controller period, s (a multiple of ``physics_dt``).
     """
@@ -50,11 +58,10 @@ class Vehicle:
     offboard_time: float
     takeoff_altitude: float | None  # m above home, of the pending take-off
     mission_speed: float | None  # m/s, set by DO_CHANGE_SPEED
-    land_after_leg: bool
-    item_hold_until: float | None
-    item_target: Vec | None
     motor_control: bool  # rotors commanded by an external controller, not the onboard one
     motor_command_time: float  # s, simulated, of the last external motor command
+    sticks: Vec  # (4,) forward, right, up, yaw in [-1, 1], from MANUAL_CONTROL
+    stick_time: float  # s, simulated, of the last stick input
 
     def __init__(
         self,
@@ -63,7 +70,8 @@ class Vehicle:
         physics_dt: float = 0.001,
         control_period: float = 0.004,
     ) -> None:
-        self.home = home or Home()
+        self.origin = home or Home()
+        self.home_position = np.zeros(3)  # m, ENU: where home is in the local frame
         self.params = ParameterStore()
         self.params.values["SIM_AIRFRAME"] = float(
             AIRFRAME_NAMES.index(get_airframe(airframe).name)
@@ -74,8 +82,8 @@ class Vehicle:
         self.control_period = self.substeps * physics_dt
         self.controller: Autopilot = CascadedController(self.airframe)
         self.battery = Battery()
-        self.mission: list[M.MissionItem] = []
-        self.mission_current = 0
+        self.failsafes = Failsafes()
+        self.missions = MissionRunner(self)
         self.events: deque[tuple[int, str]] = deque(maxlen=100)
         self.items_reached: deque[int] = deque(maxlen=100)
         self.rotor_cmd = np.zeros(L.N_ROTORS)  # rad/s, last command to the motors
@@ -111,6 +119,19 @@ class Vehicle:
         return float(self.position[2]) - self.airframe.gear_height
 
     @property
+    def mission(self) -> list[M.MissionItem]:
+        return self.missions.items
+
+    @property
+    def mission_current(self) -> int:
+        return self.missions.current
+
+    @property
+    def home_altitude(self) -> float:
+        """m above mean sea level of home."""
+        return self.origin.altitude + float(self.home_position[2])
+
+    @property
     def landed_state(self) -> int:
         if self.on_ground:
             return LandedState.ON_GROUND
@@ -135,7 +156,7 @@ class Vehicle:
         self.flew = False
         self.controller.reset()
         self._enter_mode(self.mode)
-        self._event(Severity.INFO, "armed")
+        self.event(Severity.INFO, "armed")
         return ACCEPTED
 
     def disarm(self, force: bool = False) -> Result:
@@ -144,7 +165,7 @@ class Vehicle:
         if not self.on_ground and not force:
             return denied("disarming denied: vehicle is flying (use force)")
         self.armed = False
-        self._event(Severity.INFO, "disarmed")
+        self.event(Severity.INFO, "disarmed")
         return ACCEPTED
 
     def set_mode(self, mode: Mode) -> Result:
@@ -152,6 +173,8 @@ class Vehicle:
             return denied(f"mode {mode.name} denied: needs a pilot (RC)")
         if mode is Mode.MISSION and not self.mission:
             return denied("mission mode denied: no mission uploaded")
+        if mode is Mode.MISSION and self.missions.finished:
+            self.missions.restart()
         if mode is Mode.OFFBOARD and not self._offboard_alive():
             return denied("offboard denied: stream setpoints first")
         if mode is Mode.RTL and self.on_ground:
@@ -161,21 +184,56 @@ class Vehicle:
         if self.motor_control:
             self.release_motors(f"mode {mode.name} requested")
         if mode is not self.mode:
-            self._event(Severity.INFO, f"mode {mode.name}")
+            self.event(Severity.INFO, f"mode {mode.name}")
         self._enter_mode(mode)
         return ACCEPTED
 
     def takeoff(self, altitude: float | None = None) -> Result:
-        """Climb above the current position to ``altitude`` m above home (None: param)."""
-        if not self.armed:
+        """Climb above the current position to ``altitude`` m above home (None: the
+        MIS_TAKEOFF_ALT parameter). Disarmed on the ground, the vehicle switches to
+        TAKEOFF and climbs once armed (PX4's behaviour, which QGroundControl relies on)."""
+        if not self.armed and not self.on_ground:
             return denied("take-off denied: not armed")
-        if altitude is not None and not (math.isfinite(altitude) and 0.3 <= altitude <= 500):
-            return denied(f"take-off denied: altitude {altitude} m above home out of range")
-        self.takeoff_altitude = altitude if altitude is not None else None
-        return self.set_mode(Mode.TAKEOFF)
+        if altitude is not None:
+            above_ground = altitude + float(self.home_position[2])
+            if not (math.isfinite(altitude) and above_ground >= 0.3 and altitude <= 500):
+                return denied(
+                    f"take-off denied: {altitude:.1f} m above home is below the ground or "
+                    "above 500 m"
+                )
+        self.takeoff_altitude = altitude
+        result = self.set_mode(Mode.TAKEOFF)
+        if result.ok and not self.armed:
+            self.event(Severity.INFO, "take-off ready: arm to climb")
+        return result
 
     def land(self) -> Result:
         return self.set_mode(Mode.LAND)
+
+    def set_home(self, east: float, north: float, up: float) -> Result:
+        """Move home to a local point (m; ``up`` above the ground)."""
+        point = np.array([east, north, up], dtype=np.float64)
+        if not np.isfinite(point).all() or abs(point).max() > 50_000:
+            return denied("set home denied: position not finite or too far")
+        if up < -1e-6:
+            return denied("set home denied: below the ground")
+        self.home_position = point
+        lat, lon, alt = self.origin.to_global(east, north, up)
+        self.event(Severity.INFO, f"home set to {lat:.7f}, {lon:.7f}, {alt:.1f} m")
+        return ACCEPTED
+
+    def stick_input(self, forward: float, right: float, up: float, yaw: float) -> None:
+        """Joystick deflections (MANUAL_CONTROL, normalised to [-1, 1]); they fly the
+        vehicle in POSCTL and ALTCTL and are ignored in the other modes."""
+        self.sticks = np.clip(np.nan_to_num([forward, right, up, yaw]), -1.0, 1.0)
+        self.stick_time = self.time
+
+    def datalink_lost(self, silence: float) -> None:
+        """The ground station went silent (the server measures it on the wall clock)."""
+        self._react(Failsafes.datalink_lost(silence, self.params.values))
+
+    def datalink_regained(self) -> None:
+        self.event(Severity.INFO, "ground station link regained")
 
     def return_to_launch(self) -> Result:
         return self.set_mode(Mode.RTL)
@@ -197,10 +255,10 @@ class Vehicle:
         if not np.isfinite(target).all() or abs(target).max() > 50_000:
             return denied("reposition denied: target not finite or too far")
         if self.mode is not Mode.LOITER:
-            self._event(Severity.INFO, "mode LOITER")
+            self.event(Severity.INFO, "mode LOITER")
         self.mode = Mode.LOITER
-        limits = self._limits(cruise=speed if speed and speed > 0 else None)
-        self.activity = Leg(here.copy(), target, limits, self._acceptance(), yaw, face_travel=True)
+        limits = self.limits(cruise=speed if speed and speed > 0 else None)
+        self.activity = Leg(here.copy(), target, limits, self.acceptance(), yaw, face_travel=True)
         return ACCEPTED
 
     def offboard_setpoint(self, setpoint: Setpoint) -> None:
@@ -216,7 +274,7 @@ class Vehicle:
         if not self.motor_control:
             self.motor_control = True
             self.mode = Mode.OFFBOARD
-            self._event(Severity.INFO, "external motor control")
+            self.event(Severity.INFO, "external motor control")
         self.motor_command_time = self.time
         self.rotor_cmd[:] = rotor_speeds if self.armed else 0.0
 
@@ -227,7 +285,7 @@ class Vehicle:
         self.motor_control = False
         self.controller.reset()
         self._enter_mode(Mode.LOITER)
-        self._event(Severity.NOTICE, f"motor control ended ({reason}): onboard controller holding")
+        self.event(Severity.NOTICE, f"motor control ended ({reason}): onboard controller holding")
 
     def reset_state(self, state: Vec) -> Result:
         """Put the vehicle in ``state`` (17 values, world ENU, layout of
@@ -258,36 +316,41 @@ class Vehicle:
         """Set a parameter; returns the value stored. ValueError when refused."""
         value = self.params.check(name, value)
         if name == "SIM_AIRFRAME" and value != self.params[name] and not self.on_ground:
-            raise ValueError("SIM_AIRFRAME can only change on the ground")
+            raise ParamError(
+                "SIM_AIRFRAME can only change on the ground", ParamError.PERMISSION_DENIED
+            )
+        full = value if name == "BAT1_V_CHARGED" else self.params["BAT1_V_CHARGED"]
+        empty = value if name == "BAT1_V_EMPTY" else self.params["BAT1_V_EMPTY"]
+        if empty >= full:
+            raise ParamError(
+                f"{name}: the empty cell voltage ({empty:g} V) must be below the "
+                f"full one ({full:g} V)",
+                ParamError.VALUE_OUT_OF_RANGE,
+            )
         self.params.values[name] = value
         self._apply_param(name)
         return value
 
     def set_mission(self, items: list[M.MissionItem]) -> Result:
-        for seq, item in enumerate(items):
-            problem = item.problem()
-            if problem:
-                return denied(f"mission item {seq}: {problem}")
-        if self.mode is Mode.MISSION and self.armed:
+        """Replace the mission (a refused one leaves the old one in place)."""
+        result = self.missions.set_items(items)
+        if result.ok and self.mode is Mode.MISSION and self.armed:
             self._enter_mode(Mode.LOITER)
-        self.mission = list(items)
-        self.mission_current = 0
-        return ACCEPTED
+        return result
 
     def set_mission_current(self, seq: int) -> Result:
-        if not 0 <= seq < max(len(self.mission), 1):
-            return denied(f"mission item {seq} does not exist")
-        self.mission_current = seq
-        if self.mode is Mode.MISSION:
-            self._start_item()
-        return ACCEPTED
+        result = self.missions.set_current(seq)
+        if result.ok and self.mode is Mode.MISSION:
+            self.missions.start_item()
+        return result
 
     def reboot(self) -> None:
         """Back to power-on: on the ground at home, disarmed, charged; mission kept."""
         self.fleet.time = 0.0
         self._reset_flight_state()
         self.battery.recharge()
-        self._event(Severity.INFO, "rebooted")
+        self.failsafes.reset()
+        self.event(Severity.INFO, "rebooted")
 
     # --- stepping ---------------------------------------------------------------------
     def step(self) -> None:
@@ -327,6 +390,10 @@ class Vehicle:
         if self.motor_control:
             return  # the external controller's command stands
         self._navigate()
+        if isinstance(self.activity, Sticks):
+            fresh = self.time - self.stick_time <= STICK_TIMEOUT
+            heading = float(frames.euler_from_quat(self.state[L.QUAT])[2])
+            self.activity.update(self.sticks if fresh else np.zeros(4), heading)
         setpoint = self._current_setpoint()
         self.rotor_cmd[:] = self.controller.rotor_command(self.state, setpoint, self.control_period)
 
@@ -344,25 +411,31 @@ class Vehicle:
         activity = self.activity
         if isinstance(activity, Land):
             return True
-        goal = activity.end if isinstance(activity, Leg) else getattr(activity, "point", None)
-        if goal is None:
-            goal = getattr(activity, "center", self.position)
+        if isinstance(activity, Sticks):
+            return activity.sticks[2] <= 0.0  # the thrust stick lifts off
+        if isinstance(activity, Leg):
+            goal = activity.end
+        elif isinstance(activity, Orbit):
+            goal = activity.center
+        else:
+            goal = activity.point
         return float(goal[2]) < self.airframe.gear_height + 0.3
 
     def _navigate(self) -> None:
-        """Mode logic at the controller rate: timeouts, mission progress, landing."""
+        """Mode logic at the controller rate: timeouts, failsafes, mission progress."""
+        self._check_failsafes()
         if self.mode is Mode.OFFBOARD and not self._offboard_alive():
-            self._event(Severity.WARNING, "offboard setpoints lost: holding position")
+            self.event(Severity.WARNING, "offboard setpoints lost: holding position")
             self._enter_mode(Mode.LOITER)
         if self.on_ground and not self.crashed:
             self._on_ground_timers()
         if self.mode is Mode.TAKEOFF and self.activity.done:
-            self._event(Severity.INFO, "take-off complete: holding")
+            self.event(Severity.INFO, "take-off complete: holding")
             self._enter_mode(Mode.LOITER)
         elif self.mode is Mode.RTL and self.activity.done and self.rtl_stages:
             self.activity = self.rtl_stages.pop(0)
         elif self.mode is Mode.MISSION:
-            self._mission_progress()
+            self.missions.progress()
 
     def _on_ground_timers(self) -> None:
         landing = isinstance(self.activity, Land)
@@ -372,15 +445,37 @@ class Vehicle:
                 self.landed_at = self.time
             if self.time - self.landed_at >= self.params["COM_DISARM_LAND"]:
                 self.disarm()
-                self._event(Severity.INFO, "landed: disarmed")
+                self.event(Severity.INFO, "landed: disarmed")
                 if self.mode is Mode.MISSION:
-                    self._mission_item_reached()
+                    self.missions.item_reached()
                 self._enter_mode(Mode.LOITER)
             return
         limit = self.params["COM_DISARM_PRFLT"]
         if self.armed and limit > 0 and self.time - self.armed_at > limit and not self.flew:
             self.disarm()
-            self._event(Severity.NOTICE, f"disarmed: no take-off within {limit:g} s")
+            self.event(Severity.NOTICE, f"disarmed: no take-off within {limit:g} s")
+
+    def _check_failsafes(self) -> None:
+        p = self.params.values
+        self._react(self.failsafes.battery(self.battery.remaining, p))
+        offset = self.position - self.home_position
+        height = float(offset[2]) - self.airframe.gear_height
+        self._react(self.failsafes.geofence(math.hypot(offset[0], offset[1]), height, p))
+
+    def _react(self, reaction: Reaction | None) -> None:
+        """Announce a failsafe; fly its mode if armed and in the air."""
+        if reaction is None:
+            return
+        self.event(reaction.severity, reaction.text)
+        mode = reaction.mode
+        if mode is None or not self.armed or self.on_ground or mode is self.mode:
+            return
+        if mode is Mode.RTL and self.mode is Mode.LAND:
+            return  # already coming down
+        if self.motor_control:
+            self.release_motors(reaction.text)
+        self.event(Severity.INFO, f"mode {mode.name}")
+        self._enter_mode(mode)
 
     def _watch_contact(self, before: int) -> None:
         after = int(self.fleet.contact[0])
@@ -390,16 +485,16 @@ class Vehicle:
             self.armed = False
             self.rotor_cmd[:] = 0.0
             speed = float(self.fleet.touchdown_speed[0])
-            self._event(
+            self.event(
                 Severity.CRITICAL, f"crashed (touchdown {speed:.1f} m/s): reboot to fly again"
             )
         elif after == L.ON_GROUND:
             self.landed_at = self.time
-            self._event(Severity.INFO, "landed")
+            self.event(Severity.INFO, "landed")
         elif after == L.AIRBORNE:
             self.flew = True
             self.landed_at = None
-            self._event(Severity.INFO, "took off")
+            self.event(Severity.INFO, "took off")
 
     # --- modes ------------------------------------------------------------------------
     def _enter_mode(self, mode: Mode) -> None:
@@ -410,125 +505,39 @@ class Vehicle:
         if mode is Mode.TAKEOFF:
             altitude = self.takeoff_altitude or self.params["MIS_TAKEOFF_ALT"]
             top = np.array([here[0], here[1], altitude + self.airframe.gear_height])
-            limits = self._limits(climb=self.params["MPC_TKO_SPEED"])
+            limits = self.limits(climb=self.params["MPC_TKO_SPEED"])
             self.activity = Leg(here, top, limits, radius=0.2, yaw=yaw)
         elif mode is Mode.LAND:
             self.activity = Land(here, self.params["MPC_LAND_SPEED"], yaw)
         elif mode is Mode.RTL:
-            self._plan_rtl(here, yaw)
+            self.plan_rtl(here, yaw)
         elif mode is Mode.MISSION:
-            self._start_item()
+            self.missions.started = True
+            self.missions.start_item()
+        elif mode in STICK_MODES:
+            max_yaw_rate = math.radians(self.params["MC_YAWRATE_MAX"])
+            self.activity = Sticks(here, yaw, self.limits(), max_yaw_rate)
         else:  # hold modes and offboard's fallback
             self.activity = Hold(here, yaw)
         if mode is Mode.OFFBOARD:
             self.controller.reset()
 
-    def _plan_rtl(self, here: Vec, yaw: float) -> None:
+    def plan_rtl(self, here: Vec, yaw: float) -> None:
         gear = self.airframe.gear_height
-        cruise_z = max(here[2], self.params["RTL_RETURN_ALT"] + gear)
-        above_home = np.array([0.0, 0.0, cruise_z])
+        home = self.home_position
+        cruise_z = max(here[2], home[2] + self.params["RTL_RETURN_ALT"] + gear)
+        above_home = np.array([home[0], home[1], cruise_z])
         climb_to = np.array([here[0], here[1], cruise_z])
-        limits, radius = self._limits(), self._acceptance()
+        limits, radius = self.limits(), self.acceptance()
         self.rtl_stages = [
             Leg(climb_to, above_home, limits, radius, face_travel=True),
             Land(above_home, self.params["MPC_LAND_SPEED"]),
         ]
         self.activity = Leg(here, climb_to, limits, radius, yaw)
-        self._event(Severity.INFO, "returning to launch")
-
-    # --- missions ---------------------------------------------------------------------
-    def _start_item(self) -> None:
-        here = self.position.copy()
-        self.item_hold_until = None
-        if self.mission_current >= len(self.mission):
-            self._event(Severity.INFO, "mission finished: holding")
-            self.mode = Mode.LOITER
-            self.activity = Hold(here)
-            return
-        item = self.mission[self.mission_current]
-        gear = self.airframe.gear_height
-        east, north, up = item.target(self.home, (here[0], here[1], here[2] - gear))
-        target = np.array([east, north, up + gear])
-        yaw = (
-            None
-            if math.isnan(item.param4)
-            else float(frames.yaw_ned_to_enu(math.radians(item.param4)))
-        )
-        radius = item.param2 if item.command == M.NAV_WAYPOINT and item.param2 > 0 else None
-        limits = self._limits()
-        if item.command == M.NAV_TAKEOFF:
-            target[:2] = here[:2]
-            limits = self._limits(climb=self.params["MPC_TKO_SPEED"])
-            self.activity = Leg(here, target, limits, 0.2, yaw)
-        elif item.command == M.NAV_LAND:
-            target[2] = here[2]
-            start = self._previous_target(here)
-            self.activity = Leg(start, target, limits, self._acceptance(), yaw, face_travel=True)
-            self.land_after_leg = True
-        elif item.command == M.NAV_RETURN_TO_LAUNCH:
-            self._plan_rtl(here, 0.0)
-        elif item.command == M.DO_CHANGE_SPEED:
-            if item.param2 > 0:
-                self.mission_speed = item.param2
-            self._mission_item_reached()
-            return
-        else:  # waypoints and loiters fly there first
-            start = self._previous_target(here)
-            self.activity = Leg(start, target, limits, radius or self._acceptance(), yaw, True)
-        self.land_after_leg = item.command == M.NAV_LAND
-        self.item_target = target
-
-    def _previous_target(self, here: Vec) -> Vec:
-        """Where the leg starts: the last item's target if the vehicle is near it (so the
-        track follows the planned line, as PX4 does), else the vehicle's position."""
-        previous = getattr(self, "item_target", None)
-        if previous is not None and np.linalg.norm(previous - here) < 2.0:
-            return previous
-        return here
-
-    def _mission_progress(self) -> None:
-        item = self.mission[self.mission_current]
-        if item.command == M.NAV_RETURN_TO_LAUNCH:
-            if self.activity.done and self.rtl_stages:
-                self.activity = self.rtl_stages.pop(0)
-            return  # landing completes it (see _on_ground_timers)
-        if not self.activity.done or isinstance(self.activity, Land):
-            return
-        if self.land_after_leg and isinstance(self.activity, Leg):
-            self.activity = Land(
-                self.activity.end, self.params["MPC_LAND_SPEED"], self.activity.yaw
-            )
-            return
-        if isinstance(self.activity, Leg) and item.command == M.NAV_LOITER_TURNS:
-            self.activity = Orbit(
-                self.activity.end, item.param3, item.param1, self._limits().cruise_xy, self.position
-            )
-            return
-        hold = {M.NAV_WAYPOINT: item.param1, M.NAV_LOITER_TIME: item.param1}.get(item.command, 0)
-        if item.command == M.NAV_LOITER_UNLIM:
-            return  # holds until the mission is changed
-        if self.item_hold_until is None:
-            self.item_hold_until = self.time + max(hold, 0.0)
-            self.activity = Hold(
-                getattr(self.activity, "end", self.position.copy()), self.activity.yaw
-            )
-            self.activity.done = True
-        if self.time >= self.item_hold_until:
-            self._mission_item_reached()
-
-    def _mission_item_reached(self) -> None:
-        self.items_reached.append(self.mission_current)
-        self.mission_current += 1
-        if self.mission_current < len(self.mission):
-            self._start_item()
-        elif self.armed and not self.on_ground:
-            self._start_item()  # finishes the mission: hold
-        else:
-            self.mission_current = len(self.mission) - 1 if self.mission else 0
-            self._event(Severity.INFO, "mission finished")
+        self.event(Severity.INFO, "returning to launch")
 
     # --- helpers ----------------------------------------------------------------------
-    def _limits(self, cruise: float | None = None, climb: float | None = None) -> Limits:
+    def limits(self, cruise: float | None = None, climb: float | None = None) -> Limits:
         p = self.params
         speed = cruise or self.mission_speed or p["MPC_XY_CRUISE"]
         return Limits(
@@ -538,7 +547,7 @@ class Vehicle:
             decel=0.5 * p["MPC_ACC_HOR"],
         )
 
-    def _acceptance(self) -> float:
+    def acceptance(self) -> float:
         return self.params["NAV_ACC_RAD"]
 
     def _offboard_alive(self) -> bool:
@@ -547,7 +556,7 @@ class Vehicle:
             and self.time - self.offboard_time <= self.params["COM_OF_LOSS_T"]
         )
 
-    def _event(self, severity: int, text: str) -> None:
+    def event(self, severity: int, text: str) -> None:
         self.events.append((severity, text))
 
     def _apply_all_params(self) -> None:
@@ -559,8 +568,14 @@ class Vehicle:
         value = self.params[name]
         if spec.gain is not None and isinstance(self.controller, CascadedController):
             setattr(self.controller.gains, spec.gain, value)
-        elif name == "BAT_CAPACITY":
+        elif name == "BAT1_CAPACITY":
             self.battery.capacity_mah = value
+        elif name == "BAT1_N_CELLS":
+            self.battery.cells = int(value)
+        elif name == "BAT1_V_CHARGED":
+            self.battery.cell_full_v = value
+        elif name == "BAT1_V_EMPTY":
+            self.battery.cell_empty_v = value
         elif name == "SIM_AIRFRAME":
             airframe = get_airframe(AIRFRAME_NAMES[int(value)])
             if airframe != self.airframe:
@@ -569,7 +584,7 @@ class Vehicle:
                 self.fleet.airframes = [airframe]
                 if isinstance(self.controller, CascadedController):
                     self.controller.set_airframe(airframe)
-                self._event(Severity.INFO, f"airframe {airframe.name}")
+                self.event(Severity.INFO, f"airframe {airframe.name}")
 
     def _reset_flight_state(self) -> None:
         rest = np.zeros(L.STATE_SIZE)
@@ -584,12 +599,12 @@ class Vehicle:
         self.offboard_time = -math.inf
         self.takeoff_altitude = None
         self.mission_speed = None
-        self.land_after_leg = False
-        self.item_hold_until = None
-        self.item_target = None
         self._physics_steps = 0
         self.motor_control = False
         self.motor_command_time = -math.inf
+        self.missions.reset_flight()
+        self.sticks = np.zeros(4)
+        self.stick_time = -math.inf
         self.rotor_cmd[:] = 0.0
         self.controller.reset()
         self.mode = Mode.LOITER

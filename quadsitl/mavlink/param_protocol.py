@@ -1,0 +1,125 @@
+"""The MAVLink parameter protocol: list, read, set.
+
+Integer parameters travel as MAV_PARAM_TYPE_INT32 with their four bytes in the float
+field ("bytewise"), as PX4 sends them and as QGroundControl and MAVSDK decode them for a
+non-ArduPilot vehicle (the vehicle declares MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE);
+the others are REAL32.
+
+A write that is refused is answered with PARAM_ERROR naming the reason (QGroundControl
+then reports it once instead of resending), plus a STATUSTEXT for people. A client
+speaking MAVLink 1, which has no PARAM_ERROR, gets the value still held echoed instead,
+as the protocol worked before PARAM_ERROR existed.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable
+from typing import Any
+
+from quadsitl.mavlink import mavlink as mav
+from quadsitl.vehicle.params import PARAMETERS, SPECS, ParamError
+from quadsitl.vehicle.results import Severity
+from quadsitl.vehicle.vehicle import Vehicle
+
+INTEGER_TYPES = {
+    mav.MAV_PARAM_TYPE_UINT8: "<B", mav.MAV_PARAM_TYPE_INT8: "<b",
+    mav.MAV_PARAM_TYPE_UINT16: "<H", mav.MAV_PARAM_TYPE_INT16: "<h",
+    mav.MAV_PARAM_TYPE_UINT32: "<I", mav.MAV_PARAM_TYPE_INT32: "<i",
+}  # fmt: skip
+Reply = Callable[[Any], None]
+
+
+def encode_value(value: float, integer: bool) -> tuple[float, int]:
+    """(float field, MAV_PARAM_TYPE) of a parameter value."""
+    param_type = mav.MAV_PARAM_TYPE_INT32 if integer else mav.MAV_PARAM_TYPE_REAL32
+    return encode_raw(value, param_type), param_type
+
+
+def encode_raw(value: float, param_type: int) -> float:
+    """The float field that carries ``value`` as ``param_type`` (bytewise for integers)."""
+    fmt = INTEGER_TYPES.get(param_type)
+    if fmt is None:
+        return float(value)
+    data = struct.pack(fmt, round(value)).ljust(4, b"\x00")
+    return float(struct.unpack("<f", data)[0])
+
+
+def decode_value(raw: float, param_type: int) -> float:
+    """The number a PARAM_SET (or PARAM_VALUE) carries, by its declared type."""
+    fmt = INTEGER_TYPES.get(param_type)
+    if fmt is None:
+        return float(raw)
+    data = struct.pack("<f", raw)
+    return float(struct.unpack(fmt, data[: struct.calcsize(fmt)])[0])
+
+
+def param_name(raw: Any) -> str:
+    if isinstance(raw, bytes):
+        raw = raw.decode("ascii", "replace")
+    return str(raw).split("\x00", 1)[0].strip()
+
+
+class ParamProtocol:
+    def __init__(self, vehicle: Vehicle, encoder: Any, notify: Callable[[int, str], None]) -> None:
+        self.vehicle = vehicle
+        self.encoder = encoder
+        self.notify = notify  # (severity, text) -> STATUSTEXT
+        self.names = [spec.name for spec in PARAMETERS]
+
+    def value_message(self, name: str) -> Any:
+        raw, param_type = encode_value(self.vehicle.params[name], SPECS[name].integer)
+        return self.encoder.param_value_encode(
+            name.encode(), raw, param_type, len(self.names), self.names.index(name)
+        )
+
+    def on_request_list(self, msg: Any, reply: Reply) -> None:
+        for name in self.names:
+            reply(self.value_message(name))
+
+    def on_request_read(self, msg: Any, reply: Reply) -> None:
+        if msg.param_index >= 0:
+            if msg.param_index >= len(self.names):
+                text = f"no parameter with index {msg.param_index}"
+                self._refuse(msg, reply, text, mav.MAV_PARAM_ERROR_DOES_NOT_EXIST)
+                return
+            name = self.names[msg.param_index]
+        else:
+            name = param_name(msg.param_id)
+            if name not in SPECS:
+                text = f"unknown parameter {name!r}"
+                self._refuse(msg, reply, text, mav.MAV_PARAM_ERROR_DOES_NOT_EXIST)
+                return
+        reply(self.value_message(name))
+
+    def on_set(self, msg: Any, reply: Reply, broadcast: Reply) -> None:
+        """Set; the new value goes to every link (the acknowledgement, and news for the
+        other ground stations)."""
+        name = param_name(msg.param_id)
+        try:
+            self.vehicle.set_param(name, decode_value(msg.param_value, msg.param_type))
+        except ParamError as error:
+            self._refuse(msg, reply, f"param set refused: {error}", error.code, name)
+            return
+        broadcast(self.value_message(name))
+
+    def _refuse(
+        self, msg: Any, reply: Reply, text: str, code: int, name: str | None = None
+    ) -> None:
+        self.notify(Severity.WARNING, text)
+        if _is_mavlink1(msg):
+            if name in SPECS:  # the old protocol's refusal: the value still held
+                reply(self.value_message(name))
+            return
+        param_id = (name or param_name(getattr(msg, "param_id", b""))).encode()[:16]
+        index = getattr(msg, "param_index", -1) if name is None else -1
+        error = self.encoder.param_error_encode(
+            msg.get_srcSystem(), msg.get_srcComponent(), param_id, index, code
+        )
+        reply(error)
+
+
+def _is_mavlink1(msg: Any) -> bool:
+    """Whether ``msg`` arrived in a MAVLink 1 frame (magic byte 0xFE)."""
+    buffer = msg.get_msgbuf()
+    return bool(buffer) and buffer[0] == 0xFE
