@@ -22,7 +22,11 @@ demo: venv
 test: venv
 	$(BIN)/python -m pytest -q
 
+# MAVProxy's core for its slow test, without the GUI and vision packages it lists
+# (OpenCV, VTK, wxPython): the simulator's tests only drive its command line.
 test-slow: venv
+	$(BIN)/python -m pip install --quiet --no-deps 'MAVProxy>=1.8.75'
+	$(BIN)/python -m pip install --quiet defusedxml pynmeagps pyserial
 	$(BIN)/python -m pytest -q -m slow
 
 bench: venv

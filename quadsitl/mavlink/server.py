@@ -93,6 +93,7 @@ class MavlinkServer:
         self.last_heartbeat = -math.inf
         self.gcs_heard: float | None = None  # wall s of the last ground-station heartbeat
         self.gcs_lost = False
+        self.last_mission_progress: tuple[int, int, int] | None = None
         self.last_state: tuple[bool, Mode, bool, bool] | None = None
         self._after_ack: list[Any] = []
         self.commands = self._commands()
@@ -197,6 +198,10 @@ class MavlinkServer:
             self.last_heartbeat, self.last_state = wall_now, state  # at once on a change
             self.send(T.build_heartbeat(v, self.identity.autopilot))
         self._watch_ground_station(wall_now)
+        progress = (v.mission_current, len(v.mission), T.mission_state(v))
+        if progress != self.last_mission_progress:  # at once, as PX4 does: MAVSDK's
+            self.last_mission_progress = progress  # is_mission_finished reads it
+            self.send(T.build_mission_current(self._snapshot()))
         self.missions.tick(wall_now)
         if self.signing is not None and wall_now - self._signing_reported[0] > 1.0:
             self._report_signing(wall_now)

@@ -112,10 +112,20 @@ def build_heartbeat(v: Vehicle, autopilot: int = mav.MAV_AUTOPILOT_PX4) -> Any:
 
 
 def build_sys_status(s: Snapshot) -> Any:
+    """Sensors present, enabled and healthy (MAVSDK's health checks read them). The
+    geofence bit is present and enabled when a fence is set, and unhealthy while it is
+    breached (MAVProxy announces "fence breach" whenever the health bit is clear)."""
     v = s.vehicle
-    health = SENSORS & ~mav.MAV_SYS_STATUS_PREARM_CHECK if v.crashed else SENSORS
+    fence = mav.MAV_SYS_STATUS_GEOFENCE
+    fenced = v.params["GF_MAX_HOR_DIST"] > 0 or v.params["GF_MAX_VER_DIST"] > 0
+    present = SENSORS | (fence if fenced else 0)
+    health = SENSORS | fence
+    if v.crashed:
+        health &= ~mav.MAV_SYS_STATUS_PREARM_CHECK
+    if v.failsafes.fence_breached:
+        health &= ~fence
     return _encoder.sys_status_encode(
-        SENSORS, SENSORS, health, 100, int(v.battery.voltage * 1000),
+        present, present, health, 100, int(v.battery.voltage * 1000),
         int(v.battery.current * 100), int(v.battery.remaining * 100), 0, s.comm_errors,
         *s.error_counts,
     )  # fmt: skip

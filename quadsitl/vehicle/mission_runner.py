@@ -182,16 +182,18 @@ class MissionRunner:
         v = self.v
         self.current = max(len(self.items) - 1, 0)
         self.finished = True
-        if v.armed and not v.on_ground:
+        if v.armed and not v.on_ground:  # hold at the last item's point, as PX4 does
             v.event(Severity.INFO, "mission finished: holding")
             v.mode = Mode.LOITER
-            v.activity = Hold(here)
+            v.activity = Hold(self._leg_start(here))
         else:
             v.event(Severity.INFO, "mission finished")
+
+    def _near_target(self, here: Vec) -> bool:
+        return self.target is not None and float(np.linalg.norm(self.target - here)) < 2.0
 
     def _leg_start(self, here: Vec) -> Vec:
         """Where the leg starts: the last item's target if the vehicle is near it (so the
         track follows the planned line, as PX4 does), else the vehicle's position."""
-        if self.target is not None and np.linalg.norm(self.target - here) < 2.0:
-            return self.target
-        return here
+        target = self.target
+        return target if target is not None and self._near_target(here) else here

@@ -166,6 +166,7 @@ class Sticks:
     """
 
     DEADBAND = 0.05
+    STOPPED = 0.3  # m/s: below this, a released vehicle holds its position
 
     def __init__(self, point: Vec, yaw: float, limits: Limits, max_yaw_rate: float) -> None:
         self.point = np.array(point, dtype=np.float64)  # held while the sticks are centred
@@ -187,23 +188,20 @@ class Sticks:
     def setpoint(self, position: Vec, velocity: Vec, t: float) -> Setpoint:
         forward, right, up, yaw = self.sticks
         yaw_rate = -yaw * self.max_yaw_rate  # stick right turns clockwise (ENU yaw falls)
+        yaw_sp = None if yaw_rate else self.yaw
         if not self.sticks[:3].any():
-            if self.moving:  # just released: hold where it is now
+            if self.moving:  # released: brake to a stop, then hold where it stopped
+                if np.linalg.norm(velocity) > self.STOPPED:
+                    return Setpoint(velocity=np.zeros(3), yaw=yaw_sp, yaw_rate=yaw_rate)
                 self.point = np.array(position, dtype=np.float64)
                 self.moving = False
-            if yaw_rate:
-                return Setpoint(position=self.point.copy(), yaw=None, yaw_rate=yaw_rate)
-            return Setpoint(position=self.point.copy(), yaw=self.yaw)
+            return Setpoint(position=self.point.copy(), yaw=yaw_sp, yaw_rate=yaw_rate)
         self.moving = True
         c, s = math.cos(self.heading), math.sin(self.heading)
         # Heading frame FLU: forward = (c, s), right = (s, -c) in world ENU.
         v_xy = self.limits.cruise_xy * np.array([forward * c + right * s, forward * s - right * c])
         v_z = up * (self.limits.climb if up > 0 else self.limits.descent)
-        return Setpoint(
-            velocity=np.array([v_xy[0], v_xy[1], v_z]),
-            yaw=None if yaw_rate else self.yaw,
-            yaw_rate=yaw_rate,
-        )
+        return Setpoint(velocity=np.array([v_xy[0], v_xy[1], v_z]), yaw=yaw_sp, yaw_rate=yaw_rate)
 
 
 Activity = Hold | Leg | Orbit | Land | Sticks
