@@ -1,4 +1,4 @@
-"""The three algorithms on every task over seeds (issue 7: Fig. 2–3 and the closing table).
+"""The three algorithms on every task over seeds (the paper's Fig. 2–3 and its closing table).
 
 Each (task, algorithm, seed) is trained with a preset and a fixed step budget, its best
 checkpoint evaluated on 100 deterministic test episodes, and the learning curves (mean
@@ -35,15 +35,23 @@ TARGET_SUCCESS = 0.9  # "reached": the first periodic validation at or above thi
 # Steps per run of the fast-preset comparison: the PPO budget that learns each task
 # (FAST_STEPS), shortened for the two long tasks so that 45 runs fit in about an hour.
 FAST_BUDGET = {
-    "hover": 800_000, "static_waypoint": 2_000_000, "random_waypoint": 4_000_000,
-    "land": 4_000_000, "target_follow": 2_000_000,
-}  # fmt: skip
+    "hover": 800_000,
+    "static_waypoint": 2_000_000,
+    "random_waypoint": 4_000_000,
+    "land": 4_000_000,
+    "target_follow": 2_000_000,
+}
 
 
 def one_run(
-    task: str, algo: str, preset: str, seed: int, steps: int | None, runs: Path,
+    task: str,
+    algo: str,
+    preset: str,
+    seed: int,
+    steps: int | None,
+    runs: Path,
     target: float = TARGET_SUCCESS,
-) -> dict:  # fmt: skip
+) -> dict:
     """Train one run (``steps`` None: the preset's budget), evaluate its best checkpoint
     on 100 test episodes; the run's figures as a dict. ``reach_seconds``/``reach_steps``:
     wall clock (evaluations included) and steps at the first periodic validation with
@@ -62,13 +70,21 @@ def one_run(
                 reach_seconds, reach_steps = float(row["wall_seconds"]), float(row["env_steps"])
                 break
     return {
-        "task": task, "algo": algo, "seed": seed, "success": test.success_rate,
-        "metric": test.metric_mean, "metric_name": test.metric_name,
-        "unit": test.metric_unit, "seconds": result.seconds, "steps": result.env_steps,
-        "reach_seconds": reach_seconds, "reach_steps": reach_steps,
-        "final_return": result.final_return, "diverged": result.diverged,
+        "task": task,
+        "algo": algo,
+        "seed": seed,
+        "success": test.success_rate,
+        "metric": test.metric_mean,
+        "metric_name": test.metric_name,
+        "unit": test.metric_unit,
+        "seconds": result.seconds,
+        "steps": result.env_steps,
+        "reach_seconds": reach_seconds,
+        "reach_steps": reach_steps,
+        "final_return": result.final_return,
+        "diverged": result.diverged,
         "run_dir": str(result.run_dir),
-    }  # fmt: skip
+    }
 
 
 def table_row(rows: list[dict]) -> str:
@@ -107,15 +123,19 @@ def main() -> None:
     budget = FAST_BUDGET if args.preset == "fast" else {}  # paper: Table I's 1.28 M
     jobs = [
         (task, algo, args.preset, seed, args.steps or budget.get(task), runs)
-        for task in args.tasks for algo in args.algos for seed in args.seeds
-    ]  # fmt: skip
+        for task in args.tasks
+        for algo in args.algos
+        for seed in args.seeds
+    ]
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         results = list(pool.map(one_run, *zip(*jobs, strict=True)))
     by_cell: dict[tuple[str, str], list[dict]] = {}
     for r in results:
         by_cell.setdefault((r["task"], r["algo"]), []).append(r)
-    print("| task | algorithm | test success (mean ± std; per seed) | task metric "
-          f"| validation ≥ {TARGET_SUCCESS:.0%} | run (mean), steps |")  # fmt: skip
+    print(
+        "| task | algorithm | test success (mean ± std; per seed) | task metric "
+        f"| validation ≥ {TARGET_SUCCESS:.0%} | run (mean), steps |"
+    )
     print("|---|---|---|---|---|---|")
     for rows in by_cell.values():
         print(table_row(rows))

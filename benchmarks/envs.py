@@ -1,6 +1,6 @@
 """Env throughput: native vector env (4,096 envs) and one env through ``gym.make``.
 
-Targets (issue 3), one core: ≥ 1,000,000 env steps/s for the vector env, ≥ 20,000 for the
+Targets, one core: ≥ 1,000,000 env steps/s for the vector env, ≥ 20,000 for the
 single env. Each env step is one 0.05 s control period = 5 RK4 physics substeps. Actions
 are small random perturbations around hover, so episodes run their course and
 autoresets happen at the task's own rate.

@@ -24,8 +24,9 @@ def main() -> None:
     for path in sorted((ROOT / "policies" / "checkpoints").glob("*.pt")):
         net, config, _ = checkpoint.load(path)
         result = evaluate(net, config, episodes=8, num_envs=8, keep_trajectories=8)
-        png = trajectories(config.task, result.trajectories, result.goals,
-                           OUT / f"trajectories_{config.task}.png")  # fmt: skip
+        png = trajectories(
+            config.task, result.trajectories, result.goals, OUT / f"trajectories_{config.task}.png"
+        )
         print(png.relative_to(ROOT))
     runs = [Path(p) for p in sys.argv[1:]]
     for png in learning_curves(runs, OUT) if runs else []:

@@ -1,4 +1,4 @@
-"""Training through the wire: env steps per second of the MAVLink envs (issue 6).
+"""Training through the wire: env steps per second of the MAVLink envs.
 
 * ``mavlink_env_steps_per_s``: one ``QuadSITL/Hover-v0`` env with ``backend="mavlink"``
   (gym.make, so with Gymnasium's wrappers), each step one lockstep round trip of the

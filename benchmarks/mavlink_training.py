@@ -1,5 +1,5 @@
 """PPO through the wire: the same short Stable-Baselines3 run on the in-process physics
-and on ``quadsitl sim`` processes over MAVLink (issue 6's "done when").
+and on ``quadsitl sim`` processes over MAVLink.
 
 Hover, 2 envs, seed 0, the same PPO settings and number of environment steps for both
 backends; prints the mean episode return of the last 20 episodes, the success rate of

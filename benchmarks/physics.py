@@ -1,6 +1,6 @@
 """Physics throughput: batched RK4 steps/s (4,096 vehicles) and single-vehicle steps/s.
 
-Targets (issue 2), one core: ≥ 5,000,000 vehicle steps/s batched, ≥ 100,000 steps/s for a
+Targets, one core: ≥ 5,000,000 vehicle steps/s batched, ≥ 100,000 steps/s for a
 single vehicle through the Python API (``Fleet.step``).
 """
 

@@ -92,11 +92,27 @@ def realtime() -> None:
     for thread in threads:
         thread.start()
     process = subprocess.Popen(
-        [sys.executable, "-m", "quadsitl.cli", "sim", "--physics-rate", "1000",
-         "--gcs", f"udpout:127.0.0.1:{gcs_port}", "--api", f"udpout:127.0.0.1:{api_port}",
-         "--duration", str(DURATION), "--logs", "none", "--quiet"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "quadsitl.cli",
+            "sim",
+            "--physics-rate",
+            "1000",
+            "--gcs",
+            f"udpout:127.0.0.1:{gcs_port}",
+            "--api",
+            f"udpout:127.0.0.1:{api_port}",
+            "--duration",
+            str(DURATION),
+            "--logs",
+            "none",
+            "--quiet",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     start = time.monotonic()
     _take_off(listeners[0], counts[0])
     time.sleep(WINDOW[0] - (time.monotonic() - start))
@@ -111,10 +127,14 @@ def realtime() -> None:
     p99, worst, skipped = float(match[1]), float(match[2]), int(match[3])
     cpu = 100.0 * (cpu1 - cpu0) / (t1 - t0)
     rate = (msgs1 - msgs0) / (t1 - t0)
-    print(f"sim ran {time.monotonic() - start:.1f} s at 1 kHz physics, {rate:.0f} telemetry "
-          f"messages/s received on 2 links")  # fmt: skip
-    print(f"step lateness p99 {p99:.3f} ms (max {worst:.3f} ms, {skipped} steps skipped); "
-          f"target < 2 ms: {'meets' if p99 < 2 else 'MISSES'}")  # fmt: skip
+    print(
+        f"sim ran {time.monotonic() - start:.1f} s at 1 kHz physics, {rate:.0f} telemetry "
+        f"messages/s received on 2 links"
+    )
+    print(
+        f"step lateness p99 {p99:.3f} ms (max {worst:.3f} ms, {skipped} steps skipped); "
+        f"target < 2 ms: {'meets' if p99 < 2 else 'MISSES'}"
+    )
     print(f"CPU {cpu:.1f} % of one core; target < 50 %: {'meets' if cpu < 50 else 'MISSES'}")
     print(f"realtime_jitter_p99_ms: {p99:.3f}")
     print(f"realtime_cpu_percent: {cpu:.1f}")
@@ -150,11 +170,26 @@ def lockstep(
     key = key_from_passphrase("benchmark") if signed else None
     signing = ["--signing-passphrase", "benchmark"] if signed else []
     process = subprocess.Popen(
-        [sys.executable, "-m", "quadsitl.cli", "sim", "--lockstep", "--api", "none",
-         "--gcs", f"udpout:127.0.0.1:{listener.getsockname()[1]}",
-         "--hil", f"udpin:127.0.0.1:{port}", "--logs", "none", "--quiet", *signing],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "quadsitl.cli",
+            "sim",
+            "--lockstep",
+            "--api",
+            "none",
+            "--gcs",
+            f"udpout:127.0.0.1:{listener.getsockname()[1]}",
+            "--hil",
+            f"udpin:127.0.0.1:{port}",
+            "--logs",
+            "none",
+            "--quiet",
+            *signing,
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         client = MotorClient("127.0.0.1", port, timeout=5.0, signing_key=key)
         deadline = time.monotonic() + 30

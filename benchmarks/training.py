@@ -1,4 +1,4 @@
-"""Training targets (issue 7; not part of `make test`): wall-clock time to learn.
+"""Training targets (not part of `make test`): wall-clock time to learn.
 
 Default: the fast preset on hover (PPO; target ≥ 95 % success in ≤ 60 s), random
 waypoint (≥ 90 % reached in ≤ 10 min) and landing (≥ 90 % landed without a crash in

@@ -23,9 +23,15 @@ mav = mavutil.mavlink
 
 # PX4 custom modes (main << 16 | sub << 24), as the vehicle reports them.
 MODES = {
-    "POSCTL": (3, 0), "ALTCTL": (2, 0), "OFFBOARD": (6, 0), "TAKEOFF": (4, 2),
-    "LOITER": (4, 3), "MISSION": (4, 4), "RTL": (4, 5), "LAND": (4, 6),
-}  # fmt: skip
+    "POSCTL": (3, 0),
+    "ALTCTL": (2, 0),
+    "OFFBOARD": (6, 0),
+    "TAKEOFF": (4, 2),
+    "LOITER": (4, 3),
+    "MISSION": (4, 4),
+    "RTL": (4, 5),
+    "LAND": (4, 6),
+}
 
 
 class ClientError(RuntimeError):
@@ -175,8 +181,16 @@ class VehicleClient:
     def takeoff(self, altitude: float) -> None:
         """Take off to ``altitude`` m above home (param7 is AMSL, as PX4 reads it)."""
         home = self.home or self.request_home()
-        self.command(mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan,
-                     home.altitude / 1000 + altitude)  # fmt: skip
+        self.command(
+            mav.MAV_CMD_NAV_TAKEOFF,
+            0,
+            0,
+            0,
+            math.nan,
+            math.nan,
+            math.nan,
+            home.altitude / 1000 + altitude,
+        )
 
     def land(self) -> None:
         self.command(mav.MAV_CMD_NAV_LAND, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
@@ -190,9 +204,20 @@ class VehicleClient:
         """DO_REPOSITION (COMMAND_INT, relative altitude) to a point relative to home."""
         lat, lon = self.to_global(east, north)
         self.conn.mav.command_int_send(
-            self.target, 1, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_CMD_DO_REPOSITION,
-            0, 0, -1, 0, 0, math.nan, round(lat * 1e7), round(lon * 1e7), up,
-        )  # fmt: skip
+            self.target,
+            1,
+            mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+            mav.MAV_CMD_DO_REPOSITION,
+            0,
+            0,
+            -1,
+            0,
+            0,
+            math.nan,
+            round(lat * 1e7),
+            round(lon * 1e7),
+            up,
+        )
         ack = self.wait_message(
             "COMMAND_ACK", 3.0, lambda m: m.command == mav.MAV_CMD_DO_REPOSITION
         )
@@ -249,9 +274,22 @@ class VehicleClient:
             command, east, north, up, param1 = items[msg.seq]
             lat, lon = self.to_global(east, north)
             self.conn.mav.mission_item_int_send(
-                self.target, 1, msg.seq, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, command,
-                0, 1, param1, 0, 0, math.nan, round(lat * 1e7), round(lon * 1e7), up, 0,
-            )  # fmt: skip
+                self.target,
+                1,
+                msg.seq,
+                mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                command,
+                0,
+                1,
+                param1,
+                0,
+                0,
+                math.nan,
+                round(lat * 1e7),
+                round(lon * 1e7),
+                up,
+                0,
+            )
             if msg.seq == len(items) - 1:
                 break
         return int(self.wait_message("MISSION_ACK", 5.0).type)

@@ -22,8 +22,10 @@ def start_simulator(*args: str) -> subprocess.Popen[str]:
     """``quadsitl sim ARGS`` as a child process, its output readable line by line."""
     return subprocess.Popen(
         [sys.executable, "-m", "quadsitl.cli", "sim", *args],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
 
 
 def stop_simulator(process: subprocess.Popen[str], timeout: float = 10.0) -> str:
@@ -40,16 +42,19 @@ def stop_simulator(process: subprocess.Popen[str], timeout: float = 10.0) -> str
 
 def run_demo(speed: float = 4.0, logs: str = "logs") -> int:
     port = free_udp_port()
-    sim = start_simulator("--api", f"udpout:127.0.0.1:{port}", "--speed", str(speed),
-                          "--logs", logs)  # fmt: skip
+    sim = start_simulator(
+        "--api", f"udpout:127.0.0.1:{port}", "--speed", str(speed), "--logs", logs
+    )
     client = VehicleClient(f"udpin:127.0.0.1:{port}")
     started = time.monotonic()
     try:
         client.connect(timeout=30)
         print(f"quadsitl demo: connected to the simulator (speed x{speed:g}); flying a mission:")
-        print("  take-off to 5 m, waypoints " + ", ".join(
-            f"({w.east:g}, {w.north:g}, {w.up:g})" for w in DEFAULT_WAYPOINTS[1:]
-        ) + " m east/north/up, land at home")  # fmt: skip
+        print(
+            "  take-off to 5 m, waypoints "
+            + ", ".join(f"({w.east:g}, {w.north:g}, {w.up:g})" for w in DEFAULT_WAYPOINTS[1:])
+            + " m east/north/up, land at home"
+        )
         report = fly_mission(client)
     except ClientError as error:
         print(f"quadsitl demo: failed: {error}", file=sys.stderr)
@@ -58,8 +63,14 @@ def run_demo(speed: float = 4.0, logs: str = "logs") -> int:
     finally:
         client.close()
     output = stop_simulator(sim)
-    log = next((line.split("telemetry log ", 1)[1] for line in output.splitlines()
-                if "telemetry log " in line), "(none)")  # fmt: skip
+    log = next(
+        (
+            line.split("telemetry log ", 1)[1]
+            for line in output.splitlines()
+            if "telemetry log " in line
+        ),
+        "(none)",
+    )
     for line in output.splitlines():
         if line.startswith("[") and "s]" in line:
             print("  vehicle:", line)
@@ -70,8 +81,10 @@ def run_demo(speed: float = 4.0, logs: str = "logs") -> int:
     if log != "(none)":
         recording = str(Path(log).with_suffix(".rrd"))
         replay = convert(log, recording)
-        print(f"  Rerun recording of the flight ({replay.stats.messages} messages, "
-              f"{replay.seconds:.1f} s): {recording}")  # fmt: skip
+        print(
+            f"  Rerun recording of the flight ({replay.stats.messages} messages, "
+            f"{replay.seconds:.1f} s): {recording}"
+        )
         print(f"  open it with:    rerun {recording}")
     print("connect a ground station: run `quadsitl sim` and open QGroundControl (it listens on")
     print(

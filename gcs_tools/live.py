@@ -29,8 +29,9 @@ def watch(url: str, save: str | None, duration: float | None, spawn: bool = True
         while end is None or time.monotonic() < end:
             if time.monotonic() - last_beat >= 1.0:
                 last_beat = time.monotonic()
-                conn.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS,
-                                        mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)  # fmt: skip
+                conn.mav.heartbeat_send(
+                    mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0
+                )
             msg = conn.recv_match(blocking=True, timeout=0.2)
             if msg is None or msg.get_type() == "BAD_DATA":
                 continue

@@ -93,14 +93,28 @@ def convert(tlog: str | Path, out: str | Path | None = None, spawn: bool = False
     rec.send_recording_name(Path(tlog).name)
     entities = columns.send(rec)
     if track:
-        rec.log("world/trajectory", rr.LineStrips3D([np.asarray(track)], colors=[[90, 90, 200]]),
-                static=True)  # fmt: skip
-    rec.log("world/home", rr.Points3D([view.home_local_enu], radii=0.05, colors=[[0, 160, 0]]),
-            static=True)  # fmt: skip
+        rec.log(
+            "world/trajectory",
+            rr.LineStrips3D([np.asarray(track)], colors=[[90, 90, 200]]),
+            static=True,
+        )
+    rec.log(
+        "world/home",
+        rr.Points3D([view.home_local_enu], radii=0.05, colors=[[0, 160, 0]]),
+        static=True,
+    )
     if view.mission:
         points = np.array([view.mission[k] for k in sorted(view.mission)])
-        rec.log("world/mission", rr.Points3D(points, radii=0.08, colors=[[230, 180, 0]],
-                labels=[str(k) for k in sorted(view.mission)]), static=True)  # fmt: skip
+        rec.log(
+            "world/mission",
+            rr.Points3D(
+                points,
+                radii=0.08,
+                colors=[[230, 180, 0]],
+                labels=[str(k) for k in sorted(view.mission)],
+            ),
+            static=True,
+        )
         rec.log(
             "world/mission/path", rr.LineStrips3D([points], colors=[[230, 180, 0]]), static=True
         )

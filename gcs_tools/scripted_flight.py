@@ -64,8 +64,11 @@ def fly_mission(
         raise ClientError(f"mission upload refused (MISSION_ACK {ack}): {client.texts[-1:]}")
     client.arm()
     client.set_mode("MISSION")
-    client.wait(lambda: len(client.reached) >= len(items) and not client.armed, timeout,
-                "the mission to finish and the vehicle to disarm")  # fmt: skip
+    client.wait(
+        lambda: len(client.reached) >= len(items) and not client.armed,
+        timeout,
+        "the mission to finish and the vehicle to disarm",
+    )
     return _report(client, waypoints)
 
 

@@ -105,8 +105,9 @@ def _resync(data: bytes, start: int) -> int:
     at = start
     end = len(data)
     while at < end:
-        candidates = [i for i in (data.find(bytes([V2]), at + 8), data.find(bytes([V1]), at + 8))
-                      if i >= 0]  # fmt: skip
+        candidates = [
+            i for i in (data.find(bytes([V2]), at + 8), data.find(bytes([V1]), at + 8)) if i >= 0
+        ]
         if not candidates:
             return end
         marker = min(candidates)

@@ -64,9 +64,12 @@ class PolicyAutopilot:
             raise ValueError(f"a {config.task} policy cannot fly goto and mission legs")
         options = {k: v for k, v in config.task_options.items() if not k.startswith("init_")}
         return cls(
-            net, airframe, TaskOptions.from_kwargs(**options), CARROT[config.task],
+            net,
+            airframe,
+            TaskOptions.from_kwargs(**options),
+            CARROT[config.task],
             goal_at_origin=config.task == "hover",
-        )  # fmt: skip
+        )
 
     def reset(self) -> None:
         self.landing.reset()

@@ -63,8 +63,11 @@ def load(path: str | Path) -> tuple[ActorCritic, TrainConfig, dict[str, Any]]:
 
 
 def _build(payload: dict[str, Any]) -> tuple[ActorCritic, TrainConfig]:
-    missing = [k for k in ("config", "obs_size", "act_size", "two_headed", "state_dict")
-               if k not in payload]  # fmt: skip
+    missing = [
+        k
+        for k in ("config", "obs_size", "act_size", "two_headed", "state_dict")
+        if k not in payload
+    ]
     if missing:
         raise ValueError(f"missing {', '.join(missing)}")
     config = TrainConfig.from_dict(payload["config"])

@@ -12,56 +12,69 @@ from policies.config import ALGORITHMS, TASK_NAMES
 
 def add_parsers(commands: argparse._SubParsersAction) -> None:
     train = commands.add_parser(
-        "train", help="train a policy (GAE, PPO or TRPO) on a task",
+        "train",
+        help="train a policy (GAE, PPO or TRPO) on a task",
         description="Train a policy. Writes runs/TASK-ALGO-PRESET-seedN/ (config.json, "
         "metrics.csv, checkpoints/).",
-    )  # fmt: skip
+    )
     train.add_argument("--task", required=True, choices=TASK_NAMES)
     train.add_argument("--algo", required=True, help=f"one of {', '.join(ALGORITHMS)}")
     train.add_argument("--preset", default="paper", help="paper (Table I) or fast (default: paper)")
     train.add_argument("--seed", type=_count(0), default=0, help="random seed ≥ 0 (default: 0)")
     train.add_argument(
-        "--backend", default="inprocess", choices=("inprocess", "mavlink"),
+        "--backend",
+        default="inprocess",
+        choices=("inprocess", "mavlink"),
         help="physics in-process, or in quadsitl sim processes over MAVLink",
-    )  # fmt: skip
+    )
     train.add_argument(
-        "--steps", type=_count(1), help="environment steps, at least one batch (default: the "
-        "preset's)",
-    )  # fmt: skip
+        "--steps",
+        type=_count(1),
+        help="environment steps, at least one batch (default: the preset's)",
+    )
     train.add_argument("--num-envs", type=_count(1), help="parallel envs (default: the preset's)")
     train.add_argument("--runs", default="runs", help="folder of run folders (default: runs)")
     existing = train.add_mutually_exclusive_group()
     existing.add_argument(
-        "--resume", action="store_true",
+        "--resume",
+        action="store_true",
         help="continue the run in the run folder from its last.pt, appending to metrics.csv",
-    )  # fmt: skip
+    )
     existing.add_argument(
-        "--overwrite", action="store_true",
+        "--overwrite",
+        action="store_true",
         help="replace the run in the run folder (without this or --resume, an existing run "
         "is refused)",
-    )  # fmt: skip
+    )
     train.add_argument("--quiet", action="store_true", help="no progress bar")
 
     evaluate = commands.add_parser(
-        "eval", help="evaluate a checkpoint with deterministic episodes",
+        "eval",
+        help="evaluate a checkpoint with deterministic episodes",
         description="Run deterministic episodes; prints success rate, return and the task's "
         "metric, and a line `success_rate: X`.",
-    )  # fmt: skip
+    )
     evaluate.add_argument("checkpoint", help="a .pt file written by quadsitl train")
     evaluate.add_argument("--episodes", type=int, default=100, help="episodes (default: 100)")
     evaluate.add_argument("--task", help="task to evaluate on (default: the trained one)")
     evaluate.add_argument(
-        "--backend", default="inprocess", choices=("inprocess", "mavlink"),
+        "--backend",
+        default="inprocess",
+        choices=("inprocess", "mavlink"),
         help="physics in-process, or in quadsitl sim processes over MAVLink",
-    )  # fmt: skip
+    )
     evaluate.add_argument(
-        "--rerun", nargs="?", const="", metavar="RRD",
+        "--rerun",
+        nargs="?",
+        const="",
+        metavar="RRD",
         help="record the first env's episodes in Rerun (a viewer, or the file RRD)",
-    )  # fmt: skip
+    )
 
     plot = commands.add_parser(
-        "plot", help="learning curves (mean ± std over seeds) of run folders",
-    )  # fmt: skip
+        "plot",
+        help="learning curves (mean ± std over seeds) of run folders",
+    )
     plot.add_argument("runs", nargs="+", help="run folders (any tasks, algorithms, seeds)")
     plot.add_argument("-o", "--output", default="docs/images", help="folder for the PNGs")
 
@@ -97,22 +110,34 @@ def _train(args: argparse.Namespace) -> int:
     from policies.train import train
 
     config = make_config(
-        args.task, args.algo, args.preset, args.seed, backend=args.backend,
-        total_steps=args.steps, num_envs=args.num_envs,
-    )  # fmt: skip
+        args.task,
+        args.algo,
+        args.preset,
+        args.seed,
+        backend=args.backend,
+        total_steps=args.steps,
+        num_envs=args.num_envs,
+    )
     run_dir = Path(args.runs) / f"{args.task}-{args.algo}-{args.preset}-seed{args.seed}"
     mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
-    print(f"quadsitl train: {config.iterations} iterations of {config.batch_size} steps "
-          f"-> {run_dir}", file=sys.stderr)  # fmt: skip
+    print(
+        f"quadsitl train: {config.iterations} iterations of {config.batch_size} steps -> {run_dir}",
+        file=sys.stderr,
+    )
     result = train(config, run_dir, progress=not args.quiet, mode=mode)
     last = run_dir / "checkpoints" / "last.pt"
     if result.interrupted:
-        saved = f"{last} saved at iteration {result.iterations}" if last.is_file() else (
-            "no checkpoint saved yet")  # fmt: skip
+        saved = (
+            f"{last} saved at iteration {result.iterations}"
+            if last.is_file()
+            else ("no checkpoint saved yet")
+        )
         print(f"quadsitl train: interrupted; {saved}; continue with --resume", file=sys.stderr)
         return 130
-    print(f"{result.env_steps:,} steps in {result.seconds:.1f} s; last 100 episodes: return "
-          f"{result.final_return:.1f}, success {result.final_success:.0%}")  # fmt: skip
+    print(
+        f"{result.env_steps:,} steps in {result.seconds:.1f} s; last 100 episodes: return "
+        f"{result.final_return:.1f}, success {result.final_success:.0%}"
+    )
     print(f"checkpoint: {last}")
     return 1 if result.diverged else 0
 

@@ -84,17 +84,35 @@ class TrainConfig:
         return cls(**values)
 
 
-_POSITIVE_INTS = ("num_envs", "steps_per_env", "total_steps", "hidden", "cg_iters",
-                  "line_search_steps", "critic_epochs", "checkpoint_every", "eval_episodes",
-                  "epochs", "minibatches")  # fmt: skip
+_POSITIVE_INTS = (
+    "num_envs",
+    "steps_per_env",
+    "total_steps",
+    "hidden",
+    "cg_iters",
+    "line_search_steps",
+    "critic_epochs",
+    "checkpoint_every",
+    "eval_episodes",
+    "epochs",
+    "minibatches",
+)
 _NON_NEGATIVE_INTS = ("seed", "eval_every")
 _FLOATS = {  # name: (low, high), inclusive
-    "gamma": (0.0, 1.0), "gae_lambda": (0.0, 1.0), "learning_rate": (1e-12, 10.0),
-    "clip_coef": (0.0, 10.0), "max_kl": (1e-12, 10.0), "cg_damping": (0.0, 10.0),
-    "line_search_shrink": (1e-6, 1.0 - 1e-6), "value_coef": (0.0, 1e3),
-    "huber_delta": (1e-12, 1e6), "entropy_coef": (-1e3, 1e3), "max_grad_norm": (0.0, 1e6),
-    "reward_scale": (1e-12, 1e6), "init_log_std": (-20.0, 5.0),
-}  # fmt: skip
+    "gamma": (0.0, 1.0),
+    "gae_lambda": (0.0, 1.0),
+    "learning_rate": (1e-12, 10.0),
+    "clip_coef": (0.0, 10.0),
+    "max_kl": (1e-12, 10.0),
+    "cg_damping": (0.0, 10.0),
+    "line_search_shrink": (1e-6, 1.0 - 1e-6),
+    "value_coef": (0.0, 1e3),
+    "huber_delta": (1e-12, 1e6),
+    "entropy_coef": (-1e3, 1e3),
+    "max_grad_norm": (0.0, 1e6),
+    "reward_scale": (1e-12, 1e6),
+    "init_log_std": (-20.0, 5.0),
+}
 _BOOLS = ("anneal_lr", "normalize_obs", "normalize_advantages")
 
 
@@ -148,10 +166,17 @@ STARTS: dict[str, dict[str, Any]] = {
     "target_follow": {"init_attitude_noise": 0.1},
 }
 FAST_COMMON: dict[str, Any] = {
-    "num_envs": 128, "steps_per_env": 32, "learning_rate": 1e-3, "normalize_obs": True,
-    "reward_scale": 0.01, "hidden": 128, "gamma": 0.99, "max_grad_norm": 0.5,
-    "init_log_std": -0.5, "eval_every": 20,
-}  # fmt: skip
+    "num_envs": 128,
+    "steps_per_env": 32,
+    "learning_rate": 1e-3,
+    "normalize_obs": True,
+    "reward_scale": 0.01,
+    "hidden": 128,
+    "gamma": 0.99,
+    "max_grad_norm": 0.5,
+    "init_log_std": -0.5,
+    "eval_every": 20,
+}
 FAST: dict[str, dict[str, Any]] = {
     "gae": {"gae_lambda": 0.95, "epochs": 1},
     "ppo": {
@@ -179,9 +204,12 @@ FAST_TASK_ALGO: dict[tuple[str, str], dict[str, Any]] = {
     ("land", "ppo"): {"entropy_coef": 0.0},
 }
 FAST_STEPS = {
-    "hover": 800_000, "static_waypoint": 2_000_000, "random_waypoint": 12_000_000,
-    "land": 6_000_000, "target_follow": 6_000_000,
-}  # fmt: skip
+    "hover": 800_000,
+    "static_waypoint": 2_000_000,
+    "random_waypoint": 12_000_000,
+    "land": 6_000_000,
+    "target_follow": 6_000_000,
+}
 
 
 MAVLINK_ENVS = 2  # default envs (simulator processes) through the wire
@@ -199,9 +227,13 @@ def make_config(
     if preset == "paper":
         values: dict[str, Any] = {**PAPER_COMMON, **PAPER[algo]}
     elif preset == "fast":
-        values = {**FAST_COMMON, **FAST[algo], **FAST_TASK.get(task, {}),
-                  **FAST_TASK_ALGO.get((task, algo), {}),
-                  "total_steps": FAST_STEPS[task]}  # fmt: skip
+        values = {
+            **FAST_COMMON,
+            **FAST[algo],
+            **FAST_TASK.get(task, {}),
+            **FAST_TASK_ALGO.get((task, algo), {}),
+            "total_steps": FAST_STEPS[task],
+        }
     else:
         raise ValueError(f"unknown preset {preset!r}; choose 'paper' or 'fast'")
     values["task_options"] = dict(STARTS[task])

@@ -118,7 +118,16 @@ def evaluate(
         env.close()
     returns, success = returns[:episodes], success[:episodes]
     return Evaluation(
-        task, len(returns), float(np.mean(success)), float(np.mean(returns)),
-        float(np.std(returns)), name, unit, float(np.mean(metric)) if metric else float("nan"),
-        float(np.mean(reached[:episodes])), outcomes, trajectories, goals,
-    )  # fmt: skip
+        task,
+        len(returns),
+        float(np.mean(success)),
+        float(np.mean(returns)),
+        float(np.std(returns)),
+        name,
+        unit,
+        float(np.mean(metric)) if metric else float("nan"),
+        float(np.mean(reached[:episodes])),
+        outcomes,
+        trajectories,
+        goals,
+    )

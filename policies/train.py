@@ -37,10 +37,20 @@ from policies.evaluate import VALIDATION_SEED, evaluate
 from policies.rollout import BatchEnv
 
 COLUMNS = (
-    "iteration", "env_steps", "wall_seconds", "episodes", "mean_return", "std_return",
-    "success_rate", "eval_success", "policy_loss", "value_loss", "entropy", "kl",
+    "iteration",
+    "env_steps",
+    "wall_seconds",
+    "episodes",
+    "mean_return",
+    "std_return",
+    "success_rate",
+    "eval_success",
+    "policy_loss",
+    "value_loss",
+    "entropy",
+    "kl",
     "steps_per_second",
-)  # fmt: skip
+)
 MODES = ("new", "resume", "overwrite")
 RUN_FILES = ("config.json", "metrics.csv", "checkpoints")
 
@@ -99,8 +109,7 @@ def train(
     # Everything that can fail at start happens before the folder is touched.
     seed = _seed(config.seed, start.iteration)
     seed_everything(seed)
-    env = BatchEnv(config.task, config.num_envs, seed, config.backend,
-                   **config.task_options)  # fmt: skip
+    env = BatchEnv(config.task, config.num_envs, seed, config.backend, **config.task_options)
     try:
         algo = ALGORITHM_CLASSES[config.algo](config, env.obs_size, 4)
         _restore(algo, start)
@@ -122,8 +131,11 @@ def train(
             stats = algo.update(rollout)
             if not all(math.isfinite(v) for v in stats.values()) or not _finite(algo):
                 log.diverged = True
-                print(f"\ntraining diverged at iteration {it} (a loss or weight is not "
-                      "finite); the last good checkpoint is kept", file=sys.stderr)  # fmt: skip
+                print(
+                    f"\ntraining diverged at iteration {it} (a loss or weight is not "
+                    "finite); the last good checkpoint is kept",
+                    file=sys.stderr,
+                )
                 break
             log.iteration(it, rollout, stats, algo)
     except KeyboardInterrupt:
@@ -161,8 +173,10 @@ def _resume_point(config: TrainConfig, run_dir: Path) -> _Start:
     if isinstance(iteration, bool) or not isinstance(iteration, int) or iteration < 1:
         raise ValueError(f"cannot resume: {last} has no iteration count")
     rows = _kept_rows(run_dir / "metrics.csv", iteration)
-    best = max((float(r["eval_success"]) for r in rows if r["eval_success"] not in ("", "nan")),
-               default=-1.0)  # fmt: skip
+    best = max(
+        (float(r["eval_success"]) for r in rows if r["eval_success"] not in ("", "nan")),
+        default=-1.0,
+    )
     wall = float(rows[-1]["wall_seconds"]) if rows else 0.0
     return _Start(iteration, wall, best, payload["state_dict"], payload.get("optimizers"))
 
@@ -227,10 +241,12 @@ class _Log:
     def save_last(self, algo: Algorithm) -> None:
         """last.pt: the network and the optimiser state, enough to resume."""
         checkpoint.save(
-            self.run_dir / "checkpoints" / "last.pt", algo.net, self.config,
+            self.run_dir / "checkpoints" / "last.pt",
+            algo.net,
+            self.config,
             iteration=self.last_iteration,
             optimizers=[optimizer.state_dict() for optimizer in algo.optimizers()],
-        )  # fmt: skip
+        )
 
     def _evaluate(self, algo, it: int) -> float:  # type: ignore[no-untyped-def]
         """Deterministic success on fixed starts; keeps the best network as best.pt."""
@@ -242,8 +258,13 @@ class _Log:
         self.eval_seconds += time.perf_counter() - started
         if success >= self.best:
             self.best = success
-            checkpoint.save(self.run_dir / "checkpoints" / "best.pt", algo.net, config,
-                            iteration=it, eval_success=success)  # fmt: skip
+            checkpoint.save(
+                self.run_dir / "checkpoints" / "best.pt",
+                algo.net,
+                config,
+                iteration=it,
+                eval_success=success,
+            )
         return success
 
     def close(self) -> None:
@@ -292,5 +313,7 @@ def _progress(config: TrainConfig, row: dict) -> None:  # type: ignore[type-arg]
         f"\r{config.task}/{config.algo} [{bar}] {row['env_steps']:>10,} steps  "
         f"return {row['mean_return']:8.1f}  success {row['success_rate']:5.0%}  "
         f"{row['steps_per_second']:>7,} steps/s",
-        end="", file=sys.stderr, flush=True,
-    )  # fmt: skip
+        end="",
+        file=sys.stderr,
+        flush=True,
+    )

@@ -7,6 +7,7 @@ import math
 import os
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 from quadsitl import __version__
 
@@ -39,9 +40,12 @@ def _build_parser() -> argparse.ArgumentParser:
         "--print-every", type=float, default=0.5, help="seconds between table rows (default: 0.5)"
     )
     _add_sim_parser(commands)
-    from policies.cli import add_parsers as add_policy_parsers
-
-    add_policy_parsers(commands)
+    try:  # training needs torch; the simulator does not
+        from policies.cli import add_parsers as add_policy_parsers
+    except ImportError:
+        pass
+    else:
+        add_policy_parsers(commands)
     replay = commands.add_parser(
         "replay",
         help="turn a MAVLink telemetry log (.tlog) into a Rerun recording (as gcs-replay)",
@@ -225,15 +229,47 @@ def _sim_config(args: argparse.Namespace) -> object:
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be a positive number of seconds, got {args.duration}")
     return SimConfig(
-        gcs_url=url(args.gcs), api_url=url(args.api), extra_urls=args.link,
-        hil_url=url(args.hil) if args.hil else None, lockstep=args.lockstep,
+        gcs_url=url(args.gcs),
+        api_url=url(args.api),
+        extra_urls=args.link,
+        hil_url=url(args.hil) if args.hil else None,
+        lockstep=args.lockstep,
         signing_key=_signing_key(args),
-        system_id=args.sysid, autopilot_id=args.autopilot_id, home=home, airframe=args.airframe,
-        physics_rate=args.physics_rate, control_rate=args.control_rate, speed=args.speed,
+        system_id=args.sysid,
+        autopilot_id=args.autopilot_id,
+        home=home,
+        airframe=args.airframe,
+        physics_rate=args.physics_rate,
+        control_rate=args.control_rate,
+        speed=args.speed,
         log_dir=None if args.logs.lower() == "none" else args.logs,
-        duration=args.duration, params=params, quiet=args.quiet,
-        rerun=args.rerun, rerun_save=args.rerun_save, autopilot=args.autopilot,
-    )  # fmt: skip
+        duration=args.duration,
+        params=params,
+        quiet=args.quiet,
+    )
+
+
+def _sim_collaborators(args: argparse.Namespace) -> tuple[Any, Any]:
+    """(make_autopilot, make_view) of ``quadsitl sim``: composed here, so that the
+    simulator itself needs neither the policies package (torch) nor the viewer."""
+    make_autopilot = make_view = None
+    if args.autopilot:
+        try:
+            from policies.autopilot import PolicyAutopilot
+        except ImportError as error:
+            raise ValueError(f"--autopilot needs the training extra ({error})") from None
+        path = args.autopilot
+
+        def make_autopilot(airframe: Any) -> Any:
+            return PolicyAutopilot.from_checkpoint(path, airframe)
+
+    if args.rerun or args.rerun_save:
+        from quadsitl.viz.sim_view import SimView
+
+        def make_view(vehicle: Any) -> Any:
+            return SimView(vehicle, args.rerun_save)
+
+    return make_autopilot, make_view
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -279,7 +315,8 @@ def _main(argv: Sequence[str] | None = None) -> int:
         from quadsitl.mavlink.runner import run_simulator
 
         try:
-            return run_simulator(_sim_config(args))  # type: ignore[arg-type]
+            make_autopilot, make_view = _sim_collaborators(args)
+            return run_simulator(_sim_config(args), make_autopilot, make_view)  # type: ignore[arg-type]
         except (ValueError, OSError) as error:
             parser.exit(2, f"quadsitl sim: error: {error}\n")
     parser.error(f"unknown command {args.command!r}")  # unreachable: argparse checks

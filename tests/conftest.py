@@ -36,10 +36,24 @@ def start_sim(log_dir: str, speed: float = 5.0) -> RunningSim:
     """``quadsitl sim`` listening on a free UDP port (udpin), no API link."""
     port = free_udp_port()
     process = subprocess.Popen(
-        [sys.executable, "-m", "quadsitl.cli", "sim", "--gcs", f"udpin:127.0.0.1:{port}",
-         "--api", "none", "--speed", str(speed), "--logs", log_dir],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "quadsitl.cli",
+            "sim",
+            "--gcs",
+            f"udpin:127.0.0.1:{port}",
+            "--api",
+            "none",
+            "--speed",
+            str(speed),
+            "--logs",
+            log_dir,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     return RunningSim(process, port, log_dir)
 
 
@@ -49,11 +63,25 @@ class MotorSim:
     def __init__(self, *options: str) -> None:
         self.hil_port, self.gcs_port = free_udp_port(), free_udp_port()
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "quadsitl.cli", "sim", "--api", "none", "--logs", "none",
-             "--gcs", f"udpin:127.0.0.1:{self.gcs_port}",
-             "--hil", f"udpin:127.0.0.1:{self.hil_port}", *options],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "quadsitl.cli",
+                "sim",
+                "--api",
+                "none",
+                "--logs",
+                "none",
+                "--gcs",
+                f"udpin:127.0.0.1:{self.gcs_port}",
+                "--hil",
+                f"udpin:127.0.0.1:{self.hil_port}",
+                *options,
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
 
     def client(self, **kwargs: object) -> MotorClient:
         client = MotorClient("127.0.0.1", self.hil_port, **kwargs)  # type: ignore[arg-type]

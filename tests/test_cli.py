@@ -53,8 +53,10 @@ def test_sim_stops_cleanly_on_sigint_and_sigterm(tmp_path):
     for sig in (signal.SIGINT, signal.SIGTERM):
         process = subprocess.Popen(
             [sys.executable, "-m", "quadsitl.cli", "sim", "--logs", str(tmp_path)],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        )  # fmt: skip
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         time.sleep(2.0)
         process.send_signal(sig)
         _out, err = process.communicate(timeout=10)

@@ -29,9 +29,12 @@ def test_entrypoint_starts_a_simulator_that_answers(tmp_path):
         "QUADSITL_LOGS": str(tmp_path),
     }
     process = subprocess.Popen(
-        ["sh", str(ENTRYPOINT), "--speed", "2"], env=env,
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+        ["sh", str(ENTRYPOINT), "--speed", "2"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         client = VehicleClient(f"udpout:127.0.0.1:{station}")
         heartbeat = client.connect(timeout=30)

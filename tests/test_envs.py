@@ -224,9 +224,12 @@ def test_wrong_action_shape_and_unknown_options_raise():
 
 def test_options_change_the_episode():
     env = gym.make(
-        "QuadSITL/Hover-v0", episode_seconds=1.0, init_position_noise=0.5, airframe="paper-x",
+        "QuadSITL/Hover-v0",
+        episode_seconds=1.0,
+        init_position_noise=0.5,
+        airframe="paper-x",
         param_randomization={"mass": 0.2},
-    )  # fmt: skip
+    )
     obs, _ = env.reset(seed=0)
     assert np.abs(obs[F.OBS_POS]).max() > 0.01  # the start was randomised
     masses = set()
@@ -260,7 +263,13 @@ def test_sb3_adapter_semantics_and_ppo_trains():
     assert infos[0]["terminal_observation"].shape == (34,)
     assert infos[0]["episode_metrics"]["outcome"] == "timed_out"
     np.testing.assert_array_equal(obs, venv.reset())  # reset in the same step, same seeds
-    model = PPO("MlpPolicy", QuadSB3VecEnv("hover", num_envs=8, seed=1), n_steps=32, batch_size=64,
-                seed=0, device="cpu")  # fmt: skip
+    model = PPO(
+        "MlpPolicy",
+        QuadSB3VecEnv("hover", num_envs=8, seed=1),
+        n_steps=32,
+        batch_size=64,
+        seed=0,
+        device="cpu",
+    )
     model.learn(total_timesteps=512)
     assert model.num_timesteps >= 512

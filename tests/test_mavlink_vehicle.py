@@ -56,8 +56,9 @@ def test_parameters_list_set_and_refuse(client):
 def test_arm_takeoff_goto_land(client):
     client.arm()
     client.takeoff(3.0)
-    client.wait(lambda: client.position_enu()[2] > 2.9 and client.mode == "LOITER", 20,
-                "take-off to 3 m")  # fmt: skip
+    client.wait(
+        lambda: client.position_enu()[2] > 2.9 and client.mode == "LOITER", 20, "take-off to 3 m"
+    )
     client.goto(8.0, -4.0, 4.0)
     client.wait(
         lambda: np.linalg.norm(np.subtract(client.position_enu(), (8, -4, 4))) < 0.15,
@@ -94,9 +95,23 @@ def test_mission_upload_refuses_unsupported_items_and_huge_counts(client):
 def test_offboard_follows_setpoints_then_holds_when_they_stop(client):
     def send_target():
         client.conn.mav.set_position_target_local_ned_send(
-            0, 1, 1, mav.MAV_FRAME_LOCAL_NED, 0b0000_1111_1111_1000, 3.0, 2.0, -4.0,
-            0, 0, 0, 0, 0, 0, 0, 0,
-        )  # fmt: skip
+            0,
+            1,
+            1,
+            mav.MAV_FRAME_LOCAL_NED,
+            0b0000_1111_1111_1000,
+            3.0,
+            2.0,
+            -4.0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+        )
 
     assert client.command(mav.MAV_CMD_DO_SET_MODE, 1, 6, 0, check=False) == mav.MAV_RESULT_DENIED
     send_target()

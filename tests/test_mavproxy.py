@@ -23,10 +23,24 @@ MAVPROXY = shutil.which("mavproxy.py") or str(Path(sys.executable).parent / "mav
 def test_mavproxy_detects_reads_parameters_arms_takes_off_and_lands(tmp_path):
     port = free_udp_port()
     sim = subprocess.Popen(
-        [sys.executable, "-m", "quadsitl.cli", "sim", "--gcs", f"udpout:127.0.0.1:{port}",
-         "--api", "none", "--speed", "2", "--logs", "none"],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "quadsitl.cli",
+            "sim",
+            "--gcs",
+            f"udpout:127.0.0.1:{port}",
+            "--api",
+            "none",
+            "--speed",
+            "2",
+            "--logs",
+            "none",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     # MAVProxy reads commands from stdin; each waits for the vehicle to get there.
     script = [
         (8, "arm throttle"),
@@ -36,11 +50,19 @@ def test_mavproxy_detects_reads_parameters_arms_takes_off_and_lands(tmp_path):
         (2, "exit"),  # mode tuple unconverted)
     ]
     proxy = subprocess.Popen(
-        [MAVPROXY, f"--master=udpin:127.0.0.1:{port}", "--nowait", "--state-basedir",
-         str(tmp_path)],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        [
+            MAVPROXY,
+            f"--master=udpin:127.0.0.1:{port}",
+            "--nowait",
+            "--state-basedir",
+            str(tmp_path),
+        ],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
         cwd=tmp_path,
-    )  # fmt: skip
+    )
     try:
         for delay, line in script:
             time.sleep(delay)

@@ -28,9 +28,14 @@ def lockstep_sim() -> Iterator[MotorSim]:
 
 def _as_float32(state: WireState) -> np.ndarray:
     return np.concatenate(
-        [state.position_ned, state.q_ned_frd, state.velocity_frd, state.rates_frd,
-         state.rotor_speeds]
-    ).astype(np.float32)  # fmt: skip
+        [
+            state.position_ned,
+            state.q_ned_frd,
+            state.velocity_frd,
+            state.rates_frd,
+            state.rotor_speeds,
+        ]
+    ).astype(np.float32)
 
 
 def test_lockstep_n_commands_make_n_steps_matching_in_process_physics(lockstep_sim):
@@ -64,8 +69,12 @@ def test_bad_motor_commands_change_nothing_and_are_answered(lockstep_sim):
     client.arm()
     client.step([HOVER] * 4)
     before = client.step([HOVER] * 4)  # stamped with the time of the answer before it
-    for bad in ([float("nan"), 0.5, 0.5, 0.5], [float("inf")] * 4, [1.5, 0.5, 0.5, 0.5],
-                [-0.1, 0.5, 0.5, 0.5]):  # fmt: skip
+    for bad in (
+        [float("nan"), 0.5, 0.5, 0.5],
+        [float("inf")] * 4,
+        [1.5, 0.5, 0.5, 0.5],
+        [-0.1, 0.5, 0.5, 0.5],
+    ):
         answer = client.step(bad)
         assert answer.time_usec == before.time_usec  # rejected: time did not move
         np.testing.assert_array_equal(answer.position_ned, before.position_ned)
@@ -154,9 +163,11 @@ def test_motor_control_ends_safely_when_commands_stop():
         assert beat.base_mode & mavutil.mavlink.MAV_MODE_FLAG_HIL_ENABLED
         # Commands stop: after 0.5 s the onboard controller takes over and holds.
         text = gcs.recv_match(
-            type="STATUSTEXT", blocking=True, timeout=5,
+            type="STATUSTEXT",
+            blocking=True,
+            timeout=5,
             condition="'motor control ended' in STATUSTEXT.text",
-        )  # fmt: skip
+        )
         assert text is not None and "no motor commands" in text.text
         time.sleep(2.0)
         gcs.recv_match(type="LOCAL_POSITION_NED", blocking=False)

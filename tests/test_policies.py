@@ -22,6 +22,7 @@ from policies.config import make_config
 from policies.evaluate import evaluate
 from policies.rollout import compute_gae
 from policies.train import train
+from quadsitl.physics import PAPER
 
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "policies" / "checkpoints"
 
@@ -111,8 +112,12 @@ def test_same_seed_gives_identical_metrics(tmp_path):
         )
         train(config, tmp_path / name, progress=False)
         rows = _metrics(tmp_path / name)
-        runs.append([{k: v for k, v in r.items() if k not in ("wall_seconds", "steps_per_second")}
-                     for r in rows])  # fmt: skip
+        runs.append(
+            [
+                {k: v for k, v in r.items() if k not in ("wall_seconds", "steps_per_second")}
+                for r in rows
+            ]
+        )
     assert runs[0] == runs[1] and len(runs[0]) >= 4
 
 
@@ -127,8 +132,7 @@ def test_checkpoints_load_evaluate_and_refuse_the_wrong_task(tmp_path):
     with pytest.raises(ValueError, match="trained for task 'hover'"):
         evaluate(net, loaded, task="land", episodes=2)
     with pytest.raises(ValueError, match="expects 34 observations"):
-        evaluate(net, loaded.__class__(**{**loaded.to_dict(), "task": "target_follow"}),
-                 episodes=2)  # fmt: skip
+        evaluate(net, loaded.__class__(**{**loaded.to_dict(), "task": "target_follow"}), episodes=2)
     (tmp_path / "junk.pt").write_text("not a checkpoint")
     with pytest.raises(ValueError, match="not a quadsitl checkpoint"):
         checkpoint.load(tmp_path / "junk.pt")
@@ -160,23 +164,44 @@ def test_a_diverging_run_stops_and_keeps_the_last_good_checkpoint(tmp_path, monk
 
 def test_train_and_eval_commands(tmp_path):
     run = subprocess.run(
-        [sys.executable, "-m", "quadsitl.cli", "train", "--task", "land", "--algo", "gae",
-         "--preset", "fast", "--steps", "8192", "--runs", str(tmp_path), "--quiet"],
-        capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "quadsitl.cli",
+            "train",
+            "--task",
+            "land",
+            "--algo",
+            "gae",
+            "--preset",
+            "fast",
+            "--steps",
+            "8192",
+            "--runs",
+            str(tmp_path),
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert run.returncode == 0, run.stderr
     ckpt = tmp_path / "land-gae-fast-seed0" / "checkpoints" / "last.pt"
     assert (tmp_path / "land-gae-fast-seed0" / "config.json").is_file()
     out = subprocess.run(
         [sys.executable, "-m", "quadsitl.cli", "eval", str(ckpt), "--episodes", "5"],
-        capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert out.returncode == 0, out.stderr
     assert "touchdown speed" in out.stdout and "success_rate: " in out.stdout
     bad = subprocess.run(
         [sys.executable, "-m", "quadsitl.cli", "train", "--task", "hover", "--algo", "ddpg"],
-        capture_output=True, text=True, timeout=60,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert bad.returncode == 2 and "unknown algorithm" in bad.stderr
 
 
@@ -229,10 +254,8 @@ def test_waypoint_policy_flies_take_off_and_goto_as_autopilot():
     from quadsitl.vehicle.vehicle import Vehicle
 
     torch.set_num_threads(1)
-    vehicle = Vehicle()
-    vehicle.controller = PolicyAutopilot.from_checkpoint(
-        CHECKPOINTS / "random_waypoint.pt", vehicle.airframe
-    )
+    policy = PolicyAutopilot.from_checkpoint(CHECKPOINTS / "random_waypoint.pt", PAPER)
+    vehicle = Vehicle(autopilot=policy)
     assert vehicle.arm().ok and vehicle.takeoff(3.0).ok
     for _ in range(6_000):
         vehicle.step()
@@ -251,16 +274,15 @@ def test_waypoint_policy_flies_a_whole_mission_as_autopilot():
     from quadsitl.vehicle.vehicle import Vehicle
 
     torch.set_num_threads(1)
-    vehicle = Vehicle()
-    vehicle.controller = PolicyAutopilot.from_checkpoint(
-        CHECKPOINTS / "random_waypoint.pt", vehicle.airframe
-    )
+    policy = PolicyAutopilot.from_checkpoint(CHECKPOINTS / "random_waypoint.pt", PAPER)
+    vehicle = Vehicle(autopilot=policy)
     items = []
     for k, w in enumerate(DEFAULT_WAYPOINTS):  # take-off, a 15 m square with a climb
         lat, lon, _ = vehicle.origin.to_global(w.east, w.north, 0.0)
         command = M.NAV_TAKEOFF if k == 0 else M.NAV_WAYPOINT
-        items.append(M.MissionItem(command, param1=w.hold, x=round(lat * 1e7),
-                                   y=round(lon * 1e7), z=w.up))  # fmt: skip
+        items.append(
+            M.MissionItem(command, param1=w.hold, x=round(lat * 1e7), y=round(lon * 1e7), z=w.up)
+        )
     items.append(M.MissionItem(M.NAV_LAND))  # land where it is
     assert vehicle.set_mission(items).ok and vehicle.arm().ok
     assert vehicle.set_mode(Mode.MISSION).ok
@@ -278,11 +300,26 @@ def test_ground_station_mission_flown_by_the_policy_autopilot(tmp_path):
 
     port = free_udp_port()
     sim = subprocess.Popen(
-        [sys.executable, "-m", "quadsitl.cli", "sim", "--gcs", f"udpin:127.0.0.1:{port}",
-         "--api", "none", "--logs", "none", "--speed", "4",
-         "--autopilot", str(CHECKPOINTS / "random_waypoint.pt")],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "quadsitl.cli",
+            "sim",
+            "--gcs",
+            f"udpin:127.0.0.1:{port}",
+            "--api",
+            "none",
+            "--logs",
+            "none",
+            "--speed",
+            "4",
+            "--autopilot",
+            str(CHECKPOINTS / "random_waypoint.pt"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     client = VehicleClient(f"udpout:127.0.0.1:{port}")
     try:
         client.connect(timeout=40)

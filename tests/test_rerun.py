@@ -52,9 +52,17 @@ def test_a_recorded_flight_converts_with_every_part(flight_log, tmp_path):
     result = convert(flight_log, out)
     assert not result.warnings
     rows = rows_per_entity(out)
-    for entity in ("/world/vehicle", "/world/trajectory", "/world/home", "/events",
-                   "/plots/altitude", "/plots/attitude/roll", "/plots/rotors/speed_1",
-                   "/plots/battery/voltage", "/world/vehicle/rotors"):  # fmt: skip
+    for entity in (
+        "/world/vehicle",
+        "/world/trajectory",
+        "/world/home",
+        "/events",
+        "/plots/altitude",
+        "/plots/attitude/roll",
+        "/plots/rotors/speed_1",
+        "/plots/battery/voltage",
+        "/world/vehicle/rotors",
+    ):
         assert rows.get(entity, 0) > 0, entity
     # Every position sample is one row of altitude and one translation of the vehicle.
     assert rows["/plots/altitude"] == result.entities["plots/altitude"] > 100
@@ -122,8 +130,10 @@ def test_headless_screenshot_shows_the_flight(flight_log, tmp_path):
     png = tmp_path / "flight.png"
     subprocess.run(
         [rerun, str(out), "--headless", "--window-size", "1280x720", "--screenshot-to", str(png)],
-        check=True, timeout=120, capture_output=True,
-    )  # fmt: skip
+        check=True,
+        timeout=120,
+        capture_output=True,
+    )
     from PIL import Image
 
     image = np.asarray(Image.open(png).convert("RGB"))
@@ -134,10 +144,26 @@ def test_headless_screenshot_shows_the_flight(flight_log, tmp_path):
 def test_sim_streams_itself_to_a_recording(tmp_path):
     out = tmp_path / "sim.rrd"
     result = subprocess.run(
-        [sys.executable, "-m", "quadsitl.cli", "sim", "--gcs", "udpin:127.0.0.1:0", "--api",
-         "none", "--logs", "none", "--duration", "2", "--rerun-save", str(out)],
-        capture_output=True, text=True, timeout=60,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "quadsitl.cli",
+            "sim",
+            "--gcs",
+            "udpin:127.0.0.1:0",
+            "--api",
+            "none",
+            "--logs",
+            "none",
+            "--duration",
+            "2",
+            "--rerun-save",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 0, result.stderr
     rows = rows_per_entity(out)
     assert rows["/world/vehicle"] >= 2 * 30  # pose at 30 Hz for 2 s
@@ -183,8 +209,10 @@ def test_quadsitl_replay_command(flight_log, tmp_path):
     out = tmp_path / "cli.rrd"
     result = subprocess.run(
         [sys.executable, "-m", "quadsitl.cli", "replay", str(flight_log), "-o", str(out)],
-        capture_output=True, text=True, timeout=60,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 0, result.stderr
     assert f"open it with: rerun {out}" in result.stdout
     assert rows_per_entity(out)["/plots/altitude"] > 100

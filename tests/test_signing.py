@@ -71,9 +71,11 @@ def test_signed_accepted_unsigned_bad_and_replayed_rejected_and_counted(signed_s
         good.write(frame)  # the same signed bytes again: a replay
         assert _ack(good) is None
         text = good.recv_match(
-            type="STATUSTEXT", blocking=True, timeout=12,
+            type="STATUSTEXT",
+            blocking=True,
+            timeout=12,
             condition="'signing: rejected' in STATUSTEXT.text",
-        )  # fmt: skip
+        )
         assert text is not None
         deadline = time.monotonic() + 5
         counts = (0, 0, 0)

@@ -23,9 +23,13 @@ class Algorithm(abc.ABC):
     def __init__(self, config: TrainConfig, obs_size: int, act_size: int) -> None:
         self.config = config
         self.net = ActorCritic(
-            obs_size, act_size, config.hidden, self.two_headed, config.normalize_obs,
+            obs_size,
+            act_size,
+            config.hidden,
+            self.two_headed,
+            config.normalize_obs,
             config.init_log_std,
-        )  # fmt: skip
+        )
         self._obs: np.ndarray | None = None
 
     # --- experience ---------------------------------------------------------------------
@@ -65,10 +69,15 @@ class Algorithm(abc.ABC):
         last_values = self.net.value(torch.as_tensor(self._obs)).numpy()
         self.net.norm.update(torch.as_tensor(obs.reshape(t_steps * n, -1)))
         advantages, returns = compute_gae(
-            rewards, values.astype(np.float64), terminated, truncated,
-            final_values.astype(np.float64), last_values.astype(np.float64),
-            c.gamma, c.gae_lambda,
-        )  # fmt: skip
+            rewards,
+            values.astype(np.float64),
+            terminated,
+            truncated,
+            final_values.astype(np.float64),
+            last_values.astype(np.float64),
+            c.gamma,
+            c.gae_lambda,
+        )
         return Rollout(
             obs=torch.as_tensor(obs),
             actions=torch.as_tensor(actions),

@@ -29,6 +29,8 @@ class VanillaPG(Algorithm):
         with torch.no_grad():
             kl = (batch["log_probs"] - self.log_prob(batch["obs"], batch["actions"])[0]).mean()
         return {
-            "policy_loss": policy_loss.item(), "value_loss": value_loss.item(),
-            "entropy": entropy.mean().item(), "kl": kl.item(),
-        }  # fmt: skip
+            "policy_loss": policy_loss.item(),
+            "value_loss": value_loss.item(),
+            "entropy": entropy.mean().item(),
+            "kl": kl.item(),
+        }

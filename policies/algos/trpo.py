@@ -96,9 +96,12 @@ class TRPO(Algorithm):
         with torch.no_grad():
             entropy = self.net.distribution(obs).entropy().sum(-1).mean()
         return {
-            "policy_loss": -gain.item(), "value_loss": value_loss.item(),
-            "entropy": float(entropy), "kl": float(kl), "step_accepted": float(accepted),
-        }  # fmt: skip
+            "policy_loss": -gain.item(),
+            "value_loss": value_loss.item(),
+            "entropy": float(entropy),
+            "kl": float(kl),
+            "step_accepted": float(accepted),
+        }
 
     @staticmethod
     def _set(params: list[torch.nn.Parameter], flat: torch.Tensor) -> None:

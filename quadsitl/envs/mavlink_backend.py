@@ -170,12 +170,19 @@ class MavlinkBackend:
     def _sim_args(self, index: int) -> list[str]:
         o = self.engine.options
         return [
-            "--physics-rate", f"{1 / o.physics_dt:.12g}",
-            "--control-rate", f"{1 / o.control_period:.12g}",
-            "--airframe", self.engine.airframe.name,
-            "--sysid", str(self.system_id + index),
-            "--gcs", self.gcs or "none", "--api", "none",
-        ]  # fmt: skip
+            "--physics-rate",
+            f"{1 / o.physics_dt:.12g}",
+            "--control-rate",
+            f"{1 / o.control_period:.12g}",
+            "--airframe",
+            self.engine.airframe.name,
+            "--sysid",
+            str(self.system_id + index),
+            "--gcs",
+            self.gcs or "none",
+            "--api",
+            "none",
+        ]
 
     def _connect(self) -> None:
         if self.addresses is None:

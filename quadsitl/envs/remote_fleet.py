@@ -73,9 +73,12 @@ class RemoteFleet(Fleet):
                 raise ValueError("the MAVLink reset sets all four rotors to one speed")
             client = self.clients[i]
             answer = client.reset(
-                wire.position_ned, wire.q_ned_frd, frames.enu_to_ned(s[L.VEL]), wire.rates_frd,
+                wire.position_ned,
+                wire.q_ned_frd,
+                frames.enu_to_ned(s[L.VEL]),
+                wire.rates_frd,
                 float(s[L.I_ROTOR0]),
-            )  # fmt: skip
+            )
             client.arm(force=True)
             self._take(i, answer)
 

@@ -84,9 +84,18 @@ class SimProcess:
     ) -> None:
         self.port = port if port is not None else free_udp_port()
         self.command = [
-            sys.executable, "-m", "quadsitl.cli", "sim", "--lockstep", "--quiet",
-            "--hil", f"udpin:127.0.0.1:{self.port}", "--logs", "none", *args,
-        ]  # fmt: skip
+            sys.executable,
+            "-m",
+            "quadsitl.cli",
+            "sim",
+            "--lockstep",
+            "--quiet",
+            "--hil",
+            f"udpin:127.0.0.1:{self.port}",
+            "--logs",
+            "none",
+            *args,
+        ]
         self.process = _SPAWNER.popen(
             args=self.command,
             stdin=subprocess.DEVNULL,

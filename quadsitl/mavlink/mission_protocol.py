@@ -141,15 +141,37 @@ class MissionProtocol:
         current = int(msg.seq == self.vehicle.mission_current)
         params = (item.param1, item.param2, item.param3, item.param4)
         if msg.get_type() == "MISSION_REQUEST":  # legacy float item
-            reply(self.encoder.mission_item_encode(
-                *src, msg.seq, item.frame, item.command, current, int(item.autocontinue),
-                *params, item.x * 1e-7, item.y * 1e-7, item.z, 0,
-            ))  # fmt: skip
+            reply(
+                self.encoder.mission_item_encode(
+                    *src,
+                    msg.seq,
+                    item.frame,
+                    item.command,
+                    current,
+                    int(item.autocontinue),
+                    *params,
+                    item.x * 1e-7,
+                    item.y * 1e-7,
+                    item.z,
+                    0,
+                )
+            )
         else:
-            reply(self.encoder.mission_item_int_encode(
-                *src, msg.seq, item.frame, item.command, current, int(item.autocontinue),
-                *params, item.x, item.y, item.z, 0,
-            ))  # fmt: skip
+            reply(
+                self.encoder.mission_item_int_encode(
+                    *src,
+                    msg.seq,
+                    item.frame,
+                    item.command,
+                    current,
+                    int(item.autocontinue),
+                    *params,
+                    item.x,
+                    item.y,
+                    item.z,
+                    0,
+                )
+            )
 
     def on_clear_all(self, msg: Any, reply: Reply) -> None:
         src = (msg.get_srcSystem(), msg.get_srcComponent())

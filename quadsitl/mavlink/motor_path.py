@@ -186,11 +186,25 @@ class MotorPath:
             )
         p, q, vel, r = wire.position_ned, wire.q_ned_frd, wire.velocity_frd, wire.rates_frd
         odometry = _encoder.odometry_encode(
-            time_usec, mav.MAV_FRAME_LOCAL_NED, mav.MAV_FRAME_BODY_FRD,
-            p[0], p[1], p[2], list(q), vel[0], vel[1], vel[2], r[0], r[1], r[2],
-            NAN_COVARIANCE, NAN_COVARIANCE, self.resets & 0xFF,
-            mav.MAV_ESTIMATOR_TYPE_UNKNOWN, 100,
-        )  # fmt: skip
+            time_usec,
+            mav.MAV_FRAME_LOCAL_NED,
+            mav.MAV_FRAME_BODY_FRD,
+            p[0],
+            p[1],
+            p[2],
+            list(q),
+            vel[0],
+            vel[1],
+            vel[2],
+            r[0],
+            r[1],
+            r[2],
+            NAN_COVARIANCE,
+            NAN_COVARIANCE,
+            self.resets & 0xFF,
+            mav.MAV_ESTIMATOR_TYPE_UNKNOWN,
+            100,
+        )
         messages.append(odometry)
         return messages
 
@@ -210,8 +224,14 @@ class MotorPath:
         speed = float(np.linalg.norm(velocity_ned)) * 100
         mg = accel_frd / 9.80665 * 1000
         return _encoder.hil_state_quaternion_encode(
-            wire.time_usec, list(wire.q_ned_frd), *(float(x) for x in wire.rates_frd),
-            round(lat * 1e7), round(lon * 1e7), round(alt * 1000),
-            *(_int16(x * 100) for x in velocity_ned), min(round(speed), 65535),
-            min(round(speed), 65535), *(_int16(x) for x in mg),
-        )  # fmt: skip
+            wire.time_usec,
+            list(wire.q_ned_frd),
+            *(float(x) for x in wire.rates_frd),
+            round(lat * 1e7),
+            round(lon * 1e7),
+            round(alt * 1000),
+            *(_int16(x * 100) for x in velocity_ned),
+            min(round(speed), 65535),
+            min(round(speed), 65535),
+            *(_int16(x) for x in mg),
+        )

@@ -23,10 +23,13 @@ from quadsitl.vehicle.results import Severity
 from quadsitl.vehicle.vehicle import Vehicle
 
 INTEGER_TYPES = {
-    mav.MAV_PARAM_TYPE_UINT8: "<B", mav.MAV_PARAM_TYPE_INT8: "<b",
-    mav.MAV_PARAM_TYPE_UINT16: "<H", mav.MAV_PARAM_TYPE_INT16: "<h",
-    mav.MAV_PARAM_TYPE_UINT32: "<I", mav.MAV_PARAM_TYPE_INT32: "<i",
-}  # fmt: skip
+    mav.MAV_PARAM_TYPE_UINT8: "<B",
+    mav.MAV_PARAM_TYPE_INT8: "<b",
+    mav.MAV_PARAM_TYPE_UINT16: "<H",
+    mav.MAV_PARAM_TYPE_INT16: "<h",
+    mav.MAV_PARAM_TYPE_UINT32: "<I",
+    mav.MAV_PARAM_TYPE_INT32: "<i",
+}
 Reply = Callable[[Any], None]
 
 

@@ -19,8 +19,10 @@ import select
 import signal
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -28,10 +30,11 @@ from quadsitl.mavlink.identity import get_identity
 from quadsitl.mavlink.links import Link
 from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
+from quadsitl.physics import Airframe, get_airframe
+from quadsitl.vehicle.controller import Autopilot
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.results import Severity
 from quadsitl.vehicle.vehicle import Vehicle
-from quadsitl.viz.sim_view import SimView
 
 MAX_LAG = 0.1  # s: further behind than this, skip ahead instead of catching up
 LOCKSTEP_TICK = 0.002  # wall s between telemetry/heartbeat ticks while in lockstep
@@ -49,9 +52,6 @@ class SimConfig:
     extra_urls: list[str] = field(default_factory=list)
     lockstep: bool = False  # simulated time moves only with motor commands
     signing_key: bytes | None = None  # MAVLink 2 signing key (32 bytes)
-    rerun: bool = False  # stream the vehicle to a spawned Rerun viewer
-    rerun_save: str | None = None  # ... or to this .rrd file
-    autopilot: str | None = None  # checkpoint of a trained policy flying instead of the cascade
     system_id: int = 1
     autopilot_id: str = "px4"  # what the vehicle presents itself as: "px4" or "generic"
     home: Home = field(default_factory=Home)
@@ -78,6 +78,20 @@ class SimConfig:
             raise ValueError(f"speed factor must be 0.01..100, got {self.speed}")
         if not [u for u in (self.gcs_url, self.api_url, self.hil_url, *self.extra_urls) if u]:
             raise ValueError("at least one link is needed")
+
+
+class View(Protocol):
+    """Something that shows the flight (e.g. :class:`quadsitl.viz.sim_view.SimView`)."""
+
+    def tick(self, wall_now: float) -> None: ...
+
+    def event(self, text: str) -> None: ...
+
+    def close(self) -> None: ...
+
+
+MakeAutopilot = Callable[[Airframe], Autopilot]  # an autopilot for the airframe flown
+MakeView = Callable[[Vehicle], View]
 
 
 class Timing:
@@ -109,22 +123,28 @@ class Timing:
 
 
 class Simulator:
-    def __init__(self, config: SimConfig) -> None:
+    """The vehicle, its links and log. Collaborators come in from the caller (the command
+    line composes them): ``make_autopilot`` flies instead of the cascaded controller (a
+    trained policy), ``make_view`` shows the flight (Rerun)."""
+
+    def __init__(
+        self,
+        config: SimConfig,
+        make_autopilot: MakeAutopilot | None = None,
+        make_view: MakeView | None = None,
+    ) -> None:
         config.validate()
         self.config = config
+        self.view: View | None = None
+        autopilot = make_autopilot(get_airframe(config.airframe)) if make_autopilot else None
         self.vehicle = Vehicle(
             config.airframe,
             config.home,
             physics_dt=1.0 / config.physics_rate,
             control_period=1.0 / config.control_rate,
+            autopilot=autopilot,
         )
         Vehicle(config.airframe).step()  # compile the kernels before the clock starts
-        if config.autopilot:
-            from policies.autopilot import PolicyAutopilot  # torch: only when asked for
-
-            self.vehicle.controller = PolicyAutopilot.from_checkpoint(
-                config.autopilot, self.vehicle.airframe
-            )
         for name, value in config.params.items():
             self.vehicle.set_param(name, value)
         self.links: list[Link] = []
@@ -143,15 +163,20 @@ class Simulator:
             stamp = time.strftime("%Y%m%d-%H%M%S")
             self.tlog = TlogWriter(Path(config.log_dir) / f"quadsitl-{stamp}-{os.getpid()}.tlog")
         self.server = MavlinkServer(
-            self.vehicle, self.links, self.tlog, config.system_id, 1, echo=self._print,
-            lockstep=config.lockstep, signing_key=config.signing_key,
+            self.vehicle,
+            self.links,
+            self.tlog,
+            config.system_id,
+            1,
+            echo=self._print,
+            lockstep=config.lockstep,
+            signing_key=config.signing_key,
             identity=get_identity(config.autopilot_id),
-        )  # fmt: skip
+        )
         self.timing = Timing()
         self.stopping = False
-        self.view: SimView | None = None
-        if config.rerun or config.rerun_save:
-            self.view = SimView(self.vehicle, config.rerun_save)
+        if make_view is not None:
+            self.view = make_view(self.vehicle)
 
     def _print(self, text: str) -> None:
         if not self.config.quiet:
@@ -206,8 +231,11 @@ class Simulator:
         if tlog.failure is None:
             return
         self.tlog = self.server.tlog = None
-        print(f"quadsitl sim: warning: {tlog.failure}; the flight goes on unlogged",
-              file=sys.stderr, flush=True)  # fmt: skip
+        print(
+            f"quadsitl sim: warning: {tlog.failure}; the flight goes on unlogged",
+            file=sys.stderr,
+            flush=True,
+        )
         self.server.statustext(Severity.WARNING, "telemetry log stopped: write failed")
 
     def _real_time_steps(self, start: float, steps: int, wall_per_step: float) -> int:
@@ -235,9 +263,13 @@ class Simulator:
             view.close()
 
 
-def run_simulator(config: SimConfig) -> int:
+def run_simulator(
+    config: SimConfig,
+    make_autopilot: MakeAutopilot | None = None,
+    make_view: MakeView | None = None,
+) -> int:
     """Run until SIGINT/SIGTERM (or ``config.duration``); returns an exit code."""
-    sim = Simulator(config)
+    sim = Simulator(config, make_autopilot, make_view)
     signal.signal(signal.SIGINT, sim.stop)
     signal.signal(signal.SIGTERM, sim.stop)
     links = ", ".join(f"{link.name} {link.url} (port {link.local_port})" for link in sim.links)
@@ -249,9 +281,12 @@ def run_simulator(config: SimConfig) -> int:
     exposed = [link for link in sim.links if link.exposed]
     if exposed and config.signing_key is None:
         names = ", ".join(f"{link.name} ({link.url})" for link in exposed)
-        print(f"quadsitl sim: warning: {names} can be reached from other hosts and signing "
-              "is off: anyone there can command the vehicle (docs/security.md)",
-              file=sys.stderr, flush=True)  # fmt: skip
+        print(
+            f"quadsitl sim: warning: {names} can be reached from other hosts and signing "
+            "is off: anyone there can command the vehicle (docs/security.md)",
+            file=sys.stderr,
+            flush=True,
+        )
     if sim.tlog is not None:
         sim._print(f"quadsitl sim: telemetry log {sim.tlog.path}")
     try:

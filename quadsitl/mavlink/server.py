@@ -155,9 +155,11 @@ class MavlinkServer:
         rejected by signing, and rejected motor commands."""
         r = self.signing.rejected if self.signing is not None else {}
         return (
-            r.get("unsigned", 0), r.get("bad_signature", 0), r.get("replayed", 0),
+            r.get("unsigned", 0),
+            r.get("bad_signature", 0),
+            r.get("replayed", 0),
             self.motors.counters["rejected"],
-        )  # fmt: skip
+        )
 
     # --- the loop's hooks -------------------------------------------------------------
     def receive(self, link: Link, received_at: float | None = None) -> None:
@@ -382,8 +384,11 @@ class MavlinkServer:
         else:
             amsl = self.identity.takeoff_param7_amsl
         if amsl and altitude < v.origin.altitude:
-            self.statustext(Severity.INFO, f"take-off altitude {altitude:g} m is below the "
-                            "ground as AMSL: taken as metres above home")  # fmt: skip
+            self.statustext(
+                Severity.INFO,
+                f"take-off altitude {altitude:g} m is below the "
+                "ground as AMSL: taken as metres above home",
+            )
             amsl = False
         return v.takeoff(altitude - v.home_altitude if amsl else altitude)
 
@@ -396,8 +401,10 @@ class MavlinkServer:
         else:
             lat, lon, alt = c.params[4], c.params[5], c.params[6]
             if not all(math.isfinite(x) for x in (lat, lon, alt)):
-                return Result(Outcome.DENIED, "set home denied: latitude, longitude and "
-                              "altitude must be numbers")  # fmt: skip
+                return Result(
+                    Outcome.DENIED,
+                    "set home denied: latitude, longitude and altitude must be numbers",
+                )
             east, north, up = v.origin.to_local(lat, lon, alt)
         result = v.set_home(float(east), float(north), float(up))
         if result.ok:  # ground stations learn the new home at once

@@ -125,10 +125,17 @@ def build_sys_status(s: Snapshot) -> Any:
     if v.failsafes.fence_breached:
         health &= ~fence
     return _encoder.sys_status_encode(
-        present, present, health, 100, int(v.battery.voltage * 1000),
-        int(v.battery.current * 100), int(v.battery.remaining * 100), 0, s.comm_errors,
+        present,
+        present,
+        health,
+        100,
+        int(v.battery.voltage * 1000),
+        int(v.battery.current * 100),
+        int(v.battery.remaining * 100),
+        0,
+        s.comm_errors,
         *s.error_counts,
-    )  # fmt: skip
+    )
 
 
 def build_extended_sys_state(s: Snapshot) -> Any:
@@ -155,19 +162,32 @@ def build_local_position_ned(s: Snapshot) -> Any:
 def build_global_position_int(s: Snapshot) -> Any:
     v = s.velocity_ned * 100.0  # cm/s
     return _encoder.global_position_int_encode(
-        s.time_boot_ms, round(s.lat * 1e7), round(s.lon * 1e7), round(s.alt_amsl * 1000),
-        round(s.relative_alt * 1000), round(v[0]), round(v[1]), round(v[2]),
+        s.time_boot_ms,
+        round(s.lat * 1e7),
+        round(s.lon * 1e7),
+        round(s.alt_amsl * 1000),
+        round(s.relative_alt * 1000),
+        round(v[0]),
+        round(v[1]),
+        round(v[2]),
         round(s.heading_deg * 100) % 36000,
-    )  # fmt: skip
+    )
 
 
 def build_gps_raw_int(s: Snapshot) -> Any:
     course = round(math.degrees(math.atan2(s.velocity_ned[1], s.velocity_ned[0])) % 360 * 100)
     return _encoder.gps_raw_int_encode(
-        s.time_usec, mav.GPS_FIX_TYPE_3D_FIX, round(s.lat * 1e7), round(s.lon * 1e7),
-        round(s.alt_amsl * 1000), 80, 120, round(s.ground_speed * 100),
-        course if s.ground_speed > 0.2 else 65535, 14,
-    )  # fmt: skip
+        s.time_usec,
+        mav.GPS_FIX_TYPE_3D_FIX,
+        round(s.lat * 1e7),
+        round(s.lon * 1e7),
+        round(s.alt_amsl * 1000),
+        80,
+        120,
+        round(s.ground_speed * 100),
+        course if s.ground_speed > 0.2 else 65535,
+        14,
+    )
 
 
 def build_home_position(s: Snapshot) -> Any:
@@ -193,24 +213,37 @@ def build_vfr_hud(s: Snapshot) -> Any:
     v = s.vehicle
     throttle = round(100 * float(np.mean(v.rotor_cmd)) / v.airframe.max_rotor_speed)
     return _encoder.vfr_hud_encode(
-        s.ground_speed, s.ground_speed, round(s.heading_deg) % 360, throttle, s.alt_amsl,
+        s.ground_speed,
+        s.ground_speed,
+        round(s.heading_deg) % 360,
+        throttle,
+        s.alt_amsl,
         -float(s.velocity_ned[2]),
-    )  # fmt: skip
+    )
 
 
 def build_battery_status(s: Snapshot) -> Any:
     b = s.vehicle.battery
     cells = [round(b.voltage / b.cells * 1000)] * b.cells + [65535] * (10 - b.cells)
     return _encoder.battery_status_encode(
-        0, mav.MAV_BATTERY_FUNCTION_ALL, mav.MAV_BATTERY_TYPE_LIPO, 32767, cells,
-        round(b.current * 100), round(b.used_mah), -1, round(b.remaining * 100),
-    )  # fmt: skip
+        0,
+        mav.MAV_BATTERY_FUNCTION_ALL,
+        mav.MAV_BATTERY_TYPE_LIPO,
+        32767,
+        cells,
+        round(b.current * 100),
+        round(b.used_mah),
+        -1,
+        round(b.remaining * 100),
+    )
 
 
 def build_servo_output_raw(s: Snapshot) -> Any:
     v = s.vehicle
-    pwm = [round(1000 + 1000 * c / v.airframe.max_rotor_speed) if v.armed else 1000
-           for c in v.rotor_cmd]  # fmt: skip
+    pwm = [
+        round(1000 + 1000 * c / v.airframe.max_rotor_speed) if v.armed else 1000
+        for c in v.rotor_cmd
+    ]
     return _encoder.servo_output_raw_encode(s.time_usec & 0xFFFFFFFF, 0, *pwm, 0, 0, 0, 0)
 
 
@@ -305,23 +338,28 @@ DEFAULT_RATES: dict[int, float] = {
 # REQUEST_DATA_STREAM groups (ArduPilot/MAVProxy convention) -> message ids.
 DATA_STREAMS: dict[int, tuple[int, ...]] = {
     mav.MAV_DATA_STREAM_EXTENDED_STATUS: (
-        mav.MAVLINK_MSG_ID_SYS_STATUS, mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
-        mav.MAVLINK_MSG_ID_GPS_RAW_INT, mav.MAVLINK_MSG_ID_MISSION_CURRENT,
+        mav.MAVLINK_MSG_ID_SYS_STATUS,
+        mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+        mav.MAVLINK_MSG_ID_GPS_RAW_INT,
+        mav.MAVLINK_MSG_ID_MISSION_CURRENT,
     ),
     mav.MAV_DATA_STREAM_RC_CHANNELS: (mav.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW,),
     mav.MAV_DATA_STREAM_RAW_CONTROLLER: (mav.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS,),
     mav.MAV_DATA_STREAM_POSITION: (
-        mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
+        mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+        mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
     ),
     mav.MAV_DATA_STREAM_EXTRA1: (
-        mav.MAVLINK_MSG_ID_ATTITUDE, mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
+        mav.MAVLINK_MSG_ID_ATTITUDE,
+        mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
     ),
     mav.MAV_DATA_STREAM_EXTRA2: (mav.MAVLINK_MSG_ID_VFR_HUD,),
     mav.MAV_DATA_STREAM_EXTRA3: (
-        mav.MAVLINK_MSG_ID_SYSTEM_TIME, mav.MAVLINK_MSG_ID_BATTERY_STATUS,
+        mav.MAVLINK_MSG_ID_SYSTEM_TIME,
+        mav.MAVLINK_MSG_ID_BATTERY_STATUS,
         mav.MAVLINK_MSG_ID_HOME_POSITION,
     ),
-}  # fmt: skip
+}
 DATA_STREAMS[mav.MAV_DATA_STREAM_ALL] = tuple(m for ids in DATA_STREAMS.values() for m in ids)
 
 

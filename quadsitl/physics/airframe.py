@@ -1,7 +1,7 @@
 """Airframes as data: one frozen dataclass per vehicle type, with units and sources.
 
 The default preset ``"paper"`` is the plus-configuration airframe of the paper, with the
-numbers read from the authors' code (``shared/spec/paper-reference.md``). ``"paper-x"``
+numbers read from the authors' code (the table and its source: docs/physics.md). ``"paper-x"``
 is the same vehicle with its arms turned 45° into an X, rotors numbered as PX4 does.
 
 Derived quantities (hover and maximum rotor speed) are computed here and nowhere else.
@@ -35,17 +35,17 @@ class Airframe:
     """Physical parameters of one quadrotor. Every field: unit, then source."""
 
     name: str
-    mass: float = 0.65  # kg; paper-reference
+    mass: float = 0.65  # kg; docs/physics.md
     inertia: tuple[float, float, float] = (7.5e-3, 7.5e-3, 1.3e-2)  # kg·m², diagonal J; paper-ref
-    arm_length: float = 0.23  # m, centre of mass to rotor axis; paper-reference
-    thrust_coeff: float = 3.13e-5  # N/(rad/s)², kt; paper-reference
-    torque_coeff: float = 7.5e-7  # N·m/(rad/s)², kq; paper-reference
-    drag_coeff: float = 9e-3  # N/(m/s)², kd in F = -kd|v|v; paper-reference
-    aero_moment_coeff: float = 9e-4  # N·m/(rad/s)², km in M = -km|ω|ω; paper-reference
-    motor_rate: float = 1.0 / 0.18  # 1/s, k_Ω in Ω̇ = -k_Ω(Ω - Ω_c); paper-reference
-    hover_thrust_fraction: float = 0.5  # hover thrust / max thrust (T/W = 2); paper-reference
-    gravity: float = 9.81  # m/s²; paper-reference
-    rotor_radius: float = 0.1  # m, for crash geometry only; paper-reference
+    arm_length: float = 0.23  # m, centre of mass to rotor axis; docs/physics.md
+    thrust_coeff: float = 3.13e-5  # N/(rad/s)², kt; docs/physics.md
+    torque_coeff: float = 7.5e-7  # N·m/(rad/s)², kq; docs/physics.md
+    drag_coeff: float = 9e-3  # N/(m/s)², kd in F = -kd|v|v; docs/physics.md
+    aero_moment_coeff: float = 9e-4  # N·m/(rad/s)², km in M = -km|ω|ω; docs/physics.md
+    motor_rate: float = 1.0 / 0.18  # 1/s, k_Ω in Ω̇ = -k_Ω(Ω - Ω_c); docs/physics.md
+    hover_thrust_fraction: float = 0.5  # hover thrust / max thrust (T/W = 2); docs/physics.md
+    gravity: float = 9.81  # m/s²; docs/physics.md
+    rotor_radius: float = 0.1  # m, for crash geometry only; docs/physics.md
     # Rotor i sits at rotor_xy[i] (m, body FLU) and reacts on the body with
     # rotor_yaw_sign[i]·kq·Ω_i² about +z. Plus layout, paper numbering:
     # 1 front, 2 left, 3 back, 4 right; Mz = kq(−Ω1² + Ω2² − Ω3² + Ω4²).

@@ -206,7 +206,8 @@ class TaskEngine:
         if self.task.on_reset is not None:
             self.task.on_reset(self, rows)
         self._observe()
-        # The first reward of an episode measures progress from its own start (bug 1).
+        # The first reward of an episode measures progress from its own start, not from
+        # where the previous episode ended (the authors' code got this wrong).
         self.prev_dist[rows] = self.dist[rows]
 
     # --- stepping ------------------------------------------------------------------
@@ -253,9 +254,14 @@ class TaskEngine:
             self.task.advance_goal(self, active)
         self._observe()
         F.shaped_reward(
-            self.prev_dist, self.dist, a, self.weights, S.ACTION_WEIGHT,
-            self.task.time_reward, self.reward,
-        )  # fmt: skip
+            self.prev_dist,
+            self.dist,
+            a,
+            self.weights,
+            S.ACTION_WEIGHT,
+            self.task.time_reward,
+            self.reward,
+        )
         d_pos = self.dist[:, F.D_POS]
         within = d_pos < self.task.goal_radius
         if self.task.goal_bonus:

@@ -60,6 +60,7 @@ def _int(
 
 AIRFRAME_NAMES = tuple(AIRFRAMES)  # SIM_AIRFRAME value = index into this tuple
 
+# One parameter a line, read as a table (the formatter would spread each over 7 lines).
 PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("MPC_XY_P", 1.5, 0.0, 5.0, "1/s", "horizontal position gain", "pos_xy"),
     ParamSpec("MPC_Z_P", 1.2, 0.0, 5.0, "1/s", "vertical position gain", "pos_z"),

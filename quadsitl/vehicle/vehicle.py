@@ -69,6 +69,7 @@ class Vehicle:
         home: Home | None = None,
         physics_dt: float = 0.001,
         control_period: float = 0.004,
+        autopilot: Autopilot | None = None,
     ) -> None:
         self.origin = home or Home()
         self.home_position = np.zeros(3)  # m, ENU: where home is in the local frame
@@ -80,7 +81,10 @@ class Vehicle:
         self.fleet = Fleet(1, self.airframe, dt=physics_dt)
         self.substeps = max(1, round(control_period / physics_dt))
         self.control_period = self.substeps * physics_dt
-        self.controller: Autopilot = CascadedController(self.airframe)
+        # The cascade always exists: the gain parameters tune it, and it flies unless
+        # another autopilot (e.g. a trained policy) is passed in.
+        self.cascade = CascadedController(self.airframe)
+        self.controller: Autopilot = autopilot or self.cascade
         self.battery = Battery()
         self.failsafes = Failsafes()
         self.missions = MissionRunner(self)
@@ -315,10 +319,16 @@ class Vehicle:
     def set_param(self, name: str, value: float) -> float:
         """Set a parameter; returns the value stored. ValueError when refused."""
         value = self.params.check(name, value)
-        if name == "SIM_AIRFRAME" and value != self.params[name] and not self.on_ground:
-            raise ParamError(
-                "SIM_AIRFRAME can only change on the ground", ParamError.PERMISSION_DENIED
-            )
+        if name == "SIM_AIRFRAME" and value != self.params[name]:
+            if not self.on_ground:
+                raise ParamError(
+                    "SIM_AIRFRAME can only change on the ground", ParamError.PERMISSION_DENIED
+                )
+            if self.controller is not self.cascade:
+                raise ParamError(
+                    "SIM_AIRFRAME: the autopilot flying was made for this airframe",
+                    ParamError.PERMISSION_DENIED,
+                )
         full = value if name == "BAT1_V_CHARGED" else self.params["BAT1_V_CHARGED"]
         empty = value if name == "BAT1_V_EMPTY" else self.params["BAT1_V_EMPTY"]
         if empty >= full:
@@ -566,8 +576,8 @@ class Vehicle:
     def _apply_param(self, name: str) -> None:
         spec = next(p for p in PARAMETERS if p.name == name)
         value = self.params[name]
-        if spec.gain is not None and isinstance(self.controller, CascadedController):
-            setattr(self.controller.gains, spec.gain, value)
+        if spec.gain is not None:
+            setattr(self.cascade.gains, spec.gain, value)
         elif name == "BAT1_CAPACITY":
             self.battery.capacity_mah = value
         elif name == "BAT1_N_CELLS":
@@ -582,8 +592,7 @@ class Vehicle:
                 self.airframe = airframe
                 self.fleet.params[0] = airframe.to_params()
                 self.fleet.airframes = [airframe]
-                if isinstance(self.controller, CascadedController):
-                    self.controller.set_airframe(airframe)
+                self.cascade.set_airframe(airframe)
                 self.event(Severity.INFO, f"airframe {airframe.name}")
 
     def _reset_flight_state(self) -> None:

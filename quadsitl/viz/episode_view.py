@@ -68,5 +68,8 @@ class EpisodeView:
             self.rec.flush()
             self.rec.disconnect()
         except Exception as error:  # rerun raises RuntimeError from its sinks
-            warnings.warn(f"Rerun recording could not be closed cleanly: {error}",
-                          RuntimeWarning, stacklevel=2)  # fmt: skip
+            warnings.warn(
+                f"Rerun recording could not be closed cleanly: {error}",
+                RuntimeWarning,
+                stacklevel=2,
+            )

@@ -191,9 +191,11 @@ class FlightView:
 def _altitude_velocity(position: np.ndarray, velocity: np.ndarray) -> list[Sample]:
     return [
         Sample("plots/altitude", "scalar", float(position[2])),
-        *(Sample(f"plots/velocity/{axis}", "scalar", float(v))
-          for axis, v in zip(("east", "north", "up"), velocity, strict=True)),
-    ]  # fmt: skip
+        *(
+            Sample(f"plots/velocity/{axis}", "scalar", float(v))
+            for axis, v in zip(("east", "north", "up"), velocity, strict=True)
+        ),
+    ]
 
 
 def _mode_name(msg: Any) -> str:

@@ -69,8 +69,9 @@ def log_vehicle_model(rec: rr.RecordingStream, path: str = "world/vehicle") -> N
 def setup(rec: rr.RecordingStream) -> None:
     """World coordinates and the vehicle model."""
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    rec.log("world/home", rr.Points3D([[0.0, 0.0, 0.0]], radii=0.05, colors=[[0, 160, 0]]),
-            static=True)  # fmt: skip
+    rec.log(
+        "world/home", rr.Points3D([[0.0, 0.0, 0.0]], radii=0.05, colors=[[0, 160, 0]]), static=True
+    )
     log_vehicle_model(rec)
 
 
