@@ -16,6 +16,7 @@ from typing import Any
 os.environ.setdefault("MAVLINK20", "1")  # before pymavlink.mavutil is imported
 from pymavlink import mavutil
 
+from quadsitl.mavlink.commands import FORCE_MAGIC
 from quadsitl.mavlink.param_protocol import decode_value as decode_param
 from quadsitl.mavlink.param_protocol import encode_raw as encode_param
 
@@ -172,7 +173,7 @@ class VehicleClient:
         self.wait(lambda: self.armed, 3.0, "armed heartbeat")
 
     def disarm(self, force: bool = False) -> None:
-        self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 21196 if force else 0)
+        self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, FORCE_MAGIC if force else 0)
 
     def set_mode(self, name: str) -> None:
         main, sub = MODES[name]

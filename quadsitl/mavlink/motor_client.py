@@ -20,13 +20,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from quadsitl.mavlink import mavlink as mav
+from quadsitl.mavlink.commands import FORCE_MAGIC
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.mavlink.links import is_loopback
 from quadsitl.mavlink.motor_path import ARMED_FLAG, LOCKSTEP_FLAG, RESET_STATE, STAGE_MOTION
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
 
-FORCE_MAGIC = 21196
 SPIN_SECONDS = 0.002  # poll this long for an answer before sleeping in select()
 
 
