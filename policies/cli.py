@@ -46,6 +46,11 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         help="replace the run in the run folder (without this or --resume, an existing run "
         "is refused)",
     )
+    train.add_argument(
+        "--tensorboard",
+        action="store_true",
+        help="also log every metrics.csv column to RUN/tensorboard (tensorboard --logdir runs)",
+    )
     train.add_argument("--quiet", action="store_true", help="no progress bar")
 
     evaluate = commands.add_parser(
@@ -124,7 +129,9 @@ def _train(args: argparse.Namespace) -> int:
         f"quadsitl train: {config.iterations} iterations of {config.batch_size} steps -> {run_dir}",
         file=sys.stderr,
     )
-    result = train(config, run_dir, progress=not args.quiet, mode=mode)
+    result = train(
+        config, run_dir, progress=not args.quiet, mode=mode, tensorboard=args.tensorboard
+    )
     last = run_dir / "checkpoints" / "last.pt"
     if result.interrupted:
         saved = (

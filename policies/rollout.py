@@ -8,6 +8,7 @@ step is bootstrapped with the value of the observation it ended in; a terminated
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,6 +49,15 @@ def compute_gae(
         running = delta + gamma * gae_lambda * (~ended) * running
         advantages[t] = running
     return advantages, advantages + values
+
+
+def explained_variance(values: np.ndarray, returns: np.ndarray) -> float:
+    """1 − Var(R − V) / Var(R): 1 for a perfect critic, 0 for one that predicts the mean,
+    negative for worse (NaN when the returns do not vary)."""
+    variance = float(np.var(returns))
+    if variance == 0.0:
+        return math.nan
+    return 1.0 - float(np.var(np.asarray(returns) - np.asarray(values))) / variance
 
 
 class BatchEnv:

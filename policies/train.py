@@ -34,7 +34,7 @@ from policies.algos import ALGORITHM_CLASSES
 from policies.algos.base import Algorithm
 from policies.config import TrainConfig
 from policies.evaluate import VALIDATION_SEED, evaluate
-from policies.rollout import BatchEnv
+from policies.rollout import BatchEnv, explained_variance
 
 COLUMNS = (
     "iteration",
@@ -49,8 +49,14 @@ COLUMNS = (
     "value_loss",
     "entropy",
     "kl",
+    "approx_kl",
+    "clip_fraction",
+    "explained_variance",
     "steps_per_second",
 )
+# Update statistics of the algorithms (NaN where an algorithm has none: approx_kl and
+# clip_fraction are PPO's).
+LOSS_COLUMNS = ("policy_loss", "value_loss", "entropy", "kl", "approx_kl", "clip_fraction")
 MODES = ("new", "resume", "overwrite")
 RUN_FILES = ("config.json", "metrics.csv", "checkpoints")
 
@@ -89,9 +95,14 @@ def holds_run(run_dir: Path) -> bool:
 
 
 def train(
-    config: TrainConfig, run_dir: str | Path, progress: bool = True, mode: str = "new"
+    config: TrainConfig,
+    run_dir: str | Path,
+    progress: bool = True,
+    mode: str = "new",
+    tensorboard: bool = False,
 ) -> RunResult:
-    """Train ``config`` into ``run_dir``; ``mode``: "new", "resume" or "overwrite"."""
+    """Train ``config`` into ``run_dir``; ``mode``: "new", "resume" or "overwrite";
+    ``tensorboard``: also write every metrics column to ``run_dir/tensorboard``."""
     run_dir = Path(run_dir)
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
@@ -119,7 +130,7 @@ def train(
                 shutil.rmtree(target) if target.is_dir() else target.unlink(missing_ok=True)
         run_dir.mkdir(parents=True, exist_ok=True)
         (run_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n")
-        log = _Log(config, run_dir, progress, start)
+        log = _Log(config, run_dir, progress, start, tensorboard)
     except BaseException:
         env.close()
         raise
@@ -202,8 +213,20 @@ def _restore(algo: Algorithm, start: _Start) -> None:
 class _Log:
     """metrics.csv, the progress line, checkpoints, and the running episode statistics."""
 
-    def __init__(self, config: TrainConfig, run_dir: Path, progress: bool, start: _Start) -> None:
+    def __init__(
+        self,
+        config: TrainConfig,
+        run_dir: Path,
+        progress: bool,
+        start: _Start,
+        tensorboard: bool = False,
+    ) -> None:
         self.config, self.run_dir, self.progress = config, run_dir, progress
+        self.board: Any = None
+        if tensorboard:
+            from torch.utils.tensorboard import SummaryWriter  # needs the tensorboard package
+
+            self.board = SummaryWriter(str(run_dir / "tensorboard"))
         metrics = run_dir / "metrics.csv"
         kept = _kept_rows(metrics, start.iteration) if start.iteration else []
         self.file = open(metrics, "w", newline="")  # noqa: SIM115
@@ -232,6 +255,11 @@ class _Log:
             row["eval_success"] = self._evaluate(algo, it)
         self.writer.writerow(row)
         self.file.flush()
+        if self.board is not None:  # every column, against environment steps
+            for key, value in row.items():
+                if key not in ("iteration", "env_steps") and math.isfinite(value):
+                    self.board.add_scalar(f"{config.task}/{key}", value, row["env_steps"])
+            self.board.flush()
         if self.progress and (time.perf_counter() - self.shown > 0.5 or it == config.iterations):
             self.shown = time.perf_counter()
             _progress(config, row)
@@ -269,6 +297,8 @@ class _Log:
 
     def close(self) -> None:
         self.file.close()
+        if self.board is not None:
+            self.board.close()
         if self.progress:
             print(file=sys.stderr)
 
@@ -301,7 +331,10 @@ def _row(config, it, started, rollout, stats) -> dict:  # type: ignore[no-untype
         "std_return": float(np.std(returns)) if returns else math.nan,
         "success_rate": float(np.mean(rollout.episode_success)) if returns else math.nan,
         "eval_success": math.nan,
-        **{k: stats.get(k, math.nan) for k in ("policy_loss", "value_loss", "entropy", "kl")},
+        **{k: stats.get(k, math.nan) for k in LOSS_COLUMNS},
+        "explained_variance": explained_variance(
+            rollout.values.numpy().ravel(), rollout.returns.numpy().ravel()
+        ),
         "steps_per_second": round(it * config.batch_size / max(elapsed, 1e-9)),
     }
 

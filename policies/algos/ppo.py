@@ -1,7 +1,10 @@
 """PPO: the clipped surrogate objective (Schulman 2017).
 
 L = −E[min(ρ Â, clip(ρ, 1 − ε, 1 + ε) Â)] + c_v · Huber(V, R̂) − c_H · H[π], with
-ρ = π(a|s) / π_old(a|s); ``epochs`` passes of ``minibatches`` Adam steps per batch.
+ρ = π(a|s) / π_old(a|s); ``epochs`` passes of ``minibatches`` Adam steps per batch (the
+last minibatch of a pass takes the remainder, as Stable-Baselines3 does). Logged per
+update as CleanRL logs them: the approximate KL E[(ρ − 1) − log ρ] and the fraction of
+samples whose ratio was clipped.
 """
 
 from __future__ import annotations
@@ -31,10 +34,11 @@ class PPO(Algorithm):
         c, batch = self.config, rollout.flat()
         size = batch["obs"].shape[0]
         chunk = max(1, size // c.minibatches)
-        stats: dict[str, list[float]] = {"policy_loss": [], "value_loss": [], "entropy": []}
+        names = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction")
+        stats: dict[str, list[float]] = {name: [] for name in names}
         for _ in range(c.epochs):
             order = torch.randperm(size, generator=self.generator)
-            for start in range(0, size - chunk + 1, chunk):
+            for start in range(0, size, chunk):
                 idx = order[start : start + chunk]
                 mb = {k: v[idx] for k, v in batch.items()}
                 adv = self.advantages(mb)
@@ -43,6 +47,12 @@ class PPO(Algorithm):
                 value_loss = self.critic_loss(mb["obs"], mb["returns"])
                 loss = policy_loss + c.value_coef * value_loss - c.entropy_coef * entropy.mean()
                 self.step_optimizer(self.optimizer, loss)
+                with torch.no_grad():
+                    log_ratio = log_prob - mb["log_probs"]
+                    ratio = log_ratio.exp()
+                    stats["approx_kl"].append(((ratio - 1) - log_ratio).mean().item())
+                    clipped = (ratio - 1.0).abs() > c.clip_coef
+                    stats["clip_fraction"].append(clipped.float().mean().item())
                 stats["policy_loss"].append(policy_loss.item())
                 stats["value_loss"].append(value_loss.item())
                 stats["entropy"].append(entropy.mean().item())
