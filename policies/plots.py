@@ -34,12 +34,19 @@ def _read_run(run: Path) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray, np.n
     return config, np.array(steps), np.array(returns), np.array(eval_steps), np.array(success)
 
 
-def _band(ax, curves: list[tuple[np.ndarray, np.ndarray]], algo: str) -> None:  # type: ignore[no-untyped-def]
-    """Mean ± std over seeds of curves sampled at different steps, on a common grid."""
+def seed_band(
+    curves: list[tuple[np.ndarray, np.ndarray]], points: int = 200
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(grid, mean, std) over seeds of curves (steps, values) sampled at different steps:
+    each is interpolated on a common grid of steps that all of them cover."""
     end = min(s[-1] for s, _ in curves)
-    grid = np.linspace(min(s[0] for s, _ in curves), end, 200)
+    grid = np.linspace(min(s[0] for s, _ in curves), end, points)
     ys = np.array([np.interp(grid, s, r) for s, r in curves])
-    mean, std = ys.mean(0), ys.std(0)
+    return grid, ys.mean(0), ys.std(0)
+
+
+def _band(ax, curves: list[tuple[np.ndarray, np.ndarray]], algo: str) -> None:  # type: ignore[no-untyped-def]
+    grid, mean, std = seed_band(curves)
     ax.plot(grid, mean, color=COLORS.get(algo), label=f"{algo.upper()} ({len(curves)} seeds)")
     ax.fill_between(grid, mean - std, mean + std, color=COLORS.get(algo), alpha=0.2)
 
