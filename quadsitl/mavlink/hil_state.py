@@ -1,16 +1,18 @@
-"""The motor path's vehicle state on the wire, both ways.
+"""The vehicle state in wire frames, both ways: the one conversion from the physics.
 
 The simulator's physics state (world ENU, body FLU, centre of mass, ground at z = 0)
 becomes the motor path's frames: position in local NED whose origin is the centre of
 mass resting at home (the frame of LOCAL_POSITION_NED), attitude FRD -> NED, velocity in
 body FRD (ODOMETRY's child frame, as PX4 sends it), body rates FRD, rotor speeds rad/s.
-Both the simulator (encoding) and :mod:`quadsitl.mavlink.motor_client` (decoding) use
-these two functions, so the round trip is exact up to the wire's float32.
+Both the simulator (encoding: telemetry and the motor path) and
+:mod:`quadsitl.mavlink.motor_client` (decoding) use these functions, so the round trip
+is exact up to the wire's float32 and every message agrees.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -51,6 +53,17 @@ class WireState:
             contact=contact,
             touchdown_speed=touchdown,
         )
+
+    @property
+    def velocity_ned(self) -> Vec:
+        """m/s, local NED."""
+        return frames.quat_rotate(self.q_ned_frd, self.velocity_frd)
+
+    def global_position(self, origin: Any) -> tuple[float, float, float]:
+        """(lat deg, lon deg, alt m AMSL) of the ground-level position; ``origin``: the
+        :class:`~quadsitl.vehicle.geo.Home` of the local frame."""
+        north, east, down = self.position_ned
+        return origin.to_global(float(east), float(north), float(-down))
 
     def to_physics(self, gear_height: float) -> Vec:
         """(17,) physics state row (world ENU, centre of mass above the ground plane)."""

@@ -39,6 +39,7 @@ LOCKSTEP_IDLE = 5.0  # wall s without lockstep commands before real time resumes
 NAN_COVARIANCE = [math.nan] + [0.0] * 20  # "covariance unknown"
 
 _encoder = mav.MAVLink(None)
+STANDARD_GRAVITY = 9.80665  # m/s² per g: the unit of HIL_STATE_QUATERNION's mG fields
 
 
 def _int16(x: float) -> int:
@@ -210,19 +211,19 @@ class MotorPath:
 
     def _hil_state_quaternion(self, wire: WireState) -> Any:
         v = self.vehicle
-        s = v.state
-        up = float(s[L.I_PZ]) - v.airframe.gear_height
-        lat, lon, alt = v.origin.to_global(s[L.I_PX], s[L.I_PY], up)
-        velocity_ned = np.array([s[L.I_VY], s[L.I_VX], -s[L.I_VZ]])
-        # Specific force (what an accelerometer reads), body FRD, over the last period.
-        accel_frd = np.array([0.0, 0.0, -9.80665])
+        lat, lon, alt = wire.global_position(v.origin)
+        velocity_ned = wire.velocity_ned
+        # Specific force (what an accelerometer reads), body FRD, over the last period:
+        # the acceleration minus the simulated gravity.
+        gravity_ned = np.array([0.0, 0.0, v.airframe.gravity])
+        accel_frd = frames.quat_rotate(frames.quat_conjugate(wire.q_ned_frd), -gravity_ned)
         if self._previous_velocity is not None and v.time > self._previous_velocity[0]:
             t0, v0 = self._previous_velocity
-            accel_ned = (velocity_ned - v0) / (v.time - t0) - np.array([0.0, 0.0, 9.80665])
+            accel_ned = (velocity_ned - v0) / (v.time - t0) - gravity_ned
             accel_frd = frames.quat_rotate(frames.quat_conjugate(wire.q_ned_frd), accel_ned)
         self._previous_velocity = (v.time, velocity_ned)
         speed = float(np.linalg.norm(velocity_ned)) * 100
-        mg = accel_frd / 9.80665 * 1000
+        mg = accel_frd / STANDARD_GRAVITY * 1000
         return _encoder.hil_state_quaternion_encode(
             wire.time_usec,
             list(wire.q_ned_frd),

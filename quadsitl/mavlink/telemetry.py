@@ -17,6 +17,7 @@ import numpy as np
 
 from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
+from quadsitl.mavlink.hil_state import WireState
 from quadsitl.mavlink.identity import (
     AVAILABLE_MODES,
     CUSTOM_VERSION,
@@ -76,16 +77,17 @@ class Snapshot:
         s = vehicle.state
         self.time_boot_ms = int(vehicle.time * 1000) & 0xFFFFFFFF
         self.time_usec = int(vehicle.time * 1e6)
-        # Local origin: home, on the ground (the resting centre of mass is gear height up).
-        ground_level = s[L.POS] - np.array([0.0, 0.0, vehicle.airframe.gear_height])
-        self.position_ned = frames.enu_to_ned(ground_level)  # m
+        # Local origin: the start position on the ground (the resting centre of mass is
+        # gear height up); the conversion is WireState's, shared with the motor path.
+        wire = WireState.from_physics(s, vehicle.airframe.gear_height, self.time_usec, 0, 0.0)
+        self.position_ned = wire.position_ned  # m
         self.velocity_ned = frames.enu_to_ned(s[L.VEL])  # m/s
-        self.q_ned_frd = frames.quat_enu_flu_to_ned_frd(s[L.QUAT])  # (w, x, y, z)
+        self.q_ned_frd = wire.q_ned_frd  # (w, x, y, z)
         self.roll, self.pitch, self.yaw = (float(a) for a in frames.euler_from_quat(self.q_ned_frd))
-        self.rates_frd = frames.flu_to_frd(s[L.RATES])  # rad/s
+        self.rates_frd = wire.rates_frd  # rad/s
         self.rotor_speeds = s[L.ROTORS]  # rad/s
-        up = float(s[L.I_PZ]) - vehicle.airframe.gear_height
-        self.lat, self.lon, self.alt_amsl = vehicle.origin.to_global(s[L.I_PX], s[L.I_PY], up)
+        self.lat, self.lon, self.alt_amsl = wire.global_position(vehicle.origin)
+        up = -float(self.position_ned[2])
         self.relative_alt = up - float(vehicle.home_position[2])  # m above home
         self.heading_deg = math.degrees(self.yaw) % 360.0
         self.ground_speed = math.hypot(self.velocity_ned[0], self.velocity_ned[1])
