@@ -14,9 +14,11 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-ALGORITHMS = ("gae", "ppo", "trpo")
+from policies.algos import ALGORITHMS
+from quadsitl.tasks import TASKS
+
 BACKENDS = ("inprocess", "mavlink")
-TASK_NAMES = ("hover", "static_waypoint", "random_waypoint", "land", "target_follow")
+TASK_NAMES = tuple(TASKS)  # the tasks' registry, in its order
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from quadsitl.envs.mavlink_backend import attach_backend
+from quadsitl.physics import layout as L
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
 
 
@@ -82,6 +83,10 @@ class BatchEnv:
     @property
     def obs_size(self) -> int:
         return self.engine.obs_size
+
+    @property
+    def act_size(self) -> int:
+        return L.N_ROTORS  # one action per rotor (Eq. 19)
 
     def reset(self) -> np.ndarray:
         self.engine.reset_envs(self.all)

@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from policies import checkpoint
-from policies.algos import ALGORITHM_CLASSES
+from policies.algos import algorithm_class
 from policies.algos.base import Algorithm
 from policies.config import TrainConfig
 from policies.evaluate import VALIDATION_SEED, evaluate
@@ -122,7 +122,7 @@ def train(
     seed_everything(seed)
     env = BatchEnv(config.task, config.num_envs, seed, config.backend, **config.task_options)
     try:
-        algo = ALGORITHM_CLASSES[config.algo](config, env.obs_size, 4)
+        algo = algorithm_class(config.algo)(config, env.obs_size, env.act_size)
         _restore(algo, start)
         if mode == "overwrite":
             for name in RUN_FILES:

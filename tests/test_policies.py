@@ -15,8 +15,7 @@ import pytest
 import torch
 
 from policies import checkpoint
-from policies.algos import PPO
-from policies.algos.ppo import clipped_surrogate
+from policies.algos.ppo import PPO, clipped_surrogate
 from policies.algos.trpo import conjugate_gradient
 from policies.config import make_config
 from policies.evaluate import evaluate

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from policies.algos import PPO
+from policies.algos.ppo import PPO
 from policies.config import make_config
 from policies.rollout import BatchEnv, explained_variance
 from policies.train import train

@@ -13,7 +13,6 @@ from quadsitl.vehicle import mission as M
 from quadsitl.vehicle.controller import ControllerGains
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.modes import Mode
-from quadsitl.vehicle.params import PARAMETERS
 from quadsitl.vehicle.results import Outcome
 from quadsitl.vehicle.vehicle import Vehicle
 
@@ -64,16 +63,16 @@ def test_cruise_speed_parameter_changes_the_flight():
     assert speeds[0] == pytest.approx(2.0, abs=0.15) and speeds[1] == pytest.approx(5.0, abs=0.3)
 
 
-def test_parameter_defaults_match_the_controller_and_refuse_bad_values():
-    gains = ControllerGains()
-    for spec in PARAMETERS:
-        if spec.gain:
-            assert getattr(gains, spec.gain) == spec.default, spec.name
+def test_every_gain_has_a_parameter_and_bad_values_are_refused():
+    gains = ControllerGains.defaults()  # fails if a gain has no parameter setting it
+    assert gains.pos_xy == 1.5 and gains.idle_fraction == 0.15
     v = Vehicle()
     for name, value in (("MPC_XY_P", math.nan), ("MPC_XY_P", 99.0), ("NOPE", 1.0)):
         with pytest.raises(ValueError):
             v.set_param(name, value)
     assert v.params["MPC_XY_P"] == 1.5
+    v.set_param("MPC_XY_P", 2.0)
+    assert v.cascade.gains.pos_xy == 2.0  # the parameter reaches the controller
 
 
 def test_airframe_parameter_switches_the_physics_on_the_ground_only():

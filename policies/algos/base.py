@@ -12,8 +12,6 @@ from policies.config import TrainConfig
 from policies.networks import ActorCritic
 from policies.rollout import BatchEnv, Rollout, compute_gae
 
-ACT_SIZE = 4  # rotor commands
-
 
 class Algorithm(abc.ABC):
     """Subclasses implement :meth:`update`; ``two_headed`` picks the network shape."""
@@ -41,7 +39,7 @@ class Algorithm(abc.ABC):
             self._obs = env.reset()
         t_steps, n = c.steps_per_env, env.num_envs
         obs = np.zeros((t_steps, n, env.obs_size), np.float32)
-        actions = np.zeros((t_steps, n, ACT_SIZE), np.float32)
+        actions = np.zeros((t_steps, n, self.net.act_size), np.float32)
         log_probs = np.zeros((t_steps, n), np.float32)
         values = np.zeros((t_steps, n), np.float32)
         rewards = np.zeros((t_steps, n), np.float64)

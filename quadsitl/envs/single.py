@@ -15,6 +15,7 @@ from quadsitl.envs.mavlink_backend import (
     split_backend_options,
 )
 from quadsitl.mavlink.motor_client import SimulatorError
+from quadsitl.physics import layout as L
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
 from quadsitl.viz.episode_view import EpisodeView
 
@@ -28,7 +29,7 @@ def make_spaces(engine: TaskEngine) -> tuple[gym.spaces.Box, gym.spaces.Box]:
     """Single-env observation and action spaces of an engine."""
     obs = gym.spaces.Box(-np.inf, np.inf, (engine.obs_size,), np.float32)
     act = gym.spaces.Box(
-        np.float32(engine.action_low), np.float32(engine.action_high), (4,), np.float32
+        np.float32(engine.action_low), np.float32(engine.action_high), (L.N_ROTORS,), np.float32
     )
     return obs, act
 

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from quadsitl import frames
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe
+from quadsitl.vehicle.params import PARAMETERS
 
 Vec = NDArray[np.float64]
 
@@ -54,27 +55,33 @@ class Setpoint:
 
 @dataclass
 class ControllerGains:
-    """Loop gains and limits; names in brackets are the MAVLink parameters setting them."""
+    """Loop gains and limits. Their defaults are the parameters' (the MAVLink parameter
+    named in brackets sets each, :mod:`.params` holds its default, range and unit)."""
 
-    pos_xy: float = 1.5  # 1/s [MPC_XY_P]
-    pos_z: float = 1.2  # 1/s [MPC_Z_P]
-    vel_xy: float = 3.0  # 1/s [MPC_XY_VEL_P]
-    vel_xy_i: float = 0.4  # 1/s² [MPC_XY_VEL_I]
-    vel_z: float = 4.0  # 1/s [MPC_Z_VEL_P]
-    vel_z_i: float = 1.5  # 1/s² [MPC_Z_VEL_I]
-    att_rp: float = 6.0  # 1/s [MC_ROLL_P, also pitch]
-    att_yaw: float = 2.5  # 1/s [MC_YAW_P]
-    rate_rp: float = 12.0  # 1/s [MC_ROLLRATE_P, also pitch]
-    rate_yaw: float = 4.0  # 1/s [MC_YAWRATE_P]
-    motor_boost: float = 5.0  # rotor-speed loop gain, multiples of k_Ω [SIM_MOTOR_BOOST]
-    max_speed_xy: float = 5.0  # m/s [MPC_XY_VEL_MAX]
-    max_speed_up: float = 3.0  # m/s [MPC_Z_VEL_MAX_UP]
-    max_speed_down: float = 1.5  # m/s [MPC_Z_VEL_MAX_DN]
-    max_accel_xy: float = 3.0  # m/s² [MPC_ACC_HOR]
-    max_tilt_deg: float = 35.0  # deg [MPC_TILTMAX_AIR]
-    max_rate_rp_deg: float = 220.0  # deg/s [MC_ROLLRATE_MAX]
-    max_rate_yaw_deg: float = 90.0  # deg/s [MC_YAWRATE_MAX]
-    idle_fraction: float = 0.15  # idle rotor speed / Ω_max when armed on ground [SIM_IDLE]
+    pos_xy: float  # 1/s [MPC_XY_P]
+    pos_z: float  # 1/s [MPC_Z_P]
+    vel_xy: float  # 1/s [MPC_XY_VEL_P]
+    vel_xy_i: float  # 1/s² [MPC_XY_VEL_I]
+    vel_z: float  # 1/s [MPC_Z_VEL_P]
+    vel_z_i: float  # 1/s² [MPC_Z_VEL_I]
+    att_rp: float  # 1/s [MC_ROLL_P, also pitch]
+    att_yaw: float  # 1/s [MC_YAW_P]
+    rate_rp: float  # 1/s [MC_ROLLRATE_P, also pitch]
+    rate_yaw: float  # 1/s [MC_YAWRATE_P]
+    motor_boost: float  # rotor-speed loop gain, multiples of k_Ω [SIM_MOTOR_BOOST]
+    max_speed_xy: float  # m/s [MPC_XY_VEL_MAX]
+    max_speed_up: float  # m/s [MPC_Z_VEL_MAX_UP]
+    max_speed_down: float  # m/s [MPC_Z_VEL_MAX_DN]
+    max_accel_xy: float  # m/s² [MPC_ACC_HOR]
+    max_tilt_deg: float  # deg [MPC_TILTMAX_AIR]
+    max_rate_rp_deg: float  # deg/s [MC_ROLLRATE_MAX]
+    max_rate_yaw_deg: float  # deg/s [MC_YAWRATE_MAX]
+    idle_fraction: float  # idle rotor speed / Ω_max when armed on ground [SIM_IDLE]
+
+    @classmethod
+    def defaults(cls) -> ControllerGains:
+        """Every gain at its parameter's default."""
+        return cls(**{spec.gain: spec.default for spec in PARAMETERS if spec.gain})
 
 
 class Autopilot(Protocol):
@@ -111,7 +118,7 @@ class CascadedController:
     """PX4-style cascade over one vehicle; see the module docstring."""
 
     def __init__(self, airframe: Airframe, gains: ControllerGains | None = None) -> None:
-        self.gains = gains or ControllerGains()
+        self.gains = gains or ControllerGains.defaults()
         self.set_airframe(airframe)
 
     def set_airframe(self, airframe: Airframe) -> None:
