@@ -27,6 +27,7 @@ from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.physics import layout as L
+from quadsitl.vehicle import external_control as X
 from quadsitl.vehicle.results import ACCEPTED, Outcome, Result
 from quadsitl.vehicle.vehicle import Vehicle
 
@@ -101,13 +102,13 @@ class MotorPath:
             self.counters["while_disarmed"] += 1
             if self.counters["while_disarmed"] % 1000 == 1:
                 warning = "motor commands ignored: vehicle disarmed (arm it first)"
-        v.motor_command(speeds)
+        X.motor_command(v, speeds)
         self.counters["accepted"] += 1
         if msg.time_usec:
             self.last_command_usec = msg.time_usec
         if msg.flags & LOCKSTEP_FLAG or self.always_lockstep:
             self.last_lockstep_wall = time.monotonic()
-            v.advance()
+            X.advance(v)
         return warning
 
     # --- reset ------------------------------------------------------------------------
@@ -152,7 +153,7 @@ class MotorPath:
         if math.isnan(rotor):
             rotor = 0.0 if on_ground else v.airframe.hover_rotor_speed
         state[L.ROTORS] = rotor
-        result = v.reset_state(state)
+        result = X.reset_state(v, state)
         if result.ok:
             self.staged = None
             self.resets += 1

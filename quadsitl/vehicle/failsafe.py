@@ -9,9 +9,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
+from quadsitl.vehicle import external_control as X
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import Severity
+
+if TYPE_CHECKING:
+    from quadsitl.vehicle.vehicle import Vehicle
 
 # COM_LOW_BAT_ACT, NAV_DLL_ACT and GF_ACTION values -> the mode flown (None: warn only).
 BATTERY_ACTIONS = {0: None, 2: Mode.LAND, 3: Mode.RTL}
@@ -81,3 +86,28 @@ class Failsafes:
     def reset(self) -> None:
         self.battery_level = 0
         self.fence_breached = False
+
+
+def check(v: Vehicle) -> None:
+    """Each control tick: the battery and the geofence."""
+    p = v.params.values
+    react(v, v.failsafes.battery(v.battery.remaining, p))
+    offset = v.position - v.home_position
+    height = float(offset[2]) - v.airframe.gear_height
+    react(v, v.failsafes.geofence(math.hypot(offset[0], offset[1]), height, p))
+
+
+def react(v: Vehicle, reaction: Reaction | None) -> None:
+    """Announce a failsafe; fly its mode if armed and in the air."""
+    if reaction is None:
+        return
+    v.event(reaction.severity, reaction.text)
+    mode = reaction.mode
+    if mode is None or not v.armed or v.on_ground or mode is v.mode:
+        return
+    if mode is Mode.RTL and v.mode is Mode.LAND:
+        return  # already coming down
+    if v.motor_control:
+        X.release_motors(v, reaction.text)
+    v.event(Severity.INFO, f"mode {mode.name}")
+    v.enter_mode(mode)

@@ -18,21 +18,23 @@ import numpy as np
 from quadsitl import frames
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
+from quadsitl.vehicle import external_control as X
+from quadsitl.vehicle import failsafe as FS
+from quadsitl.vehicle import guidance as G
 from quadsitl.vehicle import mission as M
+from quadsitl.vehicle import param_binding as P
 from quadsitl.vehicle.battery import Battery
 from quadsitl.vehicle.controller import Autopilot, CascadedController, Setpoint, Vec
-from quadsitl.vehicle.failsafe import Failsafes, Reaction
+from quadsitl.vehicle.failsafe import Failsafes
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.mission_runner import MissionRunner
-from quadsitl.vehicle.modes import NEEDS_PILOT, STICK_MODES, Mode
-from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg, Limits, Orbit, Sticks
-from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParamError, ParameterStore
+from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
+from quadsitl.vehicle.navigator import Activity, Hold, Land, Limits, Sticks
+from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
 from quadsitl.vehicle.results import ACCEPTED, LandedState, Result, Severity, denied
 
-MOTOR_TIMEOUT = 0.5  # s of simulated time without motor commands before the onboard
-# controller takes over again
-STICK_TIMEOUT = 0.5  # s of simulated time without MANUAL_CONTROL before sticks count as
-# centred (PX4's COM_RC_LOSS_T default)
+MOTOR_TIMEOUT = 0.5  # s (simulated) without motor commands: the onboard controller resumes
+STICK_TIMEOUT = 0.5  # s (simulated) without MANUAL_CONTROL: sticks centred (COM_RC_LOSS_T)
 
 
 class Vehicle:
@@ -91,7 +93,8 @@ class Vehicle:
         self.events: deque[tuple[int, str]] = deque(maxlen=100)
         self.items_reached: deque[int] = deque(maxlen=100)
         self.rotor_cmd = np.zeros(L.N_ROTORS)  # rad/s, last command to the motors
-        self._apply_all_params()
+        for spec in PARAMETERS:
+            P.apply(self, spec.name)
         self._reset_flight_state()
 
     # --- state, read by telemetry -----------------------------------------------------
@@ -159,7 +162,7 @@ class Vehicle:
         self.armed_at = self.time
         self.flew = False
         self.controller.reset()
-        self._enter_mode(self.mode)
+        self.enter_mode(self.mode)
         self.event(Severity.INFO, "armed")
         return ACCEPTED
 
@@ -186,10 +189,10 @@ class Vehicle:
         if mode is Mode.LAND and self.on_ground and not self.armed:
             return denied("land denied: vehicle is on the ground")
         if self.motor_control:
-            self.release_motors(f"mode {mode.name} requested")
+            X.release_motors(self, f"mode {mode.name} requested")
         if mode is not self.mode:
             self.event(Severity.INFO, f"mode {mode.name}")
-        self._enter_mode(mode)
+        self.enter_mode(mode)
         return ACCEPTED
 
     def takeoff(self, altitude: float | None = None) -> Result:
@@ -234,7 +237,7 @@ class Vehicle:
 
     def datalink_lost(self, silence: float) -> None:
         """The ground station went silent (the server measures it on the wall clock)."""
-        self._react(Failsafes.datalink_lost(silence, self.params.values))
+        FS.react(self, Failsafes.datalink_lost(silence, self.params.values))
 
     def datalink_regained(self) -> None:
         self.event(Severity.INFO, "ground station link regained")
@@ -245,24 +248,16 @@ class Vehicle:
     def reposition(
         self, east: float, north: float, up: float, speed: float | None, yaw: float | None
     ) -> Result:
-        """Go to a local point (NaN keeps the current coordinate) and hold there."""
+        """Go to a local point (m above the ground; NaN keeps the current coordinate) and
+        hold there."""
         if not self.armed:
             return denied("reposition denied: not armed")
-        here = self.position
-        target = np.array(
-            [
-                here[0] if math.isnan(east) else east,
-                here[1] if math.isnan(north) else north,
-                here[2] if math.isnan(up) else up + self.airframe.gear_height,
-            ]
-        )
-        if not np.isfinite(target).all() or abs(target).max() > 50_000:
+        leg = G.reposition(self, east, north, up, speed, yaw)
+        if leg is None:
             return denied("reposition denied: target not finite or too far")
         if self.mode is not Mode.LOITER:
             self.event(Severity.INFO, "mode LOITER")
-        self.mode = Mode.LOITER
-        limits = self.limits(cruise=speed if speed and speed > 0 else None)
-        self.activity = Leg(here.copy(), target, limits, self.acceptance(), yaw, face_travel=True)
+        self.mode, self.activity = Mode.LOITER, leg
         return ACCEPTED
 
     def offboard_setpoint(self, setpoint: Setpoint) -> None:
@@ -270,82 +265,18 @@ class Vehicle:
         self.offboard = setpoint
         self.offboard_time = self.time
 
-    def motor_command(self, rotor_speeds: Vec) -> None:
-        """Rotor speeds (rad/s, finite, within [0, Ω_max]; the caller checks) from an
-        external controller: the onboard controller is bypassed until the commands stop
-        for MOTOR_TIMEOUT, the mode changes, or :meth:`release_motors`. A disarmed vehicle
-        keeps its rotors stopped."""
-        if not self.motor_control:
-            self.motor_control = True
-            self.mode = Mode.OFFBOARD
-            self.event(Severity.INFO, "external motor control")
-        self.motor_command_time = self.time
-        self.rotor_cmd[:] = rotor_speeds if self.armed else 0.0
-
-    def release_motors(self, reason: str) -> None:
-        """Hand the rotors back to the onboard controller, holding the current position."""
-        if not self.motor_control:
-            return
-        self.motor_control = False
-        self.controller.reset()
-        self._enter_mode(Mode.LOITER)
-        self.event(Severity.NOTICE, f"motor control ended ({reason}): onboard controller holding")
-
-    def reset_state(self, state: Vec) -> Result:
-        """Put the vehicle in ``state`` (17 values, world ENU, layout of
-        :mod:`quadsitl.physics.layout`): for training episodes. Clears a crash; arming,
-        simulated time and motor control are kept. Not under motor control, the onboard
-        controller then holds the new position."""
-        state = np.asarray(state, dtype=np.float64)
-        if state.shape != (L.STATE_SIZE,) or not np.isfinite(state).all():
-            return denied("reset denied: state must be 17 finite numbers")
-        if np.linalg.norm(state[L.QUAT]) < 1e-6:
-            return denied("reset denied: attitude quaternion is zero")
-        gear = self.airframe.gear_height
-        if state[L.I_PZ] < gear - 1e-6:
-            return denied("reset denied: position below the ground")
-        if abs(state[L.POS]).max() > 50_000 or state[L.ROTORS].min() < 0:
-            return denied("reset denied: position too far or negative rotor speed")
-        state[L.ROTORS] = np.minimum(state[L.ROTORS], self.airframe.max_rotor_speed)
-        resting = state[L.I_PZ] <= gear + 1e-6 and not np.any(state[L.VEL])
-        self.fleet.reset(state, contact=L.ON_GROUND if resting else L.AIRBORNE)
-        self.flew = not resting
-        self.landed_at = self.time if resting else None
-        if not self.motor_control:
-            self.controller.reset()
-            self._enter_mode(Mode.LOITER)
-        return ACCEPTED
-
     def set_param(self, name: str, value: float) -> float:
-        """Set a parameter; returns the value stored. ValueError when refused."""
-        value = self.params.check(name, value)
-        if name == "SIM_AIRFRAME" and value != self.params[name]:
-            if not self.on_ground:
-                raise ParamError(
-                    "SIM_AIRFRAME can only change on the ground", ParamError.PERMISSION_DENIED
-                )
-            if self.controller is not self.cascade:
-                raise ParamError(
-                    "SIM_AIRFRAME: the autopilot flying was made for this airframe",
-                    ParamError.PERMISSION_DENIED,
-                )
-        full = value if name == "BAT1_V_CHARGED" else self.params["BAT1_V_CHARGED"]
-        empty = value if name == "BAT1_V_EMPTY" else self.params["BAT1_V_EMPTY"]
-        if empty >= full:
-            raise ParamError(
-                f"{name}: the empty cell voltage ({empty:g} V) must be below the "
-                f"full one ({full:g} V)",
-                ParamError.VALUE_OUT_OF_RANGE,
-            )
+        """Set a parameter; returns the value stored. ParamError when refused."""
+        value = P.check(self, name, value)
         self.params.values[name] = value
-        self._apply_param(name)
+        P.apply(self, name)
         return value
 
     def set_mission(self, items: list[M.MissionItem]) -> Result:
         """Replace the mission (a refused one leaves the old one in place)."""
         result = self.missions.set_items(items)
         if result.ok and self.mode is Mode.MISSION and self.armed:
-            self._enter_mode(Mode.LOITER)
+            self.enter_mode(Mode.LOITER)
         return result
 
     def set_mission_current(self, seq: int) -> Result:
@@ -365,35 +296,22 @@ class Vehicle:
     # --- stepping ---------------------------------------------------------------------
     def step(self) -> None:
         """Advance one physics step; the controller runs every ``substeps`` of them."""
-        if self._physics_steps % self.substeps == 0:
-            self._control()
-        self._physics_steps += 1
+        if self.physics_steps % self.substeps == 0:
+            self.control()
+        self.physics_steps += 1
         contact_before = int(self.fleet.contact[0])
         self.fleet.step(self.rotor_cmd)
-        self._watch_contact(contact_before)
-        self._drain_battery(self.fleet.dt)
+        self.watch_contact(contact_before)
+        self.drain_battery(self.fleet.dt)
 
-    def advance(self) -> None:
-        """One control period. Under motor control the physics takes it in one call."""
-        if not self.motor_control:
-            for _ in range(self.substeps):
-                self.step()
-            return
-        self._control()
-        self._physics_steps += self.substeps
-        contact_before = int(self.fleet.contact[0])
-        self.fleet.step(self.rotor_cmd, n_substeps=self.substeps)
-        self._watch_contact(contact_before)
-        self._drain_battery(self.control_period)
-
-    def _drain_battery(self, seconds: float) -> None:
+    def drain_battery(self, seconds: float) -> None:
         rotors = self.fleet.state[0, L.ROTORS]
         shaft_power = self.airframe.torque_coeff * float(np.sum(rotors**3))
         self.battery.drain(shaft_power, seconds)
 
-    def _control(self) -> None:
+    def control(self) -> None:
         if self.motor_control and self.time - self.motor_command_time > MOTOR_TIMEOUT:
-            self.release_motors("no motor commands")
+            X.release_motors(self, "no motor commands")
         if not self.armed:
             self.rotor_cmd[:] = 0.0
             return
@@ -412,36 +330,21 @@ class Vehicle:
         if self.mode is Mode.OFFBOARD and self.offboard is not None:
             return self.offboard
         setpoint = self.activity.setpoint(position, velocity, self.time)
-        if self.on_ground and self._activity_stays_on_ground():
+        if self.on_ground and G.stays_on_ground(self.activity, self.airframe.gear_height):
             return Setpoint(idle=True)
         return setpoint
 
-    def _activity_stays_on_ground(self) -> bool:
-        """True when the activity would not lift the vehicle (idle the rotors)."""
-        activity = self.activity
-        if isinstance(activity, Land):
-            return True
-        if isinstance(activity, Sticks):
-            return activity.sticks[2] <= 0.0  # the thrust stick lifts off
-        if isinstance(activity, Leg):
-            goal = activity.end
-        elif isinstance(activity, Orbit):
-            goal = activity.center
-        else:
-            goal = activity.point
-        return float(goal[2]) < self.airframe.gear_height + 0.3
-
     def _navigate(self) -> None:
         """Mode logic at the controller rate: timeouts, failsafes, mission progress."""
-        self._check_failsafes()
+        FS.check(self)
         if self.mode is Mode.OFFBOARD and not self._offboard_alive():
             self.event(Severity.WARNING, "offboard setpoints lost: holding position")
-            self._enter_mode(Mode.LOITER)
+            self.enter_mode(Mode.LOITER)
         if self.on_ground and not self.crashed:
             self._on_ground_timers()
         if self.mode is Mode.TAKEOFF and self.activity.done:
             self.event(Severity.INFO, "take-off complete: holding")
-            self._enter_mode(Mode.LOITER)
+            self.enter_mode(Mode.LOITER)
         elif self.mode is Mode.RTL and self.activity.done and self.rtl_stages:
             self.activity = self.rtl_stages.pop(0)
         elif self.mode is Mode.MISSION:
@@ -458,36 +361,14 @@ class Vehicle:
                 self.event(Severity.INFO, "landed: disarmed")
                 if self.mode is Mode.MISSION:
                     self.missions.item_reached()
-                self._enter_mode(Mode.LOITER)
+                self.enter_mode(Mode.LOITER)
             return
         limit = self.params["COM_DISARM_PRFLT"]
         if self.armed and limit > 0 and self.time - self.armed_at > limit and not self.flew:
             self.disarm()
             self.event(Severity.NOTICE, f"disarmed: no take-off within {limit:g} s")
 
-    def _check_failsafes(self) -> None:
-        p = self.params.values
-        self._react(self.failsafes.battery(self.battery.remaining, p))
-        offset = self.position - self.home_position
-        height = float(offset[2]) - self.airframe.gear_height
-        self._react(self.failsafes.geofence(math.hypot(offset[0], offset[1]), height, p))
-
-    def _react(self, reaction: Reaction | None) -> None:
-        """Announce a failsafe; fly its mode if armed and in the air."""
-        if reaction is None:
-            return
-        self.event(reaction.severity, reaction.text)
-        mode = reaction.mode
-        if mode is None or not self.armed or self.on_ground or mode is self.mode:
-            return
-        if mode is Mode.RTL and self.mode is Mode.LAND:
-            return  # already coming down
-        if self.motor_control:
-            self.release_motors(reaction.text)
-        self.event(Severity.INFO, f"mode {mode.name}")
-        self._enter_mode(mode)
-
-    def _watch_contact(self, before: int) -> None:
+    def watch_contact(self, before: int) -> None:
         after = int(self.fleet.contact[0])
         if after == before:
             return
@@ -507,55 +388,28 @@ class Vehicle:
             self.event(Severity.INFO, "took off")
 
     # --- modes ------------------------------------------------------------------------
-    def _enter_mode(self, mode: Mode) -> None:
+    def enter_mode(self, mode: Mode) -> None:
         self.mode = mode
         here = self.position.copy()
         yaw = float(frames.euler_from_quat(self.state[L.QUAT])[2])
         self.rtl_stages = []
-        if mode is Mode.TAKEOFF:
-            altitude = self.takeoff_altitude or self.params["MIS_TAKEOFF_ALT"]
-            top = np.array([here[0], here[1], altitude + self.airframe.gear_height])
-            limits = self.limits(climb=self.params["MPC_TKO_SPEED"])
-            self.activity = Leg(here, top, limits, radius=0.2, yaw=yaw)
-        elif mode is Mode.LAND:
-            self.activity = Land(here, self.params["MPC_LAND_SPEED"], yaw)
-        elif mode is Mode.RTL:
-            self.plan_rtl(here, yaw)
-        elif mode is Mode.MISSION:
+        if mode is Mode.MISSION:
             self.missions.started = True
             self.missions.start_item()
-        elif mode in STICK_MODES:
-            max_yaw_rate = math.radians(self.params["MC_YAWRATE_MAX"])
-            self.activity = Sticks(here, yaw, self.limits(), max_yaw_rate)
-        else:  # hold modes and offboard's fallback
-            self.activity = Hold(here, yaw)
+        elif mode is Mode.RTL:
+            self.plan_rtl(here, yaw)
+        else:
+            self.activity = G.activity_for(self, mode, here, yaw)
         if mode is Mode.OFFBOARD:
             self.controller.reset()
 
     def plan_rtl(self, here: Vec, yaw: float) -> None:
-        gear = self.airframe.gear_height
-        home = self.home_position
-        cruise_z = max(here[2], home[2] + self.params["RTL_RETURN_ALT"] + gear)
-        above_home = np.array([home[0], home[1], cruise_z])
-        climb_to = np.array([here[0], here[1], cruise_z])
-        limits, radius = self.limits(), self.acceptance()
-        self.rtl_stages = [
-            Leg(climb_to, above_home, limits, radius, face_travel=True),
-            Land(above_home, self.params["MPC_LAND_SPEED"]),
-        ]
-        self.activity = Leg(here, climb_to, limits, radius, yaw)
+        self.activity, self.rtl_stages = G.return_to_launch(self, here, yaw)
         self.event(Severity.INFO, "returning to launch")
 
     # --- helpers ----------------------------------------------------------------------
     def limits(self, cruise: float | None = None, climb: float | None = None) -> Limits:
-        p = self.params
-        speed = cruise or self.mission_speed or p["MPC_XY_CRUISE"]
-        return Limits(
-            cruise_xy=min(speed, p["MPC_XY_VEL_MAX"]),
-            climb=min(climb or p["MPC_Z_VEL_MAX_UP"], p["MPC_Z_VEL_MAX_UP"]),
-            descent=p["MPC_Z_VEL_MAX_DN"],
-            decel=0.5 * p["MPC_ACC_HOR"],
-        )
+        return G.limits(self, cruise, climb)
 
     def acceptance(self) -> float:
         return self.params["NAV_ACC_RAD"]
@@ -568,32 +422,6 @@ class Vehicle:
 
     def event(self, severity: int, text: str) -> None:
         self.events.append((severity, text))
-
-    def _apply_all_params(self) -> None:
-        for spec in PARAMETERS:
-            self._apply_param(spec.name)
-
-    def _apply_param(self, name: str) -> None:
-        spec = next(p for p in PARAMETERS if p.name == name)
-        value = self.params[name]
-        if spec.gain is not None:
-            setattr(self.cascade.gains, spec.gain, value)
-        elif name == "BAT1_CAPACITY":
-            self.battery.capacity_mah = value
-        elif name == "BAT1_N_CELLS":
-            self.battery.cells = int(value)
-        elif name == "BAT1_V_CHARGED":
-            self.battery.cell_full_v = value
-        elif name == "BAT1_V_EMPTY":
-            self.battery.cell_empty_v = value
-        elif name == "SIM_AIRFRAME":
-            airframe = get_airframe(AIRFRAME_NAMES[int(value)])
-            if airframe != self.airframe:
-                self.airframe = airframe
-                self.fleet.params[0] = airframe.to_params()
-                self.fleet.airframes = [airframe]
-                self.cascade.set_airframe(airframe)
-                self.event(Severity.INFO, f"airframe {airframe.name}")
 
     def _reset_flight_state(self) -> None:
         rest = np.zeros(L.STATE_SIZE)
@@ -608,7 +436,7 @@ class Vehicle:
         self.offboard_time = -math.inf
         self.takeoff_altitude = None
         self.mission_speed = None
-        self._physics_steps = 0
+        self.physics_steps = 0
         self.motor_control = False
         self.motor_command_time = -math.inf
         self.missions.reset_flight()

@@ -1,0 +1,82 @@
+"""What an external controller drives: rotor speeds in (the motor path's
+HIL_ACTUATOR_CONTROLS), whole-state resets for training episodes, and stepping one
+control period at a time: functions of a :class:`~quadsitl.vehicle.vehicle.Vehicle`,
+kept apart because the onboard flight software never uses them.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from quadsitl.physics import layout as L
+from quadsitl.vehicle.controller import Vec
+from quadsitl.vehicle.modes import Mode
+from quadsitl.vehicle.results import ACCEPTED, Result, Severity, denied
+
+if TYPE_CHECKING:
+    from quadsitl.vehicle.vehicle import Vehicle
+
+
+def motor_command(v: Vehicle, rotor_speeds: Vec) -> None:
+    """Rotor speeds (rad/s, finite, within [0, Ω_max]; the caller checks) from an
+    external controller: the onboard controller is bypassed until the commands stop
+    for MOTOR_TIMEOUT, the mode changes, or :meth:`release_motors`. A disarmed vehicle
+    keeps its rotors stopped."""
+    if not v.motor_control:
+        v.motor_control = True
+        v.mode = Mode.OFFBOARD
+        v.event(Severity.INFO, "external motor control")
+    v.motor_command_time = v.time
+    v.rotor_cmd[:] = rotor_speeds if v.armed else 0.0
+
+
+def release_motors(v: Vehicle, reason: str) -> None:
+    """Hand the rotors back to the onboard controller, holding the current position."""
+    if not v.motor_control:
+        return
+    v.motor_control = False
+    v.controller.reset()
+    v.enter_mode(Mode.LOITER)
+    v.event(Severity.NOTICE, f"motor control ended ({reason}): onboard controller holding")
+
+
+def reset_state(v: Vehicle, state: Vec) -> Result:
+    """Put the vehicle in ``state`` (17 values, world ENU, layout of
+    :mod:`quadsitl.physics.layout`): for training episodes. Clears a crash; arming,
+    simulated time and motor control are kept. Not under motor control, the onboard
+    controller then holds the new position."""
+    state = np.asarray(state, dtype=np.float64)
+    if state.shape != (L.STATE_SIZE,) or not np.isfinite(state).all():
+        return denied("reset denied: state must be 17 finite numbers")
+    if np.linalg.norm(state[L.QUAT]) < 1e-6:
+        return denied("reset denied: attitude quaternion is zero")
+    gear = v.airframe.gear_height
+    if state[L.I_PZ] < gear - 1e-6:
+        return denied("reset denied: position below the ground")
+    if abs(state[L.POS]).max() > 50_000 or state[L.ROTORS].min() < 0:
+        return denied("reset denied: position too far or negative rotor speed")
+    state[L.ROTORS] = np.minimum(state[L.ROTORS], v.airframe.max_rotor_speed)
+    resting = state[L.I_PZ] <= gear + 1e-6 and not np.any(state[L.VEL])
+    v.fleet.reset(state, contact=L.ON_GROUND if resting else L.AIRBORNE)
+    v.flew = not resting
+    v.landed_at = v.time if resting else None
+    if not v.motor_control:
+        v.controller.reset()
+        v.enter_mode(Mode.LOITER)
+    return ACCEPTED
+
+
+def advance(v: Vehicle) -> None:
+    """One control period. Under motor control the physics takes it in one call."""
+    if not v.motor_control:
+        for _ in range(v.substeps):
+            v.step()
+        return
+    v.control()
+    v.physics_steps += v.substeps
+    contact_before = int(v.fleet.contact[0])
+    v.fleet.step(v.rotor_cmd, n_substeps=v.substeps)
+    v.watch_contact(contact_before)
+    v.drain_battery(v.control_period)
