@@ -17,7 +17,12 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         description="Train a policy. Writes runs/TASK-ALGO-PRESET-seedN/ (config.json, "
         "metrics.csv, checkpoints/).",
     )
-    train.add_argument("--task", required=True, choices=TASK_NAMES)
+    train.add_argument(
+        "--task",
+        required=True,
+        help=f"{', '.join(TASK_NAMES)}, or any registered Gymnasium env id with a Box action "
+        "space (e.g. Pendulum-v1)",
+    )
     train.add_argument("--algo", required=True, help=f"one of {', '.join(ALGORITHMS)}")
     train.add_argument("--preset", default="paper", help="paper (Table I) or fast (default: paper)")
     train.add_argument("--seed", type=_count(0), default=0, help="random seed ≥ 0 (default: 0)")
@@ -123,7 +128,8 @@ def _train(args: argparse.Namespace) -> int:
         total_steps=args.steps,
         num_envs=args.num_envs,
     )
-    run_dir = Path(args.runs) / f"{args.task}-{args.algo}-{args.preset}-seed{args.seed}"
+    name = args.task.replace("/", "_")  # Gymnasium ids may have a namespace
+    run_dir = Path(args.runs) / f"{name}-{args.algo}-{args.preset}-seed{args.seed}"
     mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
     print(
         f"quadsitl train: {config.iterations} iterations of {config.batch_size} steps -> {run_dir}",

@@ -124,8 +124,7 @@ def _check(config: TrainConfig) -> None:
     for name in ("task", "algo", "preset", "backend"):
         if not isinstance(getattr(config, name), str):
             raise ValueError(f"{name} must be a string, got {getattr(config, name)!r}")
-    if config.task not in TASK_NAMES:
-        raise ValueError(f"unknown task {config.task!r}; choose one of {TASK_NAMES}")
+    check_task(config.task)
     if config.algo not in ALGORITHMS:
         raise ValueError(f"unknown algorithm {config.algo!r}; choose one of {ALGORITHMS}")
     if config.backend not in BACKENDS:
@@ -214,6 +213,22 @@ FAST_STEPS = {
 }
 
 
+FOREIGN_STEPS = 1_000_000  # default budget of the fast preset for another Gymnasium env
+
+
+def check_task(task: str) -> None:
+    """A quadsitl task name or a registered Gymnasium env id; ValueError otherwise."""
+    if task in TASK_NAMES:
+        return
+    import gymnasium
+
+    if task not in gymnasium.registry:
+        raise ValueError(
+            f"unknown task {task!r}: a quadsitl task ({', '.join(TASK_NAMES)}) or a "
+            "registered Gymnasium env id (e.g. Pendulum-v1)"
+        )
+
+
 MAVLINK_ENVS = 2  # default envs (simulator processes) through the wire
 MAX_MAVLINK_ENVS = 16
 
@@ -221,9 +236,12 @@ MAX_MAVLINK_ENVS = 16
 def make_config(
     task: str, algo: str, preset: str = "paper", seed: int = 0, **overrides: Any
 ) -> TrainConfig:
-    """The preset's configuration for ``task`` and ``algo``, with ``overrides`` applied."""
-    if task not in TASK_NAMES:
-        raise ValueError(f"unknown task {task!r}; choose one of {TASK_NAMES}")
+    """The preset's configuration for ``task`` (a quadsitl task, or any registered
+    Gymnasium env id with a Box action space) and ``algo``, with ``overrides`` applied.
+    Another env gets the preset's common values, FOREIGN_STEPS steps, and no periodic
+    evaluation (success is a quadsitl task's notion)."""
+    check_task(task)
+    ours = task in TASK_NAMES
     if algo not in ALGORITHMS:
         raise ValueError(f"unknown algorithm {algo!r}; choose one of {ALGORITHMS}")
     if preset == "paper":
@@ -234,11 +252,13 @@ def make_config(
             **FAST[algo],
             **FAST_TASK.get(task, {}),
             **FAST_TASK_ALGO.get((task, algo), {}),
-            "total_steps": FAST_STEPS[task],
+            "total_steps": FAST_STEPS.get(task, FOREIGN_STEPS),
         }
     else:
         raise ValueError(f"unknown preset {preset!r}; choose 'paper' or 'fast'")
-    values["task_options"] = dict(STARTS[task])
+    values["task_options"] = dict(STARTS.get(task, {}))
+    if not ours:
+        values["eval_every"] = 0
     values.update(task=task, algo=algo, preset=preset, seed=seed)
     unknown = set(overrides) - {f.name for f in dataclasses.fields(TrainConfig)}
     if unknown:

@@ -17,8 +17,9 @@ import torch
 from policies import checkpoint
 from policies.config import TrainConfig
 from policies.networks import ActorCritic
-from policies.rollout import BatchEnv
+from policies.rollout import make_vector_env
 
+SEED_SPACING = 100_003  # env i of a seed s starts from seed s·SEED_SPACING + i
 EVAL_SEED = 10_000  # test starts (quadsitl eval, the reported figures)
 VALIDATION_SEED = 20_000  # other starts, for choosing the best checkpoint while training
 # The figure that says how a task went, beyond success (episode-end info key, unit).
@@ -75,12 +76,16 @@ def evaluate(
     after each reset (reward None) and step of env 0 (e.g. to record it)."""
     task = task or config.task
     num_envs = min(num_envs, episodes)
-    env = BatchEnv(task, num_envs, seed, backend, **config.task_options)
+    if task not in TASK_METRICS:
+        raise ValueError(f"evaluation needs a quadsitl task ({sorted(TASK_METRICS)}), got {task!r}")
+    env = make_vector_env(task, num_envs, backend, **config.task_options)
+    engine = env.engine  # type: ignore[attr-defined]  # the native vector env's
     try:
-        checkpoint.check_fits(net, config, task, env.obs_size)
+        checkpoint.check_fits(net, config, task, engine.obs_size)
     except ValueError:
         env.close()
         raise
+    low, high = env.single_action_space.low, env.single_action_space.high  # type: ignore[attr-defined]
     returns, success, metric, outcomes = [], [], [], {}  # type: ignore[var-annotated]
     reached: list[bool] = []
     tracks: list[list[np.ndarray]] = [[] for _ in range(num_envs)]
@@ -88,27 +93,28 @@ def evaluate(
     trajectories: list[np.ndarray] = []
     goals: list[np.ndarray] = []
     key, name, unit = TASK_METRICS[task]
-    obs = env.reset()
+    obs, _ = env.reset(seed=seed * SEED_SPACING)
     if on_step is not None:
-        on_step(env.engine, None)
+        on_step(engine, None)
     try:
         while len(returns) < episodes:
             for i in range(num_envs):
-                tracks[i].append(env.engine.fleet.state[i, :3].copy())
-                goal_tracks[i].append(env.engine.goal[i, :3].copy())
+                tracks[i].append(engine.fleet.state[i, :3].copy())
+                goal_tracks[i].append(engine.goal[i, :3].copy())
             action = net.act(torch.as_tensor(obs), deterministic=True).numpy()
-            obs, reward, terminated, truncated, _, metrics = env.step(action)
+            obs, reward, terminated, truncated, info = env.step(np.clip(action, low, high))
             ended = np.flatnonzero(terminated | truncated)
             if on_step is not None:
-                on_step(env.engine, None if 0 in ended else float(reward[0]))
-            for k, i in enumerate(ended.tolist()):
-                returns.append(float(metrics["episode_return"][k]))
-                success.append(bool(metrics["success"][k]))
-                reached.append(bool(np.isfinite(metrics["reach_time"][k])))
-                value = float(metrics[key][k])
+                on_step(engine, None if 0 in ended else float(reward[0]))
+            metrics = info.get("final_info", {})
+            for i in ended.tolist():
+                returns.append(float(metrics["episode_return"][i]))
+                success.append(bool(metrics["success"][i]))
+                reached.append(bool(np.isfinite(metrics["reach_time"][i])))
+                value = float(metrics[key][i])
                 if np.isfinite(value):
                     metric.append(value)
-                outcome = str(metrics["outcome"][k])
+                outcome = str(metrics["outcome"][i])
                 outcomes[outcome] = outcomes.get(outcome, 0) + 1
                 if len(trajectories) < keep_trajectories:
                     trajectories.append(np.array(tracks[i]))

@@ -1,5 +1,6 @@
-"""Collecting experience: a batch of task envs with same-step resets, the rollout
-storage, and generalised advantage estimation with correct time-limit bootstrapping.
+"""Collecting experience: the training env (Gymnasium's vector interface, same-step
+resets), the rollout storage, and generalised advantage estimation with correct
+time-limit bootstrapping.
 
 An episode that ends by its time limit (truncated) is not a terminal state: its last
 step is bootstrapped with the value of the observation it ended in; a terminated one
@@ -12,12 +13,13 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch
+from gymnasium.vector import AutoresetMode, VectorEnv
 
-from quadsitl.envs.mavlink_backend import attach_backend
-from quadsitl.physics import layout as L
-from quadsitl.tasks import TaskEngine, TaskOptions, get_task
+from quadsitl.registration import task_env_id
+from quadsitl.tasks import TASKS
 
 
 def compute_gae(
@@ -61,53 +63,56 @@ def explained_variance(values: np.ndarray, returns: np.ndarray) -> float:
     return 1.0 - float(np.var(np.asarray(returns) - np.asarray(values))) / variance
 
 
-class BatchEnv:
-    """N envs of one task over the task engine, reset in the same step they end.
+def make_vector_env(
+    task: str, num_envs: int, backend: str = "inprocess", **options: Any
+) -> VectorEnv:
+    """The env the algorithms collect from, through Gymnasium's vector interface in
+    SAME_STEP autoreset (an episode that ends is reset in the same step; its last
+    observation is ``info["final_obs"]``). ``task``: a quadsitl task name (its native
+    vector env: every env in one batched call) or any registered Gymnasium env id with
+    a Box action space (its envs in a SyncVectorEnv). Seeding: ``reset(seed=s)`` gives
+    env i the seed ``s + i``."""
+    if task in TASKS:
+        return gym.make_vec(
+            task_env_id(task),
+            num_envs,
+            vectorization_mode="vector_entry_point",
+            autoreset_mode=AutoresetMode.SAME_STEP,
+            backend=backend,
+            **options,
+        )
+    if backend != "inprocess":
+        raise ValueError(f"backend {backend!r} is for quadsitl tasks; {task!r} is not one")
+    if task not in gym.registry:
+        raise ValueError(
+            f"{task!r} is neither a quadsitl task ({sorted(TASKS)}) nor a "
+            "registered Gymnasium env id"
+        )
+    env = gym.make_vec(
+        task,
+        num_envs,
+        vectorization_mode="sync",
+        vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP},
+        **options,
+    )
+    if not isinstance(env.single_action_space, gym.spaces.Box):
+        env.close()
+        raise ValueError(
+            f"{task} has a {type(env.single_action_space).__name__} action space; "
+            "the algorithms need a Box"
+        )
+    return env
 
-    ``step`` returns the observation to act on next (a fresh episode's where one
-    ended), the reward, ``terminated``/``truncated``, the observation each ended
-    episode finished in, and the metrics of the episodes that ended.
-    """
 
-    def __init__(
-        self, task: str, num_envs: int, seed: int, backend: str = "inprocess", **options: Any
-    ) -> None:
-        self.engine = TaskEngine(get_task(task), num_envs, TaskOptions.from_kwargs(**options))
-        self.backend = attach_backend(self.engine, {"backend": backend})
-        self.engine.seed([seed * 100_003 + i for i in range(num_envs)])
-        self.num_envs = num_envs
-        self.all = np.ones(num_envs, bool)
-        self.action_low = self.engine.action_low
-        self.action_high = self.engine.action_high
-
-    @property
-    def obs_size(self) -> int:
-        return self.engine.obs_size
-
-    @property
-    def act_size(self) -> int:
-        return L.N_ROTORS  # one action per rotor (Eq. 19)
-
-    def reset(self) -> np.ndarray:
-        self.engine.reset_envs(self.all)
-        return self.engine.obs.copy()
-
-    def step(
-        self, actions: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-        clipped = np.clip(actions, self.action_low, self.action_high)
-        reward, terminated, truncated = self.engine.step(clipped)
-        ended = terminated | truncated
-        final_obs = self.engine.obs.copy()
-        metrics: dict[str, np.ndarray] = {}
-        if ended.any():
-            metrics = self.engine.episode_metrics(np.flatnonzero(ended))
-            self.engine.reset_envs(ended)
-        return self.engine.obs.copy(), reward, terminated, truncated, final_obs, metrics
-
-    def close(self) -> None:
-        if self.backend is not None:
-            self.backend.close()
+def final_observations(next_obs: np.ndarray, info: dict[str, Any]) -> np.ndarray:
+    """The observation each env's step ended in: its last one where an episode ended
+    (``info["final_obs"]``), else the next one."""
+    final = np.array(next_obs, dtype=np.float32)
+    mask = info.get("_final_obs")
+    if mask is not None:
+        rows = np.flatnonzero(mask)
+        final[rows] = np.stack([np.asarray(info["final_obs"][i]) for i in rows])
+    return final
 
 
 @dataclass

@@ -34,7 +34,7 @@ from policies.algos import algorithm_class
 from policies.algos.base import Algorithm
 from policies.config import TrainConfig
 from policies.evaluate import VALIDATION_SEED, evaluate
-from policies.rollout import BatchEnv, explained_variance
+from policies.rollout import explained_variance, make_vector_env
 
 COLUMNS = (
     "iteration",
@@ -58,6 +58,9 @@ COLUMNS = (
 # clip_fraction are PPO's).
 LOSS_COLUMNS = ("policy_loss", "value_loss", "entropy", "kl", "approx_kl", "clip_fraction")
 MODES = ("new", "resume", "overwrite")
+# Env i of a run with seed s is seeded s·SEED_SPACING + i, so runs with nearby seeds
+# never share an env's random stream.
+SEED_SPACING = 100_003
 RUN_FILES = ("config.json", "metrics.csv", "checkpoints")
 
 
@@ -120,9 +123,12 @@ def train(
     # Everything that can fail at start happens before the folder is touched.
     seed = _seed(config.seed, start.iteration)
     seed_everything(seed)
-    env = BatchEnv(config.task, config.num_envs, seed, config.backend, **config.task_options)
+    env = make_vector_env(config.task, config.num_envs, config.backend, **config.task_options)
     try:
-        algo = algorithm_class(config.algo)(config, env.obs_size, env.act_size)
+        obs_size = int(np.prod(env.single_observation_space.shape or (1,)))
+        act_size = int(np.prod(env.single_action_space.shape or (1,)))
+        algo = algorithm_class(config.algo)(config, obs_size, act_size)
+        algo.start(env, seed * SEED_SPACING)
         _restore(algo, start)
         if mode == "overwrite":
             for name in RUN_FILES:

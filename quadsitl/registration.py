@@ -13,6 +13,15 @@ ENV_IDS = {
 }
 
 
+def task_env_id(task: str) -> str:
+    """The Gymnasium id of a task name: ``static_waypoint`` -> ``QuadSITL/StaticWaypoint-v0``."""
+    name = "".join(part.capitalize() for part in task.split("_"))
+    try:
+        return ENV_IDS[name]
+    except KeyError:
+        raise ValueError(f"unknown task {task!r}") from None
+
+
 def register_envs() -> None:
     """Register every task id once (``entry_point`` and ``vector_entry_point``)."""
     for name, env_id in ENV_IDS.items():

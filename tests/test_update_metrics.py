@@ -12,7 +12,7 @@ import torch
 
 from policies.algos.ppo import PPO
 from policies.config import make_config
-from policies.rollout import BatchEnv, explained_variance
+from policies.rollout import explained_variance, make_vector_env
 from policies.train import train
 
 
@@ -38,8 +38,9 @@ def test_ppo_minibatches_cover_every_sample_including_the_remainder(monkeypatch)
         epochs=2,
         total_steps=160,
     )
-    env = BatchEnv("hover", 16, 0)
-    algo = PPO(config, env.obs_size, 4)
+    env = make_vector_env("hover", 16)
+    algo = PPO(config, 34, 4)
+    algo.start(env, seed=0)
     rollout = algo.collect(env)
     sizes: list[int] = []
     original = algo.critic_loss
@@ -86,3 +87,24 @@ def test_trpo_has_no_ppo_statistics(tmp_path):
     with open(tmp_path / "metrics.csv") as f:
         row = next(csv.DictReader(f))
     assert row["approx_kl"] == "nan" and math.isfinite(float(row["explained_variance"]))
+
+
+def test_any_registered_gymnasium_env_with_a_box_action_space_trains(tmp_path):
+    torch.set_num_threads(1)
+    config = make_config(
+        "Pendulum-v1", "ppo", "fast", total_steps=16_384, num_envs=16, steps_per_env=256
+    )
+    assert config.eval_every == 0 and config.task_options == {}
+    result = train(config, tmp_path, progress=False)
+    with open(tmp_path / "metrics.csv") as f:
+        rows = list(csv.DictReader(f))
+    finished = [float(r["mean_return"]) for r in rows if r["episodes"] != "0"]
+    assert len(rows) == 4 and finished and all(-2000 < x < 0 for x in finished)  # Pendulum
+    assert result.env_steps == 16_384 and (tmp_path / "checkpoints" / "last.pt").is_file()
+
+
+def test_unknown_tasks_and_other_action_spaces_are_refused():
+    with pytest.raises(ValueError, match="registered Gymnasium env id"):
+        make_config("NoSuchEnv-v0", "ppo", "fast")
+    with pytest.raises(ValueError, match="Discrete action space; the algorithms need a Box"):
+        make_vector_env("CartPole-v1", 2)

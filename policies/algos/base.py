@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import abc
+from typing import Any
 
 import numpy as np
 import torch
+from gymnasium.vector import VectorEnv
 from torch.nn import functional as F
 
 from policies.config import TrainConfig
 from policies.networks import ActorCritic
-from policies.rollout import BatchEnv, Rollout, compute_gae
+from policies.rollout import Rollout, compute_gae, final_observations
 
 
 class Algorithm(abc.ABC):
@@ -31,15 +33,23 @@ class Algorithm(abc.ABC):
         self._obs: np.ndarray | None = None
 
     # --- experience ---------------------------------------------------------------------
+    def start(self, env: VectorEnv, seed: int) -> None:
+        """Reset ``env`` (env i seeded ``seed + i``) and collect from there on."""
+        self._obs = np.asarray(env.reset(seed=seed)[0], dtype=np.float32)
+        self._returns = np.zeros(env.num_envs)
+
     @torch.no_grad()
-    def collect(self, env: BatchEnv) -> Rollout:
-        """``steps_per_env`` steps of every env with the current policy."""
+    def collect(self, env: VectorEnv) -> Rollout:
+        """``steps_per_env`` steps of every env with the current policy (actions clipped
+        to the action space). ``env``: a Gymnasium vector env in SAME_STEP autoreset
+        (:func:`policies.rollout.make_vector_env`), started with :meth:`start`."""
         c = self.config
         if self._obs is None:
-            self._obs = env.reset()
-        t_steps, n = c.steps_per_env, env.num_envs
-        obs = np.zeros((t_steps, n, env.obs_size), np.float32)
-        actions = np.zeros((t_steps, n, self.net.act_size), np.float32)
+            raise RuntimeError("call start(env, seed) before collecting")
+        t_steps, n, act_size = c.steps_per_env, env.num_envs, self.net.act_size
+        low, high = env.single_action_space.low, env.single_action_space.high  # type: ignore[attr-defined]
+        obs = np.zeros((t_steps, n, self.net.obs_size), np.float32)
+        actions = np.zeros((t_steps, n, act_size), np.float32)
         log_probs = np.zeros((t_steps, n), np.float32)
         values = np.zeros((t_steps, n), np.float32)
         rewards = np.zeros((t_steps, n), np.float64)
@@ -55,18 +65,25 @@ class Algorithm(abc.ABC):
             obs[t], actions[t] = self._obs, action.numpy()
             log_probs[t] = dist.log_prob(action).sum(-1).numpy()
             values[t] = self.net.value(o).numpy()
-            self._obs, reward, terminated[t], truncated[t], final_obs, metrics = env.step(
-                actions[t]
+            next_obs, reward, terminated[t], truncated[t], info = env.step(
+                np.clip(actions[t], low, high)
             )
+            reward = np.asarray(reward, dtype=np.float64)
+            self._returns += reward
             rewards[t] = reward * c.reward_scale
-            if truncated[t].any():
-                final_values[t] = self.net.value(torch.as_tensor(final_obs)).numpy()
-            if metrics:
-                episode_returns += metrics["episode_return"].tolist()
-                episode_success += metrics["success"].tolist()
+            ended = np.flatnonzero(terminated[t] | truncated[t])
+            if truncated[t].any():  # bootstrap from where the episode was cut off
+                final = final_observations(next_obs, info)
+                final_values[t] = self.net.value(torch.as_tensor(final)).numpy()
+            if ended.size:
+                returns, success = _episode_ends(info, ended, self._returns)
+                episode_returns += returns
+                episode_success += success
+                self._returns[ended] = 0.0
+            self._obs = np.asarray(next_obs, dtype=np.float32)
         last_values = self.net.value(torch.as_tensor(self._obs)).numpy()
         self.net.norm.update(torch.as_tensor(obs.reshape(t_steps * n, -1)))
-        advantages, returns = compute_gae(
+        advantages, returns_ = compute_gae(
             rewards,
             values.astype(np.float64),
             terminated,
@@ -81,7 +98,7 @@ class Algorithm(abc.ABC):
             actions=torch.as_tensor(actions),
             log_probs=torch.as_tensor(log_probs),
             advantages=torch.as_tensor(advantages, dtype=torch.float32),
-            returns=torch.as_tensor(returns, dtype=torch.float32),
+            returns=torch.as_tensor(returns_, dtype=torch.float32),
             values=torch.as_tensor(values),
             episode_returns=episode_returns,
             episode_success=episode_success,
@@ -127,3 +144,18 @@ class Algorithm(abc.ABC):
             params = [p for group in optimizer.param_groups for p in group["params"]]
             torch.nn.utils.clip_grad_norm_(params, self.config.max_grad_norm)
         optimizer.step()
+
+
+def _episode_ends(
+    info: dict[str, Any], ended: np.ndarray, running: np.ndarray
+) -> tuple[list[float], list[bool]]:
+    """(returns, success) of the episodes that ended in rows ``ended``: the env's own
+    metrics where it reports them (quadsitl tasks), else the running sum of rewards and
+    no success."""
+    metrics = info.get("final_info", {})
+    if "episode_return" in metrics:
+        returns = [float(metrics["episode_return"][i]) for i in ended]
+    else:
+        returns = [float(running[i]) for i in ended]
+    success = [bool(metrics["success"][i]) if "success" in metrics else False for i in ended]
+    return returns, success

@@ -1,9 +1,16 @@
 """The native vector env: all N vehicles of a task stepped in one batched call.
 
-Autoreset mode NEXT_STEP, by mask: the step after an env's episode ends resets that env
-(its action is ignored, its reward is 0) and returns the first observation of the new
-episode. With ``reset(seed=s)``, env i draws from a generator seeded ``s + i``, so it
-replays exactly the single env reset with ``seed=s + i``.
+Autoreset by mask, in either of Gymnasium's modes (``autoreset_mode=``):
+
+* NEXT_STEP (default): the step after an env's episode ends resets that env (its action
+  is ignored, its reward is 0) and returns the first observation of the new episode;
+  the ended episode's metrics are in that step's ``info`` (with ``_key`` masks).
+* SAME_STEP: the step that ends an episode already returns the new episode's first
+  observation; the last one is ``info["final_obs"]`` and the episode's metrics
+  ``info["final_info"]`` (each with its ``_`` mask). The trainers use this mode.
+
+With ``reset(seed=s)``, env i draws from a generator seeded ``s + i``, so it replays
+exactly the single env reset with ``seed=s + i``: the one seeding rule of every face.
 """
 
 from __future__ import annotations
@@ -39,8 +46,18 @@ class QuadVectorEnv(VectorEnv):
     }
     task_name = "hover"
 
-    def __init__(self, num_envs: int = 1, render_mode: str | None = None, **options: Any) -> None:
+    def __init__(
+        self,
+        num_envs: int = 1,
+        render_mode: str | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        **options: Any,
+    ) -> None:
         check_no_render(render_mode)
+        self.autoreset_mode = AutoresetMode(autoreset_mode)
+        if self.autoreset_mode is AutoresetMode.DISABLED:
+            raise ValueError("autoreset_mode must be NEXT_STEP or SAME_STEP")
+        self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
         backend_options = split_backend_options(options)
         if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
@@ -90,17 +107,14 @@ class QuadVectorEnv(VectorEnv):
     def _step(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        if self.autoreset_mode is AutoresetMode.SAME_STEP:
+            return self._step_same(actions)
         resetting = self._autoreset
         reward, terminated, truncated = self.engine.step(actions, active=~resetting)
         ended = (terminated | truncated) & ~resetting
         info: dict[str, Any] = {}
         if ended.any():
-            rows = np.flatnonzero(ended)
-            for key, values in self.engine.episode_metrics(rows).items():
-                column = np.zeros(self.num_envs, dtype=values.dtype)
-                column[rows] = values
-                info[key] = column
-                info[f"_{key}"] = ended.copy()
+            info = self._metrics(np.flatnonzero(ended), ended)
         if resetting.any():
             self.engine.reset_envs(resetting)
             reward[resetting] = 0.0
@@ -108,6 +122,32 @@ class QuadVectorEnv(VectorEnv):
             truncated[resetting] = False
         self._autoreset = terminated | truncated
         return self.engine.obs.copy(), reward, terminated, truncated, info
+
+
+    def _step_same(
+        self, actions: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        reward, terminated, truncated = self.engine.step(actions)
+        ended = terminated | truncated
+        info: dict[str, Any] = {}
+        if ended.any():
+            rows = np.flatnonzero(ended)
+            info["final_obs"] = self.engine.obs.copy()
+            info["_final_obs"] = ended.copy()
+            info["final_info"] = self._metrics(rows, ended)
+            info["_final_info"] = ended.copy()
+            self.engine.reset_envs(ended)
+        return self.engine.obs.copy(), reward, terminated, truncated, info
+
+    def _metrics(self, rows: np.ndarray, ended: np.ndarray) -> dict[str, Any]:
+        """The ended episodes' metrics, as full-width columns with ``_key`` masks."""
+        info: dict[str, Any] = {}
+        for key, values in self.engine.episode_metrics(rows).items():
+            column = np.zeros(self.num_envs, dtype=values.dtype)
+            column[rows] = values
+            info[key] = column
+            info[f"_{key}"] = ended.copy()
+        return info
 
 
 def _vector_class(name: str, task_name: str) -> type[QuadVectorEnv]:
