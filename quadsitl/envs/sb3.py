@@ -1,4 +1,4 @@
-"""A Stable-Baselines3 ``VecEnv`` over the same batched engine (optional extra ``sb3``).
+"""A Stable-Baselines3 ``VecEnv`` over the native vector env (optional extra ``sb3``).
 
 SB3 semantics: an env whose episode ends is reset in the same step; the returned
 observation is the new episode's first, the last one is in
@@ -13,53 +13,49 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env import VecEnv
 
-from quadsitl.envs.mavlink_backend import MavlinkBackend, attach_backend, split_backend_options
-from quadsitl.envs.single import ENV_CLASSES, make_spaces
-from quadsitl.tasks import TaskEngine, TaskOptions, get_task
+from quadsitl.envs.single import ENV_CLASSES
+from quadsitl.envs.vector import VECTOR_CLASSES
 
 
 class QuadSB3VecEnv(VecEnv):
     """``QuadSB3VecEnv("hover", num_envs=64, **task_options)``; ``PPO("MlpPolicy", it)``.
 
-    ``backend="mavlink"`` (and the backend options of the gym envs) flies every env's
-    vehicle in its own ``quadsitl sim`` process."""
+    A face of the native vector env (:class:`~quadsitl.envs.vector.QuadVectorEnv`, in
+    SAME_STEP autoreset): ``backend="mavlink"`` (and the backend options of the gym envs)
+    flies every env's vehicle in its own ``quadsitl sim`` process."""
 
     def __init__(self, task: str, num_envs: int = 1, seed: int | None = None, **options: Any):
         names = {cls.task_name for cls in ENV_CLASSES.values()}
         task_name = task if task in names else _task_name_of(task)
-        backend_options = split_backend_options(options)
-        self.engine = TaskEngine(get_task(task_name), num_envs, TaskOptions.from_kwargs(**options))
-        self.backend: MavlinkBackend | None = attach_backend(self.engine, backend_options)
-        observation_space, action_space = make_spaces(self.engine)
+        vector_class = next(v for v in VECTOR_CLASSES.values() if v.task_name == task_name)
+        self.vec = vector_class(num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **options)
+        self.engine = self.vec.engine
         self.render_mode = None
-        super().__init__(num_envs, observation_space, action_space)
+        super().__init__(num_envs, self.vec.single_observation_space, self.vec.single_action_space)
         self._actions: np.ndarray | None = None
         self._seed = seed
-        self._all = np.ones(num_envs, bool)
 
     def reset(self) -> np.ndarray:
-        if self._seed is not None:
-            self.engine.seed([self._seed + i for i in range(self.num_envs)])
-            self._seed = None
-        self.engine.reset_envs(self._all)
-        return self.engine.obs.copy()
+        obs, _ = self.vec.reset(seed=self._seed)  # env i: seed + i, as every face
+        self._seed = None
+        return obs
 
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = actions
 
     def step_wait(self):  # type: ignore[override]
-        reward, terminated, truncated = self.engine.step(self._actions)
+        obs, reward, terminated, truncated, info = self.vec.step(self._actions)
         done = terminated | truncated
         infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         if done.any():
-            rows = np.flatnonzero(done)
-            metrics = self.engine.episode_metrics(rows)
-            for k, i in enumerate(rows):
-                episode = {key: values[k].item() for key, values in metrics.items()}
+            final_obs, metrics = info["final_obs"], info["final_info"]
+            for i in np.flatnonzero(done):
+                episode = {k: v[i].item() for k, v in metrics.items() if not k.startswith("_")}
                 infos[i] = {
-                    "terminal_observation": self.engine.obs[i].copy(),
+                    "terminal_observation": final_obs[i].copy(),
                     "TimeLimit.truncated": bool(truncated[i] and not terminated[i]),
                     "episode_metrics": episode,
                     "episode": {
@@ -69,12 +65,10 @@ class QuadSB3VecEnv(VecEnv):
                     },
                     "is_success": bool(episode["success"]),
                 }
-            self.engine.reset_envs(done)
-        return self.engine.obs.copy(), reward.astype(np.float32), done, infos
+        return obs, reward.astype(np.float32), done, infos
 
     def close(self) -> None:
-        if self.backend is not None:
-            self.backend.close()
+        self.vec.close()
 
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
         self._seed = seed

@@ -8,15 +8,13 @@ import gymnasium as gym
 import numpy as np
 
 from quadsitl.envs import docs
+from quadsitl.envs.factory import build_engine
 from quadsitl.envs.mavlink_backend import (
-    MavlinkBackend,
-    attach_backend,
     reset_envs,
-    split_backend_options,
 )
 from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.physics import layout as L
-from quadsitl.tasks import TaskEngine, TaskOptions, get_task
+from quadsitl.tasks import TaskEngine
 from quadsitl.viz.episode_view import EpisodeView
 
 EQ18 = (
@@ -62,11 +60,9 @@ class QuadEnv(gym.Env):
         if render_mode not in (None, *RENDER_MODES):
             raise ValueError(f"render_mode {render_mode!r} is not supported: None or 'rerun'")
         self.render_mode = render_mode
-        backend_options = split_backend_options(options)
-        self.engine = TaskEngine(get_task(self.task_name), 1, TaskOptions.from_kwargs(**options))
+        self.engine, self.backend = build_engine(self.task_name, 1, options)
         self.observation_space, self.action_space = make_spaces(self.engine)
         self._all = np.ones(1, bool)
-        self.backend: MavlinkBackend | None = attach_backend(self.engine, backend_options)
         self.view: EpisodeView | None = None
         if render_mode == "rerun":  # episodes logged as they are flown; see quadsitl.viz
             self.view = EpisodeView(f"{self.task_name}", rerun_save)

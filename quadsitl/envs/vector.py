@@ -21,15 +21,12 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from quadsitl.envs.factory import build_engine
 from quadsitl.envs.mavlink_backend import (
-    MavlinkBackend,
-    attach_backend,
     reset_envs,
-    split_backend_options,
 )
 from quadsitl.envs.single import ENV_CLASSES, check_no_render, make_spaces
 from quadsitl.mavlink.motor_client import SimulatorError
-from quadsitl.tasks import TaskEngine, TaskOptions, get_task
 
 
 class QuadVectorEnv(VectorEnv):
@@ -58,20 +55,16 @@ class QuadVectorEnv(VectorEnv):
         if self.autoreset_mode is AutoresetMode.DISABLED:
             raise ValueError("autoreset_mode must be NEXT_STEP or SAME_STEP")
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
-        backend_options = split_backend_options(options)
         if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         self.num_envs = int(num_envs)
         self.render_mode = render_mode
-        self.engine = TaskEngine(
-            get_task(self.task_name), self.num_envs, TaskOptions.from_kwargs(**options)
-        )
+        self.engine, self.backend = build_engine(self.task_name, self.num_envs, options)
         self.single_observation_space, self.single_action_space = make_spaces(self.engine)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._autoreset = np.zeros(self.num_envs, bool)
         self._all = np.ones(self.num_envs, bool)
-        self.backend: MavlinkBackend | None = attach_backend(self.engine, backend_options)
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
@@ -122,7 +115,6 @@ class QuadVectorEnv(VectorEnv):
             truncated[resetting] = False
         self._autoreset = terminated | truncated
         return self.engine.obs.copy(), reward, terminated, truncated, info
-
 
     def _step_same(
         self, actions: Any
