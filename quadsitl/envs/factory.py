@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from quadsitl.envs.mavlink_backend import MavlinkBackend, attach_backend, split_backend_options
+from quadsitl.envs.mavlink_backend import MavlinkBackend, make_backend, split_backend_options
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
 
 
@@ -18,5 +18,7 @@ def build_engine(
     options and the backend options together (ValueError naming an unknown one)."""
     options = dict(options)
     backend_options = split_backend_options(options)
-    engine = TaskEngine(get_task(task), num_envs, TaskOptions.from_kwargs(**options))
-    return engine, attach_backend(engine, backend_options)
+    spec, task_options = get_task(task), TaskOptions.from_kwargs(**options)
+    backend = make_backend(spec, num_envs, task_options, backend_options)
+    fleet = backend.fleet if backend is not None else None
+    return TaskEngine(spec, num_envs, task_options, fleet=fleet), backend

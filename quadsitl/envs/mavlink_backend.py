@@ -1,5 +1,6 @@
 """The ``backend="mavlink"`` of the task envs: simulator processes, lockstep clients,
-and a :class:`RemoteFleet` in the task engine in place of the in-process physics.
+and the :class:`RemoteFleet` the task engine is built with instead of the in-process
+physics.
 
 Faults: a simulator that dies or stops answering makes ``step``/``reset`` raise
 :class:`SimulatorError` within ``timeout`` seconds (the process's own exit message
@@ -21,8 +22,8 @@ from quadsitl.envs.sim_process import SimProcess
 from quadsitl.mavlink.links import parse_url
 from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
 from quadsitl.mavlink.signing import checked_key
-from quadsitl.physics import AIRFRAMES
-from quadsitl.tasks import TaskEngine
+from quadsitl.physics import AIRFRAMES, get_airframe
+from quadsitl.tasks import TaskEngine, TaskOptions, TaskSpec
 
 START_TIMEOUT = 30.0  # s for a new simulator process to answer (imports, kernel load)
 MAX_TIMEOUT = 3600.0  # s: longer than this, a stuck simulator looks like a hang
@@ -50,8 +51,11 @@ def split_backend_options(options: dict[str, Any]) -> dict[str, Any]:
     return {k: options.pop(k) for k in ("backend", *BACKEND_OPTIONS) if k in options}
 
 
-def attach_backend(engine: TaskEngine, backend_options: dict[str, Any]) -> MavlinkBackend | None:
-    """For ``backend="mavlink"``, put the engine's vehicles in simulator processes."""
+def make_backend(
+    task: TaskSpec, n: int, options: TaskOptions, backend_options: dict[str, Any]
+) -> MavlinkBackend | None:
+    """For ``backend="mavlink"``, the simulator processes ``n`` vehicles of ``task`` fly
+    in (its ``fleet`` goes into the engine); None for the in-process physics."""
     kwargs = dict(backend_options)
     backend = kwargs.pop("backend", "inprocess")
     if backend not in BACKENDS:
@@ -60,7 +64,7 @@ def attach_backend(engine: TaskEngine, backend_options: dict[str, Any]) -> Mavli
         if kwargs:
             raise ValueError(f"{sorted(kwargs)} need backend='mavlink'")
         return None
-    return MavlinkBackend(engine, **kwargs)
+    return MavlinkBackend(task, n, options, **kwargs)
 
 
 def parse_address(address: str) -> tuple[str, int]:
@@ -121,10 +125,11 @@ def _check_options(
 
 
 class MavlinkBackend:
-    """Runs each of an engine's vehicles in its own ``quadsitl sim``.
+    """Runs each of a task's vehicles in its own ``quadsitl sim``; ``fleet`` is the
+    RemoteFleet the engine steps (it stays the same object across restarts).
 
     Args:
-        engine: the TaskEngine; its fleet is replaced by a RemoteFleet.
+        task, n, options: the task, the number of vehicles, the task options.
         sim_address: "HOST:PORT" of a running ``quadsitl sim --lockstep --hil udpin:...``,
             one per vehicle (a list) or None: start one process per vehicle.
         gcs: ground-station link URL of the spawned simulators (None: none); with
@@ -136,27 +141,31 @@ class MavlinkBackend:
 
     def __init__(
         self,
-        engine: TaskEngine,
+        task: TaskSpec,
+        n: int,
+        options: TaskOptions,
         sim_address: str | list[str] | None = None,
         gcs: str | None = None,
         system_id: int = 1,
         timeout: float = 2.0,
         signing_key: bytes | None = None,
     ) -> None:
-        options = engine.options
         if options.param_randomization:
             raise ValueError("param_randomization is not available with backend='mavlink'")
-        airframe = engine.airframe
+        airframe = get_airframe(options.airframe)  # type: ignore[arg-type]
         if AIRFRAMES.get(airframe.name) != airframe:
             raise ValueError(
                 f"backend='mavlink' needs a preset airframe ({sorted(AIRFRAMES)}), "
                 f"got a custom one named {airframe.name!r}"
             )
-        _check_options(engine.n, sim_address, gcs, system_id, timeout, signing_key)
+        _check_options(n, sim_address, gcs, system_id, timeout, signing_key)
         addresses = [sim_address] if isinstance(sim_address, str) else sim_address
-        if addresses is not None and len(addresses) != engine.n:
-            raise ValueError(f"got {len(addresses)} simulator addresses for {engine.n} envs")
-        self.engine = engine
+        if addresses is not None and len(addresses) != n:
+            raise ValueError(f"got {len(addresses)} simulator addresses for {n} envs")
+        self.n, self.options, self.airframe = n, options, airframe
+        self.fleet = RemoteFleet(
+            n, airframe, options.physics_dt, options.control_period, task.ground
+        )
         self.addresses = [parse_address(a) for a in addresses] if addresses else None
         self.timeout = timeout
         self.signing_key = bytes(signing_key) if signing_key is not None else None
@@ -168,14 +177,14 @@ class MavlinkBackend:
         self._connect()
 
     def _sim_args(self, index: int) -> list[str]:
-        o = self.engine.options
+        o = self.options
         return [
             "--physics-rate",
             f"{1 / o.physics_dt:.12g}",
             "--control-rate",
             f"{1 / o.control_period:.12g}",
             "--airframe",
-            self.engine.airframe.name,
+            self.airframe.name,
             "--sysid",
             str(self.system_id + index),
             "--gcs",
@@ -187,7 +196,7 @@ class MavlinkBackend:
     def _connect(self) -> None:
         if self.addresses is None:
             key = {"QUADSITL_SIGNING_KEY": self.signing_key.hex()} if self.signing_key else {}
-            self.processes = [SimProcess(self._sim_args(i), env=key) for i in range(self.engine.n)]
+            self.processes = [SimProcess(self._sim_args(i), env=key) for i in range(self.n)]
             addresses = [("127.0.0.1", p.port) for p in self.processes]
         else:
             addresses = self.addresses
@@ -198,10 +207,7 @@ class MavlinkBackend:
         except BaseException:
             self._release()
             raise
-        engine, o = self.engine, self.engine.options
-        engine.fleet = RemoteFleet(
-            self.clients, engine.airframe, o.physics_dt, o.control_period, engine.task.ground
-        )
+        self.fleet.connect(self.clients)
 
     def _wait_for_heartbeat(self, index: int) -> None:
         process = self.processes[index] if self.processes else None
@@ -239,8 +245,7 @@ class MavlinkBackend:
 
     def close(self) -> None:
         self.closed = True
-        if isinstance(self.engine.fleet, RemoteFleet):
-            self.engine.fleet.close()
+        self.fleet.close()
         self._release()
 
     def _release(self) -> None:

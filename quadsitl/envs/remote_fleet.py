@@ -1,8 +1,8 @@
 """A fleet whose physics runs in simulator processes, one vehicle each, over MAVLink.
 
-:class:`RemoteFleet` has the face of :class:`~quadsitl.physics.Fleet` that the task
-engine uses (``state``, ``params``, ``contact``, ``touchdown_speed``, ``reset``,
-``step``), so the task code is the same for both backends: ``step`` sends every
+:class:`RemoteFleet` holds the same arrays as :class:`~quadsitl.physics.Fleet`
+(:class:`~quadsitl.physics.fleet.VehicleStates`) and steps them over the wire, so the
+task code is the same for both backends: ``step`` sends every
 vehicle's rotor commands as a lockstep HIL_ACTUATOR_CONTROLS, then collects the state
 answers (the simulators work in parallel); ``reset`` sends the reset commands
 (docs/mavlink.md) and arms the vehicle.
@@ -22,31 +22,31 @@ from numpy.typing import ArrayLike
 from quadsitl import frames
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
-from quadsitl.physics import Fleet
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe
+from quadsitl.physics.fleet import VehicleStates
 
 FLYING_ALTITUDE = 20.0  # m: where the task origin of tasks without a ground is flown
 
 
-class RemoteFleet(Fleet):
-    """One vehicle per client. ``ground``: whether the task has the ground plane
-    (landing), else the task is flown at altitude."""
+class RemoteFleet(VehicleStates):
+    """The states of ``n`` vehicles, stepped in their simulators, one per client (given
+    by :meth:`connect`). ``ground``: whether the task has the ground plane (landing),
+    else the task is flown at altitude."""
 
-    def __init__(
-        self,
-        clients: list[MotorClient],
-        airframe: Airframe,
-        dt: float,
-        period: float,
-        ground: bool,
-    ) -> None:
-        super().__init__(len(clients), airframe, dt=dt, ground_z=0.0 if ground else -math.inf)
-        self.clients = clients
+    def __init__(self, n: int, airframe: Airframe, dt: float, period: float, ground: bool) -> None:
+        super().__init__(n, airframe, dt=dt, ground_z=0.0 if ground else -math.inf)
+        self.clients: list[MotorClient] = []
         self.period_usec = round(period * 1e6)
         self.gear = airframe.gear_height
         self.offset = np.array([0.0, 0.0, 0.0 if ground else FLYING_ALTITUDE])
         self.closed = False
+
+    def connect(self, clients: list[MotorClient]) -> None:
+        """Fly through these clients (new simulators after a restart), one per vehicle."""
+        if len(clients) != self.n:
+            raise ValueError(f"got {len(clients)} clients for {self.n} vehicles")
+        self.clients = clients
 
     def close(self) -> None:
         """After this, ``reset`` and ``step`` raise ClosedEnvironmentError."""

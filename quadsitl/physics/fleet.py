@@ -1,13 +1,16 @@
 """The stateful face of the physics: N vehicles that hold their arrays and step.
 
-A :class:`Fleet` only holds data and checks input; the numbers come from the compiled
-kernel (or, with ``backend="reference"``, from the numpy reference it is tested
-against). A single vehicle is a fleet of one.
+:class:`VehicleStates` holds the arrays and checks input; :class:`Fleet` steps them with
+the compiled kernel (or, with ``backend="reference"``, the numpy reference it is tested
+against). A single vehicle is a fleet of one. Whatever steps vehicles elsewhere (the
+simulator processes of the MAVLink backend) is a VehicleStates with its own ``step``:
+:class:`FleetLike` is what the task engine needs of it.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -38,15 +41,35 @@ def initial_state(
     return state
 
 
-class Fleet:
-    """N quadrotors stepped together by one implementation of the physics.
+class FleetLike(Protocol):
+    """What the task engine needs of a fleet: its arrays, a reset and a step."""
+
+    state: NDArray[np.float64]
+    params: NDArray[np.float64]
+    contact: NDArray[np.int8]
+    touchdown_speed: NDArray[np.float64]
+
+    @property
+    def hover_rotor_speed(self) -> NDArray[np.float64]: ...
+
+    def reset(
+        self,
+        state: ArrayLike | None = None,
+        contact: ArrayLike | int = L.AIRBORNE,
+        mask: ArrayLike | None = None,
+    ) -> None: ...
+
+    def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None: ...
+
+
+class VehicleStates:
+    """The arrays of N quadrotors, with named views and a checked reset.
 
     Args:
         n: number of vehicles.
         airframe: preset name, an :class:`Airframe`, or one per vehicle.
         dt: physics step, s.
         ground_z: world height of the ground plane, m (``-inf``: no ground).
-        backend: ``"compiled"`` (numba kernel) or ``"reference"`` (numpy).
 
     Attributes:
         state: (n, 17) float64, layout in :mod:`quadsitl.physics.layout`.
@@ -62,14 +85,11 @@ class Fleet:
         airframe: str | Airframe | Sequence[str | Airframe] = "paper",
         dt: float = 0.01,
         ground_z: float = 0.0,
-        backend: str = "compiled",
     ) -> None:
         if not isinstance(n, (int, np.integer)) or n < 1:
             raise ValueError(f"n must be a positive integer, got {n!r}")
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
-        if backend not in BACKENDS:
-            raise ValueError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
         if isinstance(airframe, (str, Airframe)):
             airframes = [get_airframe(airframe)] * n
         else:
@@ -78,7 +98,6 @@ class Fleet:
                 raise ValueError(f"got {len(airframes)} airframes for {n} vehicles")
         self.n = int(n)
         self.dt = float(dt)
-        self.backend = backend
         self.airframes = airframes
         self.params = np.stack([a.to_params(ground_z) for a in airframes])
         self.state = initial_state(self.n, rotor_speed=self.hover_rotor_speed)
@@ -123,6 +142,63 @@ class Fleet:
         """(n,) rad/s."""
         return self.params[:, L.P_OMEGA_MAX]
 
+    def reset(
+        self,
+        state: ArrayLike | None = None,
+        contact: ArrayLike | int = L.AIRBORNE,
+        mask: ArrayLike | None = None,
+    ) -> None:
+        """Overwrite the state of all vehicles, or of those selected by a boolean mask.
+
+        Resetting clears a crash. Without ``state`` the vehicles are put at rest at the
+        origin, rotors at hover speed.
+        """
+        rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
+        if rows.shape != (self.n,):
+            raise ValueError(f"mask must have shape ({self.n},), got {rows.shape}")
+        if state is None:
+            new = initial_state(int(rows.sum()), rotor_speed=self.hover_rotor_speed[rows])
+        else:
+            new = np.asarray(state, dtype=np.float64)
+            count = int(rows.sum())
+            if new.shape == (L.STATE_SIZE,):
+                new = np.broadcast_to(new, (count, L.STATE_SIZE))
+            if new.shape != (count, L.STATE_SIZE):
+                raise ValueError(
+                    f"state must have shape ({count}, {L.STATE_SIZE}), got {new.shape}"
+                )
+            if not np.isfinite(new).all():
+                raise ValueError("state must be finite")
+            norms = np.linalg.norm(new[:, L.QUAT], axis=1)
+            if np.any(norms < 1e-9):
+                raise ValueError("state quaternion must be non-zero")
+            new = new.copy()
+            new[:, L.QUAT] /= norms[:, None]
+        self.state[rows] = new
+        self.contact[rows] = contact
+        self.touchdown_speed[rows] = 0.0
+
+
+class Fleet(VehicleStates):
+    """N quadrotors stepped together by one implementation of the physics.
+
+    Args (besides VehicleStates'):
+        backend: ``"compiled"`` (numba kernel) or ``"reference"`` (numpy).
+    """
+
+    def __init__(
+        self,
+        n: int = 1,
+        airframe: str | Airframe | Sequence[str | Airframe] = "paper",
+        dt: float = 0.01,
+        ground_z: float = 0.0,
+        backend: str = "compiled",
+    ) -> None:
+        if backend not in BACKENDS:
+            raise ValueError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
+        super().__init__(n, airframe, dt, ground_z)
+        self.backend = backend
+
     # --- stepping -------------------------------------------------------------------
     def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
         """Advance ``n_substeps`` physics steps holding commanded rotor speeds (rad/s).
@@ -160,39 +236,3 @@ class Fleet:
                     self.state, self.params, cmd, self.contact, self.touchdown_speed, self.dt
                 )
         self.time += n_substeps * self.dt
-
-    def reset(
-        self,
-        state: ArrayLike | None = None,
-        contact: ArrayLike | int = L.AIRBORNE,
-        mask: ArrayLike | None = None,
-    ) -> None:
-        """Overwrite the state of all vehicles, or of those selected by a boolean mask.
-
-        Resetting clears a crash. Without ``state`` the vehicles are put at rest at the
-        origin, rotors at hover speed.
-        """
-        rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
-        if rows.shape != (self.n,):
-            raise ValueError(f"mask must have shape ({self.n},), got {rows.shape}")
-        if state is None:
-            new = initial_state(int(rows.sum()), rotor_speed=self.hover_rotor_speed[rows])
-        else:
-            new = np.asarray(state, dtype=np.float64)
-            count = int(rows.sum())
-            if new.shape == (L.STATE_SIZE,):
-                new = np.broadcast_to(new, (count, L.STATE_SIZE))
-            if new.shape != (count, L.STATE_SIZE):
-                raise ValueError(
-                    f"state must have shape ({count}, {L.STATE_SIZE}), got {new.shape}"
-                )
-            if not np.isfinite(new).all():
-                raise ValueError("state must be finite")
-            norms = np.linalg.norm(new[:, L.QUAT], axis=1)
-            if np.any(norms < 1e-9):
-                raise ValueError("state quaternion must be non-zero")
-            new = new.copy()
-            new[:, L.QUAT] /= norms[:, None]
-        self.state[rows] = new
-        self.contact[rows] = contact
-        self.touchdown_speed[rows] = 0.0

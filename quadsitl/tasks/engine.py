@@ -16,6 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from quadsitl.frames import quat_from_euler
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
+from quadsitl.physics.fleet import FleetLike
 from quadsitl.tasks import features as F
 from quadsitl.tasks import spec as S
 
@@ -134,13 +135,22 @@ class TaskEngine:
         outcome: (N,) spec outcome code of the episode (RUNNING until it ends).
     """
 
-    def __init__(self, task: S.TaskSpec, num_envs: int, options: TaskOptions) -> None:
+    def __init__(
+        self,
+        task: S.TaskSpec,
+        num_envs: int,
+        options: TaskOptions,
+        fleet: FleetLike | None = None,
+    ) -> None:
+        """``fleet``: the vehicles, if not the in-process physics (e.g. the MAVLink
+        backend's); it must have been made for ``num_envs`` vehicles, the options'
+        airframe, time step and the task's ground."""
         self.task = task
         self.options = options
         self.n = num_envs
         self.airframe = get_airframe(options.airframe)  # type: ignore[arg-type]
         ground_z = 0.0 if task.ground else -math.inf
-        self.fleet = Fleet(
+        self.fleet: FleetLike = fleet or Fleet(
             num_envs, airframe=self.airframe, dt=options.physics_dt, ground_z=ground_z
         )
         self.base_params = self.fleet.params[0].copy()
