@@ -102,7 +102,7 @@ class PolicyAutopilot:
         origin = goal if self.goal_at_origin else self.origin
         local = state.copy()[None, :]
         local[0, L.POS] -= origin
-        self.goal[0, :3] = goal - origin
+        self.goal[0, F.GOAL_POS] = goal - origin
         F.observe(local, self.params, self.goal, self.obs, self.dist, self.tilt)
         action = self.net.act(torch.as_tensor(self.obs), deterministic=True).numpy()[0]
         hover = self.airframe.hover_rotor_speed

@@ -18,6 +18,8 @@ from policies import checkpoint
 from policies.config import TrainConfig
 from policies.networks import ActorCritic
 from policies.rollout import make_vector_env
+from quadsitl.physics import layout as L
+from quadsitl.tasks import features as F
 
 SEED_SPACING = 100_003  # env i of a seed s starts from seed s·SEED_SPACING + i
 EVAL_SEED = 10_000  # test starts (quadsitl eval, the reported figures)
@@ -99,8 +101,8 @@ def evaluate(
     try:
         while len(returns) < episodes:
             for i in range(num_envs):
-                tracks[i].append(engine.fleet.state[i, :3].copy())
-                goal_tracks[i].append(engine.goal[i, :3].copy())
+                tracks[i].append(engine.fleet.state[i, L.POS].copy())
+                goal_tracks[i].append(engine.goal[i, F.GOAL_POS].copy())
             action = net.act(torch.as_tensor(obs), deterministic=True).numpy()
             obs, reward, terminated, truncated, info = env.step(np.clip(action, low, high))
             ended = np.flatnonzero(terminated | truncated)

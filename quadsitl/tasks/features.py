@@ -45,6 +45,11 @@ OBS_GOAL_COS = slice(25, 28)
 OBS_GOAL_VEL = slice(28, 31)
 OBS_GOAL_RATES = slice(31, 34)
 OBS_SIZE = 34
+# Target following appends (the ``extra_obs`` of its task):
+OBS_TARGET_VECTOR = slice(34, 37)  # target − position, ENU m
+OBS_TARGET_DISTANCE = 37  # ‖target − position‖, m
+OBS_TARGET_VELOCITY = slice(38, 41)  # target velocity, ENU m/s
+TARGET_EXTRA_OBS = 7
 
 D_POS, D_ATT, D_VEL, D_RATE = 0, 1, 2, 3
 N_DIST = 4

@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from quadsitl.physics import layout as L
+from quadsitl.tasks import features as F
 from quadsitl.tasks import spec as S
 
 SPEED = 1.0  # m/s
@@ -42,8 +44,8 @@ def _place_target(engine, rows: np.ndarray) -> None:
     position = (1 - s) ** 2 * p0 + 2 * (1 - s) * s * p1 + s**2 * p2
     tangent = 2 * (1 - s) * (p1 - p0) + 2 * s * (p2 - p1)
     norm = np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-9)
-    engine.goal[rows, 0:3] = position
-    engine.goal[rows, 3:6] = SPEED * tangent / norm
+    engine.goal[rows, F.GOAL_POS] = position
+    engine.goal[rows, F.GOAL_VEL] = SPEED * tangent / norm
 
 
 def on_reset(engine, rows: np.ndarray) -> None:
@@ -72,15 +74,18 @@ def advance_goal(engine, active: np.ndarray) -> None:
 
 
 def fill_extra_obs(engine) -> None:
-    to_target = engine.goal[:, 0:3] - engine.fleet.state[:, 0:3]
-    engine.obs[:, 34:37] = to_target
-    engine.obs[:, 37] = np.linalg.norm(to_target, axis=1)
-    engine.obs[:, 38:41] = engine.goal[:, 3:6]
+    to_target = engine.goal[:, F.GOAL_POS] - engine.fleet.state[:, L.POS]
+    engine.obs[:, F.OBS_TARGET_VECTOR] = to_target
+    engine.obs[:, F.OBS_TARGET_DISTANCE] = np.linalg.norm(to_target, axis=1)
+    engine.obs[:, F.OBS_TARGET_VELOCITY] = engine.goal[:, F.GOAL_VEL]
 
 
 def events(engine, reward: np.ndarray, outcome: np.ndarray) -> None:
     progress = engine.steps / engine.max_steps
-    in_range = engine.obs[:, 37] <= RANGE
+    # The distance computed here, not read back from the observation: the reward does
+    # not depend on another hook having filled it first.
+    distance = np.linalg.norm(engine.goal[:, F.GOAL_POS] - engine.fleet.state[:, L.POS], axis=1)
+    in_range = distance <= RANGE
     reward += RANGE_BONUS * (1.0 + progress) * in_range
     reward -= EXIT_PENALTY * (outcome != S.RUNNING)
 
@@ -103,6 +108,6 @@ TASK = S.TaskSpec(
     advance_goal=advance_goal,
     events=events,
     success=followed,
-    extra_obs=7,
+    extra_obs=F.TARGET_EXTRA_OBS,
     fill_extra_obs=fill_extra_obs,
 )

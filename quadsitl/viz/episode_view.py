@@ -15,6 +15,7 @@ import rerun as rr
 
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TaskEngine
+from quadsitl.tasks import features as F
 from quadsitl.viz.scene import blueprint, open_recording, quat_xyzw
 
 STEP_TIMELINE = "step"
@@ -51,13 +52,14 @@ class EpisodeView:
         self.track.append(position)
         attitude = rr.Quaternion(xyzw=quat_xyzw(state[L.QUAT]))
         rec.log("world/vehicle", rr.Transform3D(translation=position, quaternion=attitude))
-        rec.log("world/goal", rr.Points3D([engine.goal[i, :3]], radii=0.06, colors=[[0, 200, 0]]))
+        goal = engine.goal[i, F.GOAL_POS]
+        rec.log("world/goal", rr.Points3D([goal], radii=0.06, colors=[[0, 200, 0]]))
         rec.log("world/trajectory", rr.LineStrips3D([np.asarray(self.track)]))
         rec.log("plots/altitude", rr.Scalars(float(position[2])))
         rec.log("plots/velocity/speed", rr.Scalars(float(np.linalg.norm(state[L.VEL]))))
         rec.log(
             "plots/distance_to_goal",
-            rr.Scalars(float(np.linalg.norm(position - engine.goal[i, :3]))),
+            rr.Scalars(float(np.linalg.norm(position - goal))),
         )
         if reward is not None:
             rec.log("plots/reward", rr.Scalars(float(reward)))
