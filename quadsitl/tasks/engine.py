@@ -173,9 +173,8 @@ class TaskEngine:
         self.episode_return = np.zeros(num_envs)
         self.weights = np.asarray(task.weights, dtype=np.float64)
         self.rngs = [np.random.default_rng() for _ in range(num_envs)]
-        self.extra: dict[str, NDArray] = {}  # per-task arrays (target, segment, ...)
-        if task.setup is not None:
-            task.setup(self)
+        # Whatever state the task keeps per env beyond the goal (its own typed object).
+        self.task_state = task.new_state(num_envs) if task.new_state is not None else None
 
     # --- seeding and reset ---------------------------------------------------------
     def seed(self, seeds: list[int | None]) -> None:

@@ -29,16 +29,13 @@ def start_above_pad(rng: np.random.Generator) -> np.ndarray:
 
 
 def pad_goal(rng: np.random.Generator) -> np.ndarray:
-    # The goal height is the resting height of the centre of mass (set in setup).
+    # The goal height is the resting height of the centre of mass (set in on_reset).
     return np.array([0.0, 0.0, 0.0, 0.0, 0.0, -DESCENT_RATE])
 
 
-def setup(engine) -> None:
-    engine.extra["rest_height"] = np.array(engine.airframe.gear_height)
-
-
 def on_reset(engine, rows: np.ndarray) -> None:
-    engine.goal[rows, 2] = engine.extra["rest_height"]
+    # The goal height is the centre of mass resting on its gear, on the pad.
+    engine.goal[rows, 2] = engine.airframe.gear_height
 
 
 def events(engine, reward: np.ndarray, outcome: np.ndarray) -> None:
@@ -68,7 +65,6 @@ TASK = S.TaskSpec(
     ground=True,
     sample_start=start_above_pad,
     sample_goal=pad_goal,
-    setup=setup,
     on_reset=on_reset,
     events=events,
     success=landed,

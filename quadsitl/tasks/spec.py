@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -68,7 +68,7 @@ class TaskSpec:
     sample_start: Callable[[np.random.Generator], np.ndarray] = level_start
     sample_goal: Callable[[np.random.Generator], np.ndarray] = origin_goal
     # Hooks for tasks with more than Eq. 18 (landing, target following).
-    setup: Callable[[TaskEngine], None] | None = None
+    new_state: Callable[[int], Any] | None = None  # the task's own per-env state, for N envs
     on_reset: Callable[[TaskEngine, np.ndarray], None] | None = None
     advance_goal: Callable[[TaskEngine, np.ndarray], None] | None = None
     events: Callable[[TaskEngine, np.ndarray, np.ndarray], None] | None = None

@@ -9,6 +9,7 @@ the vector to the target (3, ENU m), its distance (1, m) and its velocity (3, EN
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -23,9 +24,16 @@ RANGE_BONUS = 5.0  # per step within range, scaled by (1 + t/T): later matters m
 EXIT_PENALTY = 500.0
 
 
-def setup(engine) -> None:
-    engine.extra["control_points"] = np.zeros((engine.n, 3, 3))  # P0, P1, P2 per env
-    engine.extra["curve_s"] = np.zeros(engine.n)
+@dataclass
+class TargetCurves:
+    """Each env's current Bézier segment and how far along it the target is."""
+
+    control_points: np.ndarray  # (N, 3, 3) m, ENU: P0, P1, P2 of each env's segment
+    curve_s: np.ndarray  # (N,) curve parameter in [0, 1]
+
+
+def new_state(n: int) -> TargetCurves:
+    return TargetCurves(np.zeros((n, 3, 3)), np.zeros(n))
 
 
 def _new_segment(engine, i: int, start: np.ndarray, previous_control: np.ndarray | None) -> None:
@@ -34,12 +42,12 @@ def _new_segment(engine, i: int, start: np.ndarray, previous_control: np.ndarray
         control = rng.uniform(-BOX, BOX, 3)
     else:  # mirror the previous control point: the tangent stays continuous
         control = np.clip(2 * start - previous_control, -BOX, BOX)
-    engine.extra["control_points"][i] = (start, control, rng.uniform(-BOX, BOX, 3))
+    engine.task_state.control_points[i] = (start, control, rng.uniform(-BOX, BOX, 3))
 
 
 def _place_target(engine, rows: np.ndarray) -> None:
-    points = engine.extra["control_points"][rows]
-    s = engine.extra["curve_s"][rows][:, None]
+    points = engine.task_state.control_points[rows]
+    s = engine.task_state.curve_s[rows][:, None]
     p0, p1, p2 = points[:, 0], points[:, 1], points[:, 2]
     position = (1 - s) ** 2 * p0 + 2 * (1 - s) * s * p1 + s**2 * p2
     tangent = 2 * (1 - s) * (p1 - p0) + 2 * s * (p2 - p1)
@@ -51,25 +59,25 @@ def _place_target(engine, rows: np.ndarray) -> None:
 def on_reset(engine, rows: np.ndarray) -> None:
     for i in rows:
         _new_segment(engine, i, np.zeros(3), None)
-    engine.extra["curve_s"][rows] = 0.0
+    engine.task_state.curve_s[rows] = 0.0
     _place_target(engine, rows)
 
 
 def advance_goal(engine, active: np.ndarray) -> None:
     """Move each active env's target SPEED·dt along its curve (arc length to first order)."""
     rows = np.flatnonzero(active)
-    points = engine.extra["control_points"][rows]
-    s = engine.extra["curve_s"][rows]
+    points = engine.task_state.control_points[rows]
+    s = engine.task_state.curve_s[rows]
     tangent = 2 * (1 - s)[:, None] * (points[:, 1] - points[:, 0]) + 2 * s[:, None] * (
         points[:, 2] - points[:, 1]
     )
     s = s + SPEED * engine.control_period / np.maximum(np.linalg.norm(tangent, axis=1), 1e-9)
-    engine.extra["curve_s"][rows] = s
+    engine.task_state.curve_s[rows] = s
     for k in np.flatnonzero(s >= 1.0):
         i = rows[k]
-        old = engine.extra["control_points"][i].copy()
+        old = engine.task_state.control_points[i].copy()
         _new_segment(engine, i, old[2], old[1])
-        engine.extra["curve_s"][i] = min(s[k] - 1.0, 1.0)
+        engine.task_state.curve_s[i] = min(s[k] - 1.0, 1.0)
     _place_target(engine, rows)
 
 
@@ -103,7 +111,7 @@ TASK = S.TaskSpec(
     goal_radius=RANGE,
     bound_box=4.0,
     max_tilt=math.pi / 2,
-    setup=setup,
+    new_state=new_state,
     on_reset=on_reset,
     advance_goal=advance_goal,
     events=events,
