@@ -174,7 +174,8 @@ def _running(pid: int) -> bool:
 
 
 def _live_simulators() -> list[int]:
-    """Live ``quadsitl.cli sim`` processes on this machine (tests run one at a time)."""
+    """Live ``quadsitl.cli sim`` processes started by this test process (its children:
+    another test run on the same machine has simulators of its own)."""
     found = []
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
@@ -182,7 +183,11 @@ def _live_simulators() -> list[int]:
         try:
             with open(f"/proc/{entry}/cmdline", "rb") as f:
                 cmdline = f.read().split(b"\0")
-        except OSError:
+            with open(f"/proc/{entry}/stat") as f:
+                parent = int(f.read().rsplit(")", 1)[1].split()[1])
+        except (OSError, ValueError, IndexError):
+            continue
+        if parent != os.getpid():
             continue
         if b"quadsitl.cli" in cmdline and b"sim" in cmdline and _running(int(entry)):
             found.append(int(entry))
