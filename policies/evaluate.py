@@ -17,11 +17,10 @@ import torch
 from policies import checkpoint
 from policies.config import TrainConfig
 from policies.networks import ActorCritic
-from policies.rollout import make_vector_env
+from policies.rollout import SEED_SPACING, make_vector_env
 from quadsitl.physics import layout as L
 from quadsitl.tasks import features as F
 
-SEED_SPACING = 100_003  # env i of a seed s starts from seed s·SEED_SPACING + i
 EVAL_SEED = 10_000  # test starts (quadsitl eval, the reported figures)
 VALIDATION_SEED = 20_000  # other starts, for choosing the best checkpoint while training
 # The figure that says how a task went, beyond success (episode-end info key, unit).

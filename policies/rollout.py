@@ -63,6 +63,11 @@ def explained_variance(values: np.ndarray, returns: np.ndarray) -> float:
     return 1.0 - float(np.var(np.asarray(returns) - np.asarray(values))) / variance
 
 
+# Env i of a run (or evaluation) with seed s is seeded s·SEED_SPACING + i, so runs with
+# nearby seeds never share an env's random stream.
+SEED_SPACING = 100_003
+
+
 def make_vector_env(
     task: str, num_envs: int, backend: str = "inprocess", **options: Any
 ) -> VectorEnv:

@@ -34,7 +34,7 @@ from policies.algos import algorithm_class
 from policies.algos.base import Algorithm
 from policies.config import TrainConfig
 from policies.evaluate import VALIDATION_SEED, evaluate
-from policies.rollout import explained_variance, make_vector_env
+from policies.rollout import SEED_SPACING, explained_variance, make_vector_env
 
 COLUMNS = (
     "iteration",
@@ -58,9 +58,6 @@ COLUMNS = (
 # clip_fraction are PPO's).
 LOSS_COLUMNS = ("policy_loss", "value_loss", "entropy", "kl", "approx_kl", "clip_fraction")
 MODES = ("new", "resume", "overwrite")
-# Env i of a run with seed s is seeded s·SEED_SPACING + i, so runs with nearby seeds
-# never share an env's random stream.
-SEED_SPACING = 100_003
 RUN_FILES = ("config.json", "metrics.csv", "checkpoints")
 
 

@@ -36,20 +36,7 @@ def start_sim(log_dir: str, speed: float = 5.0) -> RunningSim:
     """``quadsitl sim`` listening on a free UDP port (udpin), no API link."""
     port = free_udp_port()
     process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "quadsitl.cli",
-            "sim",
-            "--gcs",
-            f"udpin:127.0.0.1:{port}",
-            "--api",
-            "none",
-            "--speed",
-            str(speed),
-            "--logs",
-            log_dir,
-        ],
+        cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --speed {speed} --logs", log_dir),
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
@@ -62,22 +49,9 @@ class MotorSim:
 
     def __init__(self, *options: str) -> None:
         self.hil_port, self.gcs_port = free_udp_port(), free_udp_port()
+        gcs, hil = f"udpin:127.0.0.1:{self.gcs_port}", f"udpin:127.0.0.1:{self.hil_port}"
         self.process = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "quadsitl.cli",
-                "sim",
-                "--api",
-                "none",
-                "--logs",
-                "none",
-                "--gcs",
-                f"udpin:127.0.0.1:{self.gcs_port}",
-                "--hil",
-                f"udpin:127.0.0.1:{self.hil_port}",
-                *options,
-            ],
+            cli(f"sim --api none --logs none --gcs {gcs} --hil {hil}", *options),
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
@@ -102,6 +76,12 @@ class MotorSim:
             self.process.kill()
             out, _ = self.process.communicate()
         return out
+
+
+def cli(words: str, *args: object) -> list[str]:
+    """The command line of ``python -m quadsitl.cli``: ``words`` (fixed options, split at
+    spaces) then ``args`` (one argument each, e.g. paths)."""
+    return [sys.executable, "-m", "quadsitl.cli", *words.split(), *map(str, args)]
 
 
 def run_cli(*args: str, env: dict[str, str] | None = None, timeout: float = 120):

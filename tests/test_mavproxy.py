@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from gcs_tools.demo import free_udp_port
+from tests.conftest import cli
 
 pytestmark = pytest.mark.slow
 MAVPROXY = shutil.which("mavproxy.py") or str(Path(sys.executable).parent / "mavproxy.py")
@@ -23,20 +24,7 @@ MAVPROXY = shutil.which("mavproxy.py") or str(Path(sys.executable).parent / "mav
 def test_mavproxy_detects_reads_parameters_arms_takes_off_and_lands(tmp_path):
     port = free_udp_port()
     sim = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "quadsitl.cli",
-            "sim",
-            "--gcs",
-            f"udpout:127.0.0.1:{port}",
-            "--api",
-            "none",
-            "--speed",
-            "2",
-            "--logs",
-            "none",
-        ],
+        cli(f"sim --gcs udpout:127.0.0.1:{port} --api none --speed 2 --logs none"),
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,

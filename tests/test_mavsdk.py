@@ -8,7 +8,6 @@ from __future__ import annotations
 import asyncio
 import math
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -24,6 +23,7 @@ from mavsdk.plugins.mission import MissionItem, MissionPlan  # noqa: E402
 from mavsdk.plugins.mission_raw import MissionItem as RawItem  # noqa: E402
 
 from gcs_tools.demo import free_udp_port  # noqa: E402
+from tests.conftest import cli  # noqa: E402
 
 SPEED = 4.0  # simulator speed factor
 NAN = math.nan
@@ -138,22 +138,11 @@ def test_mavsdk_flies_takeoff_goto_missions_and_return(identity, tmp_path):
     events = tmp_path / "events.txt"
     with open(events, "w") as out:
         sim = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "quadsitl.cli",
-                "sim",
-                "--gcs",
-                "none",
-                "--api",
-                f"udpout:127.0.0.1:{port}",
-                "--speed",
-                str(SPEED),
-                "--logs",
-                "none",
+            cli(
+                f"sim --gcs none --api udpout:127.0.0.1:{port} --logs none --speed {SPEED}",
                 "--autopilot-id",
                 identity,
-            ],
+            ),
             stdout=out,
             stderr=subprocess.STDOUT,
             text=True,

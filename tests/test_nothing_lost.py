@@ -21,7 +21,7 @@ from policies import checkpoint
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.runner import SimConfig, Simulator
 from quadsitl.mavlink.tlog import TlogWriter
-from tests.conftest import interrupt, run_cli
+from tests.conftest import cli, interrupt, run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "checkpoints" / "hover.pt"
@@ -30,24 +30,11 @@ SHIPPED = ROOT / "policies" / "checkpoints" / "hover.pt"
 # --- 4. training never overwrites by accident -------------------------------------------
 def _train(runs: Path, *extra: str, steps: str = "8192"):
     return subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "quadsitl.cli",
-            "train",
-            "--task",
-            "hover",
-            "--algo",
-            "ppo",
-            "--preset",
-            "fast",
-            "--steps",
-            steps,
-            "--runs",
-            str(runs),
-            "--quiet",
+        cli(
+            f"train --task hover --algo ppo --preset fast --quiet --steps {steps} --runs",
+            runs,
             *extra,
-        ],
+        ),
         capture_output=True,
         text=True,
         timeout=180,
@@ -98,22 +85,7 @@ def test_a_second_run_into_the_same_folder_is_refused_then_resumed_or_overwritte
 def test_bad_training_options_are_clear_errors_and_leave_no_folder(tmp_path, args, message):
     runs = tmp_path / "runs"
     result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "quadsitl.cli",
-            "train",
-            "--task",
-            "hover",
-            "--algo",
-            "ppo",
-            "--preset",
-            "fast",
-            "--runs",
-            str(runs),
-            "--quiet",
-            *args,
-        ],
+        cli("train --task hover --algo ppo --preset fast --runs", str(runs), "--quiet", *args),
         capture_output=True,
         text=True,
         timeout=60,
@@ -124,22 +96,7 @@ def test_bad_training_options_are_clear_errors_and_leave_no_folder(tmp_path, arg
 
 def test_ctrl_c_saves_last_and_exits_cleanly(tmp_path):
     process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "quadsitl.cli",
-            "train",
-            "--task",
-            "hover",
-            "--algo",
-            "ppo",
-            "--preset",
-            "fast",
-            "--steps",
-            "4000000",
-            "--runs",
-            str(tmp_path),
-        ],
+        cli("train --task hover --algo ppo --preset fast --steps 4000000 --runs", str(tmp_path)),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -201,18 +158,7 @@ def test_a_log_folder_that_disappears_stops_the_log_not_the_vehicle(tmp_path):
     logs = tmp_path / "logs"
     port = free_udp_port()
     process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "quadsitl.cli",
-            "sim",
-            "--gcs",
-            f"udpin:127.0.0.1:{port}",
-            "--api",
-            "none",
-            "--logs",
-            str(logs),
-        ],
+        cli("sim --gcs", f"udpin:127.0.0.1:{port}", "--api", "none", "--logs", str(logs)),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

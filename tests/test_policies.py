@@ -22,6 +22,7 @@ from policies.evaluate import evaluate
 from policies.rollout import compute_gae
 from policies.train import train
 from quadsitl.physics import PAPER
+from tests.conftest import cli
 
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "policies" / "checkpoints"
 
@@ -165,23 +166,7 @@ def test_a_diverging_run_stops_and_keeps_the_last_good_checkpoint(tmp_path, monk
 
 def test_train_and_eval_commands(tmp_path):
     run = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "quadsitl.cli",
-            "train",
-            "--task",
-            "land",
-            "--algo",
-            "gae",
-            "--preset",
-            "fast",
-            "--steps",
-            "8192",
-            "--runs",
-            str(tmp_path),
-            "--quiet",
-        ],
+        cli("train --task land --algo gae --preset fast --steps 8192 --quiet --runs", tmp_path),
         capture_output=True,
         text=True,
         timeout=120,
@@ -316,22 +301,10 @@ def test_ground_station_mission_flown_by_the_policy_autopilot(tmp_path):
 
     port = free_udp_port()
     sim = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "quadsitl.cli",
-            "sim",
-            "--gcs",
-            f"udpin:127.0.0.1:{port}",
-            "--api",
-            "none",
-            "--logs",
-            "none",
-            "--speed",
-            "4",
-            "--autopilot",
-            str(CHECKPOINTS / "random_waypoint.pt"),
-        ],
+        cli(
+            f"sim --gcs udpin:127.0.0.1:{port} --api none --logs none --speed 4 --autopilot",
+            CHECKPOINTS / "random_waypoint.pt",
+        ),
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,

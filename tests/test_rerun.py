@@ -3,7 +3,6 @@ files that are not logs; the recording is read back with Rerun's own reader."""
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 import sys
 import time
@@ -18,7 +17,8 @@ from gcs_tools.client import VehicleClient
 from gcs_tools.replay import convert, main
 from gcs_tools.tlog_reader import ReadStats, read_tlog
 from quadsitl.mavlink.tlog import TlogWriter
-from tests.conftest import start_sim
+from quadsitl.viz.scene import viewer_executable
+from tests.conftest import cli, start_sim
 
 
 def rows_per_entity(rrd: Path) -> dict[str, int]:
@@ -122,9 +122,8 @@ def test_not_a_log_says_so_without_a_traceback(tmp_path, capsys, content):
 
 @pytest.mark.slow
 def test_headless_screenshot_shows_the_flight(flight_log, tmp_path):
-    rerun = shutil.which("rerun", path=str(Path(sys.executable).parent))
-    if rerun is None:
-        pytest.skip("rerun viewer not installed")
+    rerun = viewer_executable()  # rerun-sdk, a dependency, installs it beside the interpreter
+    assert rerun is not None, "the Rerun viewer is missing from the environment"
     out = tmp_path / "flight.rrd"
     convert(flight_log, out)
     png = tmp_path / "flight.png"
@@ -144,22 +143,7 @@ def test_headless_screenshot_shows_the_flight(flight_log, tmp_path):
 def test_sim_streams_itself_to_a_recording(tmp_path):
     out = tmp_path / "sim.rrd"
     result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "quadsitl.cli",
-            "sim",
-            "--gcs",
-            "udpin:127.0.0.1:0",
-            "--api",
-            "none",
-            "--logs",
-            "none",
-            "--duration",
-            "2",
-            "--rerun-save",
-            str(out),
-        ],
+        cli("sim --gcs udpin:127.0.0.1:0 --api none --logs none --duration 2 --rerun-save", out),
         capture_output=True,
         text=True,
         timeout=60,

@@ -15,8 +15,6 @@ import time
 import warnings
 from typing import Any
 
-from gymnasium.error import ClosedEnvironmentError
-
 from quadsitl.envs.remote_fleet import RemoteFleet
 from quadsitl.envs.sim_process import SimProcess
 from quadsitl.mavlink.links import parse_url
@@ -170,7 +168,6 @@ class MavlinkBackend:
         self.timeout = timeout
         self.signing_key = bytes(signing_key) if signing_key is not None else None
         self.gcs = gcs
-        self.closed = False
         self.system_id = system_id
         self.processes: list[SimProcess] = []
         self.clients: list[MotorClient] = []
@@ -222,13 +219,9 @@ class MavlinkBackend:
                 if time.monotonic() > deadline:
                     raise
 
-    def check_open(self) -> None:
-        if self.closed:
-            raise ClosedEnvironmentError("env is closed: make a new one")
-
     def check_alive(self) -> None:
         """Before a reset: restart simulator processes if one has died, with a warning."""
-        self.check_open()
+        self.fleet.check_open()
         dead = [p for p in self.processes if not p.alive]
         if dead:
             reason = dead[0].exit_message()
@@ -244,7 +237,6 @@ class MavlinkBackend:
         return error
 
     def close(self) -> None:
-        self.closed = True
         self.fleet.close()
         self._release()
 

@@ -52,7 +52,7 @@ class RemoteFleet(VehicleStates):
         """After this, ``reset`` and ``step`` raise ClosedEnvironmentError."""
         self.closed = True
 
-    def _check_open(self) -> None:
+    def check_open(self) -> None:
         if self.closed:
             raise ClosedEnvironmentError("env is closed: make a new one")
 
@@ -62,7 +62,7 @@ class RemoteFleet(VehicleStates):
         contact: ArrayLike | int = L.AIRBORNE,
         mask: ArrayLike | None = None,
     ) -> None:
-        self._check_open()
+        self.check_open()
         super().reset(state, contact, mask)  # checks the input, as the local fleet does
         rows = range(self.n) if mask is None else np.flatnonzero(mask).tolist()
         for i in rows:
@@ -83,7 +83,7 @@ class RemoteFleet(VehicleStates):
             self._take(i, answer)
 
     def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
-        self._check_open()
+        self.check_open()
         cmd = np.asarray(rotor_cmd, dtype=np.float64).reshape(self.n, L.N_ROTORS)
         if not np.isfinite(cmd).all():
             raise ValueError(f"rotor commands must be finite, got {cmd}")

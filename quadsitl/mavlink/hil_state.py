@@ -54,11 +54,6 @@ class WireState:
             touchdown_speed=touchdown,
         )
 
-    @property
-    def velocity_ned(self) -> Vec:
-        """m/s, local NED."""
-        return frames.quat_rotate(self.q_ned_frd, self.velocity_frd)
-
     def global_position(self, origin: Any) -> tuple[float, float, float]:
         """(lat deg, lon deg, alt m AMSL) of the ground-level position; ``origin``: the
         :class:`~quadsitl.vehicle.geo.Home` of the local frame."""

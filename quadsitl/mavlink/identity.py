@@ -43,9 +43,12 @@ class Identity:
 
 
 IDENTITIES = {
-    # PX4 v1.15.0: the flight stack whose protocol behaviour the vehicle follows.
-    "px4": Identity("px4", mav.MAV_AUTOPILOT_PX4, software_version(1, 15, 0), True),
-    "generic": Identity("generic", mav.MAV_AUTOPILOT_GENERIC, _own_version(), False),
+    identity.name: identity
+    for identity in (
+        # PX4 v1.15.0: the flight stack whose protocol behaviour the vehicle follows.
+        Identity("px4", mav.MAV_AUTOPILOT_PX4, software_version(1, 15, 0), True),
+        Identity("generic", mav.MAV_AUTOPILOT_GENERIC, _own_version(), False),
+    )
 }
 CUSTOM_VERSION = b"quadsitl"  # AUTOPILOT_VERSION flight_custom_version (8 bytes)
 MIDDLEWARE_VERSION = _own_version()  # quadsitl's own version, in every identity
@@ -81,11 +84,6 @@ AVAILABLE_MODES: tuple[ModeEntry, ...] = (
     ModeEntry(Mode.LAND, "Land", mav.MAV_STANDARD_MODE_LAND, True),
     ModeEntry(Mode.OFFBOARD, "Offboard", mav.MAV_STANDARD_MODE_NON_STANDARD, False),
 )
-STANDARD_MODES = {
-    e.standard_mode: e.mode
-    for e in AVAILABLE_MODES
-    if e.standard_mode != mav.MAV_STANDARD_MODE_NON_STANDARD
-}
 
 
 def available_modes_message(encoder: object, index: int) -> object:

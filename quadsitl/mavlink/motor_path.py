@@ -213,15 +213,14 @@ class MotorPath:
     def _hil_state_quaternion(self, wire: WireState) -> Any:
         v = self.vehicle
         lat, lon, alt = wire.global_position(v.origin)
-        velocity_ned = wire.velocity_ned
+        velocity_ned = frames.enu_to_ned(v.state[L.VEL])
         # Specific force (what an accelerometer reads), body FRD, over the last period:
         # the acceleration minus the simulated gravity.
-        gravity_ned = np.array([0.0, 0.0, v.airframe.gravity])
-        accel_frd = frames.quat_rotate(frames.quat_conjugate(wire.q_ned_frd), -gravity_ned)
+        accel_ned = np.array([0.0, 0.0, -v.airframe.gravity])
         if self._previous_velocity is not None and v.time > self._previous_velocity[0]:
             t0, v0 = self._previous_velocity
-            accel_ned = (velocity_ned - v0) / (v.time - t0) - gravity_ned
-            accel_frd = frames.quat_rotate(frames.quat_conjugate(wire.q_ned_frd), accel_ned)
+            accel_ned += (velocity_ned - v0) / (v.time - t0)
+        accel_frd = frames.quat_rotate(frames.quat_conjugate(wire.q_ned_frd), accel_ned)
         self._previous_velocity = (v.time, velocity_ned)
         speed = float(np.linalg.norm(velocity_ned)) * 100
         mg = accel_frd / STANDARD_GRAVITY * 1000

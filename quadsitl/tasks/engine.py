@@ -228,7 +228,7 @@ class TaskEngine:
         Actions of envs not ``active`` are ignored (replaced by 0) before the check.
         """
         raw = np.asarray(action)
-        if not (np.issubdtype(raw.dtype, np.floating) or np.issubdtype(raw.dtype, np.integer)):
+        if raw.dtype.kind not in "fiu":  # float, signed or unsigned integer
             raise ValueError(f"action must hold real numbers, got dtype {raw.dtype}")
         a = raw.astype(np.float64, copy=False)
         if a.shape != (self.n, L.N_ROTORS):

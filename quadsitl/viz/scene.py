@@ -119,9 +119,9 @@ def viewer_executable() -> str | None:
     return shutil.which("rerun")
 
 
-def why_no_viewer() -> str | None:
-    """Why no viewer window can be shown here (None: one can)."""
-    if viewer_executable() is None:
+def why_no_viewer(executable: str | None) -> str | None:
+    """Why no viewer window can be shown here (None: one can), given the viewer found."""
+    if executable is None:
         return "the Rerun viewer executable is not installed"
     if sys.platform.startswith("linux") and not (
         os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
@@ -168,8 +168,8 @@ def open_recording(
     rec = rr.RecordingStream(name)
     layout = blueprint() if default_blueprint is None else default_blueprint
     if spawn and save is None:
-        reason = why_no_viewer()
         executable = viewer_executable()
+        reason = why_no_viewer(executable)
         if reason is None and executable is not None:
             rr.spawn(executable_path=executable, default_blueprint=layout, recording=rec)
         else:
