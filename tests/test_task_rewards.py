@@ -9,6 +9,8 @@ situation fails.
 
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
 import pytest
 
@@ -25,7 +27,7 @@ def _engine(task: str, state: np.ndarray, contact: int = L.AIRBORNE) -> TaskEngi
     engine.seed([0])
     engine.reset_envs(np.ones(1, bool))
     engine.fleet.reset(state[None, :], contact=contact)
-    engine._observe()  # distances of the placed state: the step measures progress from here
+    engine.observe()  # distances of the placed state: the step measures progress from here
     engine.prev_dist[:] = engine.dist
     return engine
 
@@ -39,9 +41,9 @@ def _state(position, velocity=(0.0, 0.0, 0.0)) -> np.ndarray:
 
 def _eq18(engine: TaskEngine, before: np.ndarray, action: np.ndarray) -> float:
     """Σ_c α_c (d_before − d_after) − 0.01‖a‖² + the time term."""
-    task = engine.task
-    progress = float(np.dot(task.weights, before[0] - engine.dist[0]))
-    return progress - ACTION_WEIGHT * float(action @ action) + task.time_reward
+    module = importlib.import_module(f"quadsitl.tasks.{engine.task.name}")
+    progress = float(np.dot(module.WEIGHTS, before[0] - engine.dist[0]))
+    return progress - ACTION_WEIGHT * float(action @ action) + getattr(module, "TIME_REWARD", 0.0)
 
 
 def _step(engine: TaskEngine, action: np.ndarray | None = None) -> tuple[float, float, int]:

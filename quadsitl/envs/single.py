@@ -81,23 +81,19 @@ class QuadEnv(gym.Env):
         return self.engine.obs[0].copy(), {}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        engine = self.engine
         try:
-            reward, terminated, truncated = self.engine.step(action)
+            reward, terminated, truncated = engine.step(action)
         except SimulatorError as error:
             raise self._explain(error) from None
         if self.view is not None:
-            self.view.step(self.engine, float(reward[0]))
+            self.view.step(engine, float(reward[0]))
+        ended_early, timed_out = bool(terminated[0]), bool(truncated[0])
         info: dict[str, Any] = {}
-        if terminated[0] or truncated[0]:
-            metrics = self.engine.episode_metrics(np.zeros(1, np.int64))
+        if ended_early or timed_out:
+            metrics = engine.episode_metrics(np.zeros(1, np.int64))
             info = {key: value[0].item() for key, value in metrics.items()}
-        return (
-            self.engine.obs[0].copy(),
-            float(reward[0]),
-            bool(terminated[0]),
-            bool(truncated[0]),
-            info,
-        )
+        return engine.obs[0].copy(), float(reward[0]), ended_early, timed_out, info
 
     def _explain(self, error: SimulatorError) -> SimulatorError:
         return self.backend.explain(error) if self.backend is not None else error

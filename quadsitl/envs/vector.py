@@ -103,7 +103,7 @@ class QuadVectorEnv(VectorEnv):
         if self.autoreset_mode is AutoresetMode.SAME_STEP:
             return self._step_same(actions)
         resetting = self._autoreset
-        reward, terminated, truncated = self.engine.step(actions, active=~resetting)
+        reward, terminated, truncated = _copies(self.engine.step(actions, active=~resetting))
         ended = (terminated | truncated) & ~resetting
         info: dict[str, Any] = {}
         if ended.any():
@@ -119,7 +119,7 @@ class QuadVectorEnv(VectorEnv):
     def _step_same(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        reward, terminated, truncated = self.engine.step(actions)
+        reward, terminated, truncated = _copies(self.engine.step(actions))
         ended = terminated | truncated
         info: dict[str, Any] = {}
         if ended.any():
@@ -140,6 +140,11 @@ class QuadVectorEnv(VectorEnv):
             info[key] = column
             info[f"_{key}"] = ended.copy()
         return info
+
+
+def _copies(arrays: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    """The user's own copies of the engine's step arrays (the next step overwrites them)."""
+    return tuple(a.copy() for a in arrays)
 
 
 def _vector_class(name: str, task_name: str) -> type[QuadVectorEnv]:

@@ -198,6 +198,8 @@ class Fleet(VehicleStates):
             raise ValueError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
         super().__init__(n, airframe, dt, ground_z)
         self.backend = backend
+        self._compiled = backend == "compiled"
+        self._cmd_shape = (self.n, L.N_ROTORS)
 
     # --- stepping -------------------------------------------------------------------
     def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
@@ -206,15 +208,14 @@ class Fleet(VehicleStates):
         ``rotor_cmd`` has shape (n, 4) (or (4,) for a fleet of one). Commands are clipped
         to [0, Ω_max]; NaN or inf raise ValueError and leave the state untouched.
         """
-        cmd = np.asarray(rotor_cmd, dtype=np.float64)
-        if cmd.shape != (self.n, L.N_ROTORS):
-            if self.n == 1 and cmd.shape == (L.N_ROTORS,):
-                cmd = cmd.reshape(1, L.N_ROTORS)
-            else:
+        cmd = np.ascontiguousarray(rotor_cmd, dtype=np.float64)
+        if cmd.shape != self._cmd_shape:
+            if cmd.shape != (L.N_ROTORS,) or self.n != 1:
                 raise ValueError(
                     f"rotor commands must have shape ({self.n}, {L.N_ROTORS}), got {cmd.shape}"
                 )
-        if self.backend == "compiled":
+            cmd = cmd.reshape(self._cmd_shape)
+        if self._compiled:
             bad = kernel.step(
                 self.state,
                 self.params,

@@ -1,7 +1,11 @@
-"""The batched task engine: N vehicles flying one task, with its rewards and endings.
+"""The batched task engine: N vehicles flying one task; it knows no task.
 
-The single gym env, the native vector env and the SB3 adapter are three faces of this
-class; it knows nothing of Gymnasium's reset conventions (the faces do that).
+Each step: the actions become rotor commands (Eq. 19), the physics steps, the task's
+compiled ``evaluate`` writes observation, reward and outcome, and the engine keeps the
+episode counters (truncation, time within the goal radius, returns). Resetting a subset
+of envs by mask and the episode metrics are here too. The single gym env, the native
+vector env and the SB3 adapter are faces of this class; it knows nothing of Gymnasium's
+reset conventions (the faces do that).
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import FleetLike
 from quadsitl.tasks import features as F
 from quadsitl.tasks import spec as S
+from quadsitl.tasks.reward import jit
 
 # Parameter columns that ``param_randomization`` may scale.
 RANDOMIZABLE = {
@@ -123,6 +128,59 @@ class TaskOptions:
                 raise ValueError(f"param_randomization[{name!r}] must be in [0, 1), got {fraction}")
 
 
+@jit
+def take_action(raw, active, hover, beta, action, rotor_cmd, steps):  # pragma: no cover
+    """Start a step: ``action`` = the raw actions as float64 (0 where not ``active``),
+    rotor commands Ω_c = Ω_h + β·a (Eq. 19; the physics clips them), one more step
+    counted. Returns -1, or the first env whose action is not finite (nothing changed)."""
+    for n in range(raw.shape[0]):
+        if active[n]:
+            for i in range(raw.shape[1]):
+                if not math.isfinite(raw[n, i]):
+                    return n
+    for n in range(raw.shape[0]):
+        for i in range(raw.shape[1]):
+            a = float(raw[n, i]) if active[n] else 0.0
+            action[n, i] = a
+            rotor_cmd[n, i] = hover + beta * a
+        steps[n] += 1
+    return -1
+
+
+@jit
+def close_step(
+    dist,
+    prev_dist,
+    reward,
+    outcome,
+    steps,
+    max_steps,
+    goal_radius,
+    control_period,
+    time_within,
+    reach_time,
+    episode_return,
+    terminated,
+    truncated,
+):  # pragma: no cover - compiled
+    """End a step: the episode counters, and truncation at the time limit."""
+    for n in range(dist.shape[0]):
+        if dist[n, F.D_POS] < goal_radius:
+            time_within[n] += control_period
+            if math.isnan(reach_time[n]):
+                reach_time[n] = steps[n] * control_period
+        terminated[n] = outcome[n] != S.RUNNING
+        truncated[n] = steps[n] >= max_steps and not terminated[n]
+        if truncated[n]:
+            outcome[n] = S.TIMED_OUT
+        for c in range(F.N_DIST):
+            prev_dist[n, c] = dist[n, c]
+        episode_return[n] += reward[n]
+
+
+OUTCOME_NAME_ARRAY = np.array([S.OUTCOME_NAMES[code] for code in range(len(S.OUTCOME_NAMES))])
+
+
 class TaskEngine:
     """N envs of one task, stepped in one batched call.
 
@@ -131,6 +189,7 @@ class TaskEngine:
         goal: (N, 6) goal position and velocity, ENU.
         obs: (N, obs_size) float32, the latest observation.
         dist: (N, 4) the latest goal distances (features.D_*).
+        action: (N, 4) the latest actions, float64.
         steps: (N,) env steps taken in the current episode.
         outcome: (N,) spec outcome code of the episode (RUNNING until it ends).
     """
@@ -165,14 +224,19 @@ class TaskEngine:
         self.obs, self.dist, self.tilt = F.empty_buffers(num_envs, self.obs_size)
         self.prev_dist = np.zeros_like(self.dist)
         self.goal = np.zeros((num_envs, 6))
+        self.action = np.zeros((num_envs, L.N_ROTORS))
+        self.rotor_cmd = np.zeros((num_envs, L.N_ROTORS))
         self.reward = np.zeros(num_envs)
+        self.terminated = np.zeros(num_envs, bool)
+        self.truncated = np.zeros(num_envs, bool)
         self.steps = np.zeros(num_envs, np.int64)
         self.outcome = np.zeros(num_envs, np.int8)
         self.time_within = np.zeros(num_envs)
         self.reach_time = np.full(num_envs, math.nan)
         self.episode_return = np.zeros(num_envs)
-        self.weights = np.asarray(task.weights, dtype=np.float64)
         self.rngs = [np.random.default_rng() for _ in range(num_envs)]
+        self._all = np.ones(num_envs, bool)
+        self._action_shape = (num_envs, L.N_ROTORS)
         # Whatever state the task keeps per env beyond the goal (its own typed object).
         self.task_state = task.new_state(num_envs) if task.new_state is not None else None
 
@@ -187,23 +251,44 @@ class TaskEngine:
         if rows.size == 0:
             return
         o = self.options
-        states = np.zeros((rows.size, L.STATE_SIZE))
+        # Half-widths of the start noise, in the order drawn: position, attitude,
+        # velocity, rates (three values each). ``low + (high − low)·u`` is what
+        # ``rng.uniform(low, high)`` computes, from the same draws, without its checks.
+        spread = np.repeat(
+            [
+                o.init_position_noise,
+                o.init_attitude_noise,
+                o.init_velocity_noise,
+                o.init_rate_noise,
+            ],
+            3,
+        )
+        task = self.task
+        draws_start, draws_goal = callable(task.start), callable(task.goal)
+        starts = np.empty((rows.size, 3))
+        starts[:] = 0.0 if draws_start else task.start
+        goals = np.empty((rows.size, 6))
+        goals[:] = 0.0 if draws_goal else task.goal
+        draws = []
         for k, i in enumerate(rows):
             rng = self.rngs[i]
-            position = self.task.sample_start(rng) + rng.uniform(
-                -o.init_position_noise, o.init_position_noise, 3
-            )
-            attitude = rng.uniform(-o.init_attitude_noise, o.init_attitude_noise, 3)
-            states[k, L.POS] = position
-            states[k, L.QUAT] = quat_from_euler(*attitude)
-            states[k, L.VEL] = rng.uniform(-o.init_velocity_noise, o.init_velocity_noise, 3)
-            states[k, L.RATES] = rng.uniform(-o.init_rate_noise, o.init_rate_noise, 3)
-            self.goal[i] = self.task.sample_goal(rng)
+            if draws_start:
+                starts[k] = task.start(rng)
+            draws.append(rng.random(12))
+            if draws_goal:
+                goals[k] = task.goal(rng)
             if o.param_randomization:
                 params = self.base_params.copy()
                 for name, fraction in o.param_randomization.items():
                     params[RANDOMIZABLE[name]] *= rng.uniform(1 - fraction, 1 + fraction)
                 self.fleet.params[i] = params
+        self.goal[rows] = goals
+        noise = -spread + (spread - -spread) * np.array(draws)
+        states = np.zeros((rows.size, L.STATE_SIZE))
+        states[:, L.POS] = starts + noise[:, 0:3]
+        states[:, L.QUAT] = quat_from_euler(noise[:, 3], noise[:, 4], noise[:, 5])
+        states[:, L.VEL] = noise[:, 6:9]
+        states[:, L.RATES] = noise[:, 9:12]
         hover = self.fleet.hover_rotor_speed[rows]  # of each vehicle's (randomised) airframe
         states[:, L.ROTORS] = np.minimum(hover, self.fleet.params[rows, L.P_OMEGA_MAX])[:, None]
         self.fleet.reset(states, mask=mask)
@@ -214,91 +299,95 @@ class TaskEngine:
         self.episode_return[rows] = 0.0
         if self.task.on_reset is not None:
             self.task.on_reset(self, rows)
-        self._observe()
+        self.observe(rows if rows.size < self.n else None)
         # The first reward of an episode measures progress from its own start, not from
         # where the previous episode ended (the authors' code got this wrong).
         self.prev_dist[rows] = self.dist[rows]
 
+    def observe(self, rows: NDArray[np.int64] | None = None) -> None:
+        """Recompute the observation and goal distances of the vehicles as they are (of
+        those in ``rows``, or all)."""
+        fleet, observe = self.fleet, self.task.observe
+        if rows is None:
+            observe(fleet.state, fleet.params, self.goal, self.obs, self.dist, self.tilt)
+            return
+        obs, dist, tilt = self.obs[rows], self.dist[rows], self.tilt[rows]
+        observe(fleet.state[rows], fleet.params[rows], self.goal[rows], obs, dist, tilt)
+        self.obs[rows], self.dist[rows], self.tilt[rows] = obs, dist, tilt
+
     # --- stepping ------------------------------------------------------------------
-    def check_action(
-        self, action: ArrayLike, active: NDArray[np.bool_] | None = None
-    ) -> NDArray[np.float64]:
-        """(N, 4) float64 action; NaN/inf or a wrong shape raise ValueError.
-
-        Actions of envs not ``active`` are ignored (replaced by 0) before the check.
-        """
-        raw = np.asarray(action)
-        if raw.dtype.kind not in "fiu":  # float, signed or unsigned integer
-            raise ValueError(f"action must hold real numbers, got dtype {raw.dtype}")
-        a = raw.astype(np.float64, copy=False)
-        if a.shape != (self.n, L.N_ROTORS):
-            if self.n == 1 and a.shape == (L.N_ROTORS,):
-                a = a.reshape(1, L.N_ROTORS)
-            else:
-                raise ValueError(f"action must have shape ({self.n}, {L.N_ROTORS}), got {a.shape}")
-        if active is not None and not active.all():
-            a = np.where(active[:, None], a, 0.0)
-        if not np.isfinite(a).all():
-            bad = int(np.flatnonzero(~np.isfinite(a).all(axis=1))[0])
-            raise ValueError(f"action of env {bad} is not finite: {a[bad]}")
-        return a
-
     def step(
         self, action: ArrayLike, active: NDArray[np.bool_] | None = None
     ) -> tuple[NDArray, NDArray, NDArray]:
         """Advance all envs one control period.
 
-        ``active`` (default all) marks envs whose episode goes on; the others are about to
-        be reset: their actions are ignored and they must not draw from their generators.
+        ``action``: (N, 4) real numbers (or (4,) for one env); NaN/inf or a wrong shape
+        raise ValueError and change nothing. ``active`` (default all) marks envs whose
+        episode goes on; the others are about to be reset: their actions are ignored and
+        they must not draw from their generators.
 
         Returns:
-            reward (N,), terminated (N,), truncated (N,).
+            reward (N,), terminated (N,), truncated (N,): the engine's own arrays,
+            overwritten by the next step (copy them to keep them).
         """
-        a = self.check_action(action, active)
-        # Eq. 19: Ω_c = Ω_h + β a, clipped to [0, Ω_max] by the physics.
-        self.fleet.step(self.hover_speed + self.options.beta * a, n_substeps=self.substeps)
+        raw = np.asarray(action)
+        if raw.dtype.kind not in "fiu":  # float, signed or unsigned integer
+            raise ValueError(f"action must hold real numbers, got dtype {raw.dtype}")
+        if raw.shape != self._action_shape:
+            if self.n == 1 and raw.shape == (L.N_ROTORS,):
+                raw = raw.reshape(self._action_shape)
+            else:
+                raise ValueError(
+                    f"action must have shape ({self.n}, {L.N_ROTORS}), got {raw.shape}"
+                )
         if active is None:
-            active = np.ones(self.n, bool)
+            active = self._all
+        bad = take_action(
+            raw,
+            active,
+            self.hover_speed,
+            self.options.beta,
+            self.action,
+            self.rotor_cmd,
+            self.steps,
+        )
+        if bad >= 0:
+            raise ValueError(f"action of env {bad} is not finite: {raw[bad]}")
+        fleet = self.fleet
+        fleet.step(self.rotor_cmd, n_substeps=self.substeps)
         if self.task.advance_goal is not None:
             self.task.advance_goal(self, active)
-        self._observe()
-        F.shaped_reward(
-            self.prev_dist,
+        self.task.evaluate(
+            fleet.state,
+            fleet.params,
+            fleet.contact,
+            self.goal,
+            self.action,
+            self.steps,
+            self.max_steps,
+            self.obs,
             self.dist,
-            a,
-            self.weights,
-            S.ACTION_WEIGHT,
-            self.task.time_reward,
+            self.prev_dist,
+            self.tilt,
             self.reward,
+            self.outcome,
         )
-        d_pos = self.dist[:, F.D_POS]
-        within = d_pos < self.task.goal_radius
-        if self.task.goal_bonus:
-            self.reward += self.task.goal_bonus * within
-        self.steps += 1
-        self.time_within += within * self.control_period
-        newly = within & np.isnan(self.reach_time)
-        self.reach_time[newly] = self.steps[newly] * self.control_period
-
-        outcome = self.outcome
-        outcome[:] = S.RUNNING
-        pos = self.fleet.state[:, L.POS]
-        outcome[(np.abs(pos) > self.task.bound_box).any(axis=1)] = S.OUT_OF_BOUNDS
-        outcome[d_pos > self.task.bound_goal_distance] = S.OUT_OF_BOUNDS
-        outcome[self.tilt > self.task.max_tilt] = S.FLIPPED
-        if self.task.events is not None:
-            self.task.events(self, self.reward, outcome)
-        terminated = outcome != S.RUNNING
-        truncated = (self.steps >= self.max_steps) & ~terminated
-        outcome[truncated] = S.TIMED_OUT
-        self.prev_dist[:] = self.dist
-        self.episode_return += self.reward
-        return self.reward.copy(), terminated, truncated
-
-    def _observe(self) -> None:
-        F.observe(self.fleet.state, self.fleet.params, self.goal, self.obs, self.dist, self.tilt)
-        if self.task.fill_extra_obs is not None:
-            self.task.fill_extra_obs(self)
+        close_step(
+            self.dist,
+            self.prev_dist,
+            self.reward,
+            self.outcome,
+            self.steps,
+            self.max_steps,
+            self.task.goal_radius,
+            self.control_period,
+            self.time_within,
+            self.reach_time,
+            self.episode_return,
+            self.terminated,
+            self.truncated,
+        )
+        return self.reward, self.terminated, self.truncated
 
     # --- episode metrics -----------------------------------------------------------
     def episode_metrics(self, rows: NDArray[np.int64]) -> dict[str, NDArray]:
@@ -311,7 +400,7 @@ class TaskEngine:
             )
         outcome = self.outcome[rows]
         return {
-            "outcome": np.array([S.OUTCOME_NAMES[int(c)] for c in outcome]),
+            "outcome": OUTCOME_NAME_ARRAY[outcome],
             "success": success,
             "final_distance": self.dist[rows, F.D_POS].copy(),
             "time_within_threshold": self.time_within[rows].copy(),

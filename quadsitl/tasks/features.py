@@ -1,4 +1,4 @@
-"""Observation, goal distances and the Eq. 18 reward, for all tasks, over the batch.
+"""The observation layout and the goal distances, for all tasks, over the batch.
 
 Compiled with numba because the single env must step in tens of microseconds and the
 vector env must handle millions of env steps per second; the formulas are short and
@@ -33,6 +33,19 @@ import numpy as np
 
 from quadsitl.physics import layout as L
 
+# First column of each block (the compiled code indexes with these) ...
+OBS_X = 0
+OBS_SIN_X = 3
+OBS_COS_X = 6
+OBS_BODY_VX = 9
+OBS_RATE_X = 12
+OBS_ROTOR0 = 15
+OBS_GOAL_DX = 19
+OBS_GOAL_SIN_X = 22
+OBS_GOAL_COS_X = 25
+OBS_GOAL_DVX = 28
+OBS_GOAL_RATE_X = 31
+# ... and the blocks as slices (for numpy code).
 OBS_POS = slice(0, 3)
 OBS_SIN = slice(3, 6)
 OBS_COS = slice(6, 9)
@@ -49,6 +62,8 @@ OBS_SIZE = 34
 OBS_TARGET_VECTOR = slice(34, 37)  # target − position, ENU m
 OBS_TARGET_DISTANCE = 37  # ‖target − position‖, m
 OBS_TARGET_VELOCITY = slice(38, 41)  # target velocity, ENU m/s
+OBS_TARGET_VECTOR_X = 34
+OBS_TARGET_VELOCITY_X = 38
 TARGET_EXTRA_OBS = 7
 
 D_POS, D_ATT, D_VEL, D_RATE = 0, 1, 2, 3
@@ -57,6 +72,7 @@ N_DIST = 4
 # Goal arrays: (N, 6) = position (ENU, m) then velocity (ENU, m/s).
 GOAL_POS = slice(0, 3)
 GOAL_VEL = slice(3, 6)
+GOAL_X, GOAL_VX = 0, 3
 
 _jit = numba.njit(nogil=True, cache=True, error_model="numpy")
 
@@ -67,9 +83,13 @@ def observe(state, params, goal, obs, dist, tilt):  # pragma: no cover - compile
     for n in range(state.shape[0]):
         s = state[n]
         qw, qx, qy, qz = s[L.I_QW], s[L.I_QX], s[L.I_QY], s[L.I_QZ]
-        roll = math.atan2(2 * (qw * qx + qy * qz), 1 - 2 * (qx * qx + qy * qy))
-        pitch = math.asin(min(max(2 * (qw * qy - qz * qx), -1.0), 1.0))
-        yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+        # Sines and cosines of roll, pitch and yaw straight from the quaternion (no
+        # trigonometry: the angles' own atan2/asin are only needed for the tilt).
+        roll_y, roll_x = 2 * (qw * qx + qy * qz), 1 - 2 * (qx * qx + qy * qy)
+        sin_pitch = min(max(2 * (qw * qy - qz * qx), -1.0), 1.0)
+        yaw_y, yaw_x = 2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz)
+        roll = math.atan2(roll_y, roll_x)
+        pitch = math.asin(sin_pitch)
         tilt[n] = max(abs(roll), abs(pitch))
         # Rotation matrix rows: body = Rᵀ world.
         r00 = 1 - 2 * (qy * qy + qz * qz)
@@ -84,58 +104,53 @@ def observe(state, params, goal, obs, dist, tilt):  # pragma: no cover - compile
         o = obs[n]
         pos_err = 0.0
         for k in range(3):
-            o[k] = s[L.I_PX + k]
-            delta = goal[n, k] - s[L.I_PX + k]
-            o[19 + k] = delta
+            o[OBS_X + k] = s[L.I_PX + k]
+            delta = goal[n, GOAL_X + k] - s[L.I_PX + k]
+            o[OBS_GOAL_DX + k] = delta
             pos_err += delta * delta
         sin_err = 0.0
         cos_err = 0.0
-        angles = (roll, pitch, yaw)
+        roll_norm, yaw_norm = math.hypot(roll_y, roll_x), math.hypot(yaw_y, yaw_x)
+        sines = (
+            roll_y / roll_norm if roll_norm > 0 else 0.0,
+            sin_pitch,
+            yaw_y / yaw_norm if yaw_norm > 0 else 0.0,
+        )
+        cosines = (
+            roll_x / roll_norm if roll_norm > 0 else 1.0,
+            math.sqrt(1.0 - sin_pitch * sin_pitch),
+            yaw_x / yaw_norm if yaw_norm > 0 else 1.0,
+        )
         for k in range(3):
-            sa = math.sin(angles[k])
-            ca = math.cos(angles[k])
-            o[3 + k] = sa
-            o[6 + k] = ca
-            o[22 + k] = -sa
-            o[25 + k] = 1.0 - ca
+            sa = sines[k]
+            ca = cosines[k]
+            o[OBS_SIN_X + k] = sa
+            o[OBS_COS_X + k] = ca
+            o[OBS_GOAL_SIN_X + k] = -sa
+            o[OBS_GOAL_COS_X + k] = 1.0 - ca
             sin_err += sa * sa
             cos_err += (1.0 - ca) * (1.0 - ca)
         vx, vy, vz = s[L.I_VX], s[L.I_VY], s[L.I_VZ]
-        ex, ey, ez = goal[n, 3] - vx, goal[n, 4] - vy, goal[n, 5] - vz
-        o[9] = r00 * vx + r10 * vy + r20 * vz
-        o[10] = r01 * vx + r11 * vy + r21 * vz
-        o[11] = r02 * vx + r12 * vy + r22 * vz
-        o[28] = r00 * ex + r10 * ey + r20 * ez
-        o[29] = r01 * ex + r11 * ey + r21 * ez
-        o[30] = r02 * ex + r12 * ey + r22 * ez
+        ex, ey, ez = goal[n, GOAL_VX] - vx, goal[n, GOAL_VX + 1] - vy, goal[n, GOAL_VX + 2] - vz
+        o[OBS_BODY_VX] = r00 * vx + r10 * vy + r20 * vz
+        o[OBS_BODY_VX + 1] = r01 * vx + r11 * vy + r21 * vz
+        o[OBS_BODY_VX + 2] = r02 * vx + r12 * vy + r22 * vz
+        o[OBS_GOAL_DVX] = r00 * ex + r10 * ey + r20 * ez
+        o[OBS_GOAL_DVX + 1] = r01 * ex + r11 * ey + r21 * ez
+        o[OBS_GOAL_DVX + 2] = r02 * ex + r12 * ey + r22 * ez
         rate_err = 0.0
         for k in range(3):
             w = s[L.I_WX + k]
-            o[12 + k] = w
-            o[31 + k] = -w
+            o[OBS_RATE_X + k] = w
+            o[OBS_GOAL_RATE_X + k] = -w
             rate_err += w * w
         omega_max = params[n, L.P_OMEGA_MAX]
         for k in range(L.N_ROTORS):
-            o[15 + k] = s[L.I_ROTOR0 + k] / omega_max
-        dist[n, 0] = math.sqrt(pos_err)
-        dist[n, 1] = math.sqrt(sin_err) + math.sqrt(cos_err)
-        dist[n, 2] = math.sqrt(ex * ex + ey * ey + ez * ez)
-        dist[n, 3] = math.sqrt(rate_err)
-
-
-@_jit
-def shaped_reward(
-    prev_dist, dist, action, weights, action_weight, time_reward, reward
-):  # pragma: no cover
-    """Eq. 18 without its bonus: Σ_c α_c (d_prev − d) − action_weight·‖a‖² + time term."""
-    for n in range(dist.shape[0]):
-        total = time_reward
-        for c in range(N_DIST):
-            total += weights[c] * (prev_dist[n, c] - dist[n, c])
-        penalty = 0.0
-        for i in range(action.shape[1]):
-            penalty += action[n, i] * action[n, i]
-        reward[n] = total - action_weight * penalty
+            o[OBS_ROTOR0 + k] = s[L.I_ROTOR0 + k] / omega_max
+        dist[n, D_POS] = math.sqrt(pos_err)
+        dist[n, D_ATT] = math.sqrt(sin_err) + math.sqrt(cos_err)
+        dist[n, D_VEL] = math.sqrt(ex * ex + ey * ey + ez * ez)
+        dist[n, D_RATE] = math.sqrt(rate_err)
 
 
 def empty_buffers(n: int, obs_size: int = OBS_SIZE) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,26 +1,36 @@
 """Land: descend from 3 m onto the pad at the origin, at about 0.5 m/s, without crashing.
 
-Touchdown and crash come from the physics' ground contact (true rotor-disc geometry):
-a gentle touchdown on the pad is ``landed`` (+500); a rotor strike, a touchdown faster
-than the airframe's limit or too tilted, or a descent faster than 2 m/s (the paper's
-vortex-ring proxy) is ``crashed`` (−500); a gentle touchdown beside the pad is
-``landed_off_pad`` (no bonus).
+Reward per step: Eq. 18 (``reward.progress``, goal velocity 0.5 m/s down), + LANDING_REWARD
+on landing on the pad, − CRASH_PENALTY on a crash. Touchdown and crash come from the
+physics' ground contact (true rotor-disc geometry): a gentle touchdown on the pad is
+``landed``; a rotor strike, a touchdown faster than the airframe's limit or too tilted,
+or a descent faster than 2 m/s (the paper's vortex-ring proxy) is ``crashed``; a gentle
+touchdown beside the pad is ``landed_off_pad`` (no bonus). Also ends more than 6 m from
+the pad (a flip in the air does not end it). Success: landed on the pad.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from quadsitl.physics import layout as L
+from quadsitl.tasks import features as F
+from quadsitl.tasks import reward as R
 from quadsitl.tasks import spec as S
 
-PAD_RADIUS = 0.5  # m, horizontal distance from the pad centre that counts as on the pad
+EPISODE_SECONDS = 6.0
+WEIGHTS = (100.0, 10.0, 1.0, 5.0)  # α of position, attitude, velocity, rates
+START_HEIGHT = 3.0  # m
+START_SPREAD = 1.5  # m, x and y ~ U(−1.5, 1.5)
 DESCENT_RATE = 0.5  # m/s, the target descent rate
+PAD_RADIUS = 0.5  # m, horizontal distance from the pad centre that counts as on the pad
 VORTEX_RING_SPEED = 2.0  # m/s, descending faster ends the episode as a crash
 LANDING_REWARD = 500.0
 CRASH_PENALTY = 500.0
-START_HEIGHT = 3.0  # m
-START_SPREAD = 1.5  # m, x and y ~ U(−1.5, 1.5)
+MAX_GOAL_DISTANCE = 6.0  # m
+GOAL_RADIUS = 0.1  # m (metrics only)
 
 
 def start_above_pad(rng: np.random.Generator) -> np.ndarray:
@@ -38,17 +48,37 @@ def on_reset(engine, rows: np.ndarray) -> None:
     engine.goal[rows, 2] = engine.airframe.gear_height
 
 
-def events(engine, reward: np.ndarray, outcome: np.ndarray) -> None:
-    contact = engine.fleet.contact
-    vz = engine.fleet.state[:, L.I_VZ]
-    horizontal = np.hypot(*engine.fleet.state[:, 0:2].T)
-    down = contact == L.ON_GROUND
-    on_pad = down & (horizontal <= PAD_RADIUS)
-    crashed = (contact == L.CRASHED) | (vz < -VORTEX_RING_SPEED)
-    outcome[down & ~on_pad] = S.LANDED_OFF_PAD
-    outcome[on_pad] = S.LANDED
-    outcome[crashed] = S.CRASHED
-    reward += LANDING_REWARD * (on_pad & ~crashed) - CRASH_PENALTY * crashed
+@R.jit
+def evaluate(
+    state,
+    params,
+    contact,
+    goal,
+    action,
+    steps,
+    max_steps,
+    obs,
+    dist,
+    prev_dist,
+    tilt,
+    reward,
+    outcome,
+):  # pragma: no cover - compiled
+    F.observe(state, params, goal, obs, dist, tilt)
+    weights = WEIGHTS
+    for n in range(state.shape[0]):
+        reward[n] = R.progress(n, prev_dist, dist, weights, action)
+        outcome[n] = S.RUNNING
+        if dist[n, F.D_POS] > MAX_GOAL_DISTANCE:
+            outcome[n] = S.OUT_OF_BOUNDS
+        if contact[n] == L.ON_GROUND:
+            on_pad = math.hypot(state[n, L.I_PX], state[n, L.I_PY]) <= PAD_RADIUS
+            outcome[n] = S.LANDED if on_pad else S.LANDED_OFF_PAD
+        if contact[n] == L.CRASHED or state[n, L.I_VZ] < -VORTEX_RING_SPEED:
+            outcome[n] = S.CRASHED
+            reward[n] -= CRASH_PENALTY
+        elif outcome[n] == S.LANDED:
+            reward[n] += LANDING_REWARD
 
 
 def landed(engine, rows: np.ndarray) -> np.ndarray:
@@ -57,15 +87,12 @@ def landed(engine, rows: np.ndarray) -> np.ndarray:
 
 TASK = S.TaskSpec(
     name="land",
-    episode_seconds=6.0,
-    weights=(100.0, 10.0, 1.0, 5.0),
-    time_reward=0.0,
-    goal_radius=0.1,
-    bound_goal_distance=6.0,
+    episode_seconds=EPISODE_SECONDS,
+    evaluate=evaluate,
+    goal_radius=GOAL_RADIUS,
     ground=True,
-    sample_start=start_above_pad,
-    sample_goal=pad_goal,
+    start=start_above_pad,
+    goal=pad_goal,
     on_reset=on_reset,
-    events=events,
     success=landed,
 )

@@ -1,13 +1,20 @@
-"""What a task is: a frozen description plus a few pure functions, read by the engine."""
+"""What a task is: its constants, how an episode starts, and one compiled ``evaluate``.
+
+A task module (``hover.py``, ``land.py``, ...) reads top to bottom: the start and the
+goal, then ``evaluate``, which writes the observation, the reward and the outcome of
+every env after a physics step. The engine (``engine.py``) knows no task: it steps the
+physics, calls these functions, and keeps the episode counters and metrics.
+"""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from quadsitl.tasks import features as F
 
 if TYPE_CHECKING:
     from quadsitl.tasks.engine import TaskEngine
@@ -30,48 +37,34 @@ OUTCOME_NAMES = {
     LANDED_OFF_PAD: "landed_off_pad",
 }
 
-ACTION_WEIGHT = 0.01
-"""Weight of the action penalty ‖a‖² (the paper: 'a small penalty'; value our choice)."""
-
-
-def level_start(rng: np.random.Generator) -> np.ndarray:
-    """Start at the task origin (the paper's default for hover and the waypoints)."""
-    return np.zeros(3)
-
-
-def origin_goal(rng: np.random.Generator) -> np.ndarray:
-    """Goal (6,): position then velocity, ENU: hold the origin."""
-    return np.zeros(6)
-
 
 @dataclass(frozen=True)
 class TaskSpec:
-    """A flight task: constants of the paper plus its start, goal and event functions.
+    """A flight task, as the engine sees it.
 
-    Reward per step (Eq. 18): Σ_c weights_c·Δd_c − ACTION_WEIGHT·‖a‖² + time_reward
-    + goal_bonus while within goal_radius, plus whatever ``events`` adds.
+    ``evaluate(state, params, contact, goal, action, steps, max_steps, obs, dist,
+    prev_dist, tilt, reward, outcome)`` is compiled; after each physics step it fills,
+    for every env n, ``obs[n]``, ``dist[n]`` (the goal distances of Eq. 18), ``tilt[n]``,
+    ``reward[n]`` and ``outcome[n]`` (RUNNING or why the episode ends). ``steps[n]``
+    counts the env's steps including this one; ``prev_dist`` holds the distances of the
+    step before. ``observe(state, params, goal, obs, dist, tilt)`` does the observation
+    part alone (at reset).
     """
 
     name: str
     episode_seconds: float
-    weights: tuple[float, float, float, float]  # position, attitude, velocity, rates
-    time_reward: float
-    goal_radius: float  # m: bonus, time-within and reach-time threshold
+    evaluate: Callable[..., None]
+    goal_radius: float  # m: the time-within and reach-time metrics count inside it
     success_radius: float = 0.1  # m: success = flown to the end and this close at the end
-    goal_bonus: float = 0.0
-    bound_box: float = math.inf  # m: ends when any |x|, |y|, |z| exceeds it
-    bound_goal_distance: float = math.inf  # m: ends when farther from the goal
-    max_tilt: float = math.inf  # rad: ends when |roll| or |pitch| exceeds it (the paper:
-    # hover and target following only; a waypoint or landing episode goes on after a
-    # flip, so that ending it early can never be a way out of negative rewards)
     ground: bool = False  # a ground plane at z = 0
-    sample_start: Callable[[np.random.Generator], np.ndarray] = level_start
-    sample_goal: Callable[[np.random.Generator], np.ndarray] = origin_goal
-    # Hooks for tasks with more than Eq. 18 (landing, target following).
+    extra_obs: int = 0  # observation values after the common F.OBS_SIZE
+    observe: Callable[..., None] = F.observe
+    # Start position (3, m ENU) and goal (6: position m, velocity m/s, ENU): fixed
+    # values, or a function of the env's generator that draws them each episode.
+    start: tuple[float, ...] | Callable[[np.random.Generator], np.ndarray] = (0.0, 0.0, 0.0)
+    goal: tuple[float, ...] | Callable[[np.random.Generator], np.ndarray] = (0.0,) * 6
+    # For tasks whose goal moves or that keep more than a goal per env (target following).
     new_state: Callable[[int], Any] | None = None  # the task's own per-env state, for N envs
     on_reset: Callable[[TaskEngine, np.ndarray], None] | None = None
     advance_goal: Callable[[TaskEngine, np.ndarray], None] | None = None
-    events: Callable[[TaskEngine, np.ndarray, np.ndarray], None] | None = None
     success: Callable[[TaskEngine, np.ndarray], np.ndarray] | None = None
-    extra_obs: int = 0
-    fill_extra_obs: Callable[[TaskEngine], None] | None = None

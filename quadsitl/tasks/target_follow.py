@@ -4,6 +4,11 @@ The target starts at the origin (where the vehicle starts) and moves at about 1 
 through random control points in [−2, 2]³; segments join with a continuous tangent.
 Observation: the common 34 values (goal = the target's position and velocity) plus
 the vector to the target (3, ENU m), its distance (1, m) and its velocity (3, ENU m/s).
+
+Reward per step: Eq. 18 (``reward.progress``, goal = the target), + RANGE_BONUS·(1 + t/T)
+while within RANGE of the target (later matters more), − EXIT_PENALTY when the episode
+ends early. Ends out of a 4 m box or beyond 90° of roll or pitch. Success: flown to the
+end, within RANGE for at least 80 % of it.
 """
 
 from __future__ import annotations
@@ -15,8 +20,13 @@ import numpy as np
 
 from quadsitl.physics import layout as L
 from quadsitl.tasks import features as F
+from quadsitl.tasks import reward as R
 from quadsitl.tasks import spec as S
 
+EPISODE_SECONDS = 25.0
+WEIGHTS = (100.0, 10.0, 0.1, 0.1)  # α of position, attitude, velocity, rates
+BOUND_BOX = 4.0  # m
+MAX_TILT = math.pi / 2  # rad
 SPEED = 1.0  # m/s
 BOX = 2.0  # m, control points in [−BOX, BOX]³
 RANGE = 2.0  # m, the distance to stay within
@@ -81,21 +91,47 @@ def advance_goal(engine, active: np.ndarray) -> None:
     _place_target(engine, rows)
 
 
-def fill_extra_obs(engine) -> None:
-    to_target = engine.goal[:, F.GOAL_POS] - engine.fleet.state[:, L.POS]
-    engine.obs[:, F.OBS_TARGET_VECTOR] = to_target
-    engine.obs[:, F.OBS_TARGET_DISTANCE] = np.linalg.norm(to_target, axis=1)
-    engine.obs[:, F.OBS_TARGET_VELOCITY] = engine.goal[:, F.GOAL_VEL]
+@R.jit
+def observe(state, params, goal, obs, dist, tilt):  # pragma: no cover - compiled
+    """The common observation, then the target's vector, distance and velocity."""
+    F.observe(state, params, goal, obs, dist, tilt)
+    for n in range(state.shape[0]):
+        for k in range(3):
+            obs[n, F.OBS_TARGET_VECTOR_X + k] = goal[n, F.GOAL_X + k] - state[n, L.I_PX + k]
+            obs[n, F.OBS_TARGET_VELOCITY_X + k] = goal[n, F.GOAL_VX + k]
+        obs[n, F.OBS_TARGET_DISTANCE] = R.distance_to_goal(state, goal, n)
 
 
-def events(engine, reward: np.ndarray, outcome: np.ndarray) -> None:
-    progress = engine.steps / engine.max_steps
-    # The distance computed here, not read back from the observation: the reward does
-    # not depend on another hook having filled it first.
-    distance = np.linalg.norm(engine.goal[:, F.GOAL_POS] - engine.fleet.state[:, L.POS], axis=1)
-    in_range = distance <= RANGE
-    reward += RANGE_BONUS * (1.0 + progress) * in_range
-    reward -= EXIT_PENALTY * (outcome != S.RUNNING)
+@R.jit
+def evaluate(
+    state,
+    params,
+    contact,
+    goal,
+    action,
+    steps,
+    max_steps,
+    obs,
+    dist,
+    prev_dist,
+    tilt,
+    reward,
+    outcome,
+):  # pragma: no cover - compiled
+    observe(state, params, goal, obs, dist, tilt)
+    weights = WEIGHTS
+    for n in range(state.shape[0]):
+        reward[n] = R.progress(n, prev_dist, dist, weights, action)
+        # The distance computed here, not read back from the float32 observation.
+        if R.distance_to_goal(state, goal, n) <= RANGE:
+            reward[n] += RANGE_BONUS * (1.0 + steps[n] / max_steps)
+        outcome[n] = S.RUNNING
+        if R.outside_box(state, n, BOUND_BOX):
+            outcome[n] = S.OUT_OF_BOUNDS
+        if tilt[n] > MAX_TILT:
+            outcome[n] = S.FLIPPED
+        if outcome[n] != S.RUNNING:
+            reward[n] -= EXIT_PENALTY
 
 
 def followed(engine, rows: np.ndarray) -> np.ndarray:
@@ -105,17 +141,13 @@ def followed(engine, rows: np.ndarray) -> np.ndarray:
 
 TASK = S.TaskSpec(
     name="target_follow",
-    episode_seconds=25.0,
-    weights=(100.0, 10.0, 0.1, 0.1),
-    time_reward=0.0,
+    episode_seconds=EPISODE_SECONDS,
+    evaluate=evaluate,
     goal_radius=RANGE,
-    bound_box=4.0,
-    max_tilt=math.pi / 2,
+    extra_obs=F.TARGET_EXTRA_OBS,
+    observe=observe,
     new_state=new_state,
     on_reset=on_reset,
     advance_goal=advance_goal,
-    events=events,
     success=followed,
-    extra_obs=F.TARGET_EXTRA_OBS,
-    fill_extra_obs=fill_extra_obs,
 )
