@@ -111,7 +111,28 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         metavar="URL",
         help="an extra link (repeatable): udpout:HOST:PORT, udpin:HOST:PORT or tcpin:HOST:PORT",
     )
-    sim.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default: 1)")
+    sim.add_argument(
+        "--sysid",
+        type=int,
+        default=1,
+        help="MAVLink system id (of the first vehicle; vehicle i has SYSID+i) (default: 1)",
+    )
+    sim.add_argument(
+        "--vehicles",
+        type=int,
+        default=1,
+        metavar="N",
+        help="vehicles in this process, their physics stepped as one batch; each is a "
+        "complete MAVLink vehicle on every link (default: 1)",
+    )
+    sim.add_argument(
+        "--spacing",
+        type=float,
+        default=2.0,
+        metavar="M",
+        help="metres between the vehicles' start positions, a grid east then north "
+        "(default: 2)",
+    )
     sim.add_argument(
         "--autopilot-id",
         choices=("px4", "generic"),
@@ -236,6 +257,8 @@ def _sim_config(args: argparse.Namespace) -> object:
         lockstep=args.lockstep,
         signing_key=_signing_key(args),
         system_id=args.sysid,
+        vehicles=args.vehicles,
+        spacing=args.spacing,
         autopilot_id=args.autopilot_id,
         home=home,
         airframe=args.airframe,

@@ -38,18 +38,20 @@ class WireState:
 
     @classmethod
     def from_physics(
-        cls, state: ArrayLike, gear_height: float, time_usec: int, contact: int, touchdown: float
+        cls, state: ArrayLike, gear_height: float, time_usec: int, contact: Any, touchdown: Any
     ) -> WireState:
+        """From a (17,) physics state, or from (N, 17) states (then every field but the
+        time holds N rows)."""
         s = np.asarray(state, dtype=np.float64)
-        q_enu_flu = s[L.QUAT]
-        velocity_flu = frames.quat_rotate(frames.quat_conjugate(q_enu_flu), s[L.VEL])
+        q_enu_flu = s[..., L.QUAT]
+        velocity_flu = frames.quat_rotate(frames.quat_conjugate(q_enu_flu), s[..., L.VEL])
         return cls(
             time_usec=time_usec,
-            position_ned=frames.enu_to_ned(s[L.POS] - np.array([0.0, 0.0, gear_height])),
+            position_ned=frames.enu_to_ned(s[..., L.POS] - np.array([0.0, 0.0, gear_height])),
             q_ned_frd=frames.quat_enu_flu_to_ned_frd(q_enu_flu),
             velocity_frd=frames.flu_to_frd(velocity_flu),
-            rates_frd=frames.flu_to_frd(s[L.RATES]),
-            rotor_speeds=s[L.ROTORS].copy(),
+            rates_frd=frames.flu_to_frd(s[..., L.RATES]),
+            rotor_speeds=s[..., L.ROTORS].copy(),
             contact=contact,
             touchdown_speed=touchdown,
         )
@@ -61,12 +63,13 @@ class WireState:
         return origin.to_global(float(east), float(north), float(-down))
 
     def to_physics(self, gear_height: float) -> Vec:
-        """(17,) physics state row (world ENU, centre of mass above the ground plane)."""
-        state = np.zeros(L.STATE_SIZE)
+        """(17,) physics state row (world ENU, centre of mass above the ground plane), or
+        (N, 17) rows from a batch."""
+        state = np.zeros((*np.shape(self.position_ned)[:-1], L.STATE_SIZE))
         q_enu_flu = frames.quat_normalize(frames.quat_ned_frd_to_enu_flu(self.q_ned_frd))
-        state[L.POS] = frames.ned_to_enu(self.position_ned) + np.array([0.0, 0.0, gear_height])
-        state[L.QUAT] = q_enu_flu
-        state[L.VEL] = frames.quat_rotate(q_enu_flu, frames.frd_to_flu(self.velocity_frd))
-        state[L.RATES] = frames.frd_to_flu(self.rates_frd)
-        state[L.ROTORS] = self.rotor_speeds
+        state[..., L.POS] = frames.ned_to_enu(self.position_ned) + np.array([0.0, 0.0, gear_height])
+        state[..., L.QUAT] = q_enu_flu
+        state[..., L.VEL] = frames.quat_rotate(q_enu_flu, frames.frd_to_flu(self.velocity_frd))
+        state[..., L.RATES] = frames.frd_to_flu(self.rates_frd)
+        state[..., L.ROTORS] = self.rotor_speeds
         return state

@@ -23,6 +23,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink
 from quadsitl.mavlink.signing import keep_signing_clock
 
@@ -94,6 +95,8 @@ class Link:
         self.kind, host, port = parse_url(url)
         self._out = _Capture()
         self.mav = mavlink.MAVLink(self._out, srcSystem=system_id, srcComponent=component_id)
+        self.system_id = system_id
+        self._seq: dict[int, int] = {}  # next sequence number of each system sending here
         self.peers: dict[Any, Peer] = {}
         self.destination: tuple[str, int] | None = None
         self.bad_frames = 0
@@ -132,8 +135,11 @@ class Link:
         return [self.sock] + [p.sock for p in self.peers.values() if p.sock is not None]
 
     # --- receiving --------------------------------------------------------------------
-    def receive(self) -> list[tuple[Any, Peer]]:
-        """Every complete message now waiting, with the peer it came from."""
+    def receive(self, fast: frozenset[int] = frozenset()) -> list[tuple[Any, Peer]]:
+        """Every complete message now waiting, with the peer it came from. Unsigned
+        frames of the message ids in ``fast`` come as :class:`fast_codec.Frame` (parsed
+        without pymavlink: the hot path of lockstep rounds), the rest as pymavlink
+        messages."""
         out: list[tuple[Any, Peer]] = []
         if self.kind == "tcpin":
             self._accept()
@@ -150,7 +156,10 @@ class Link:
                 peer = self.peers.get(address) or Peer(address, _new_parser())
                 self.peers[address] = peer
                 peer.last_seen = time.monotonic()
-                self._parse(peer, data, out)
+                if fast:
+                    self._parse_fast(peer, data, out, fast)
+                else:
+                    self._parse(peer, data, out)
         return out
 
     def _accept(self) -> None:
@@ -191,13 +200,43 @@ class Link:
             else:
                 out.append((message, peer))
 
+    def _parse_fast(
+        self, peer: Peer, data: bytes, out: list[tuple[Any, Peer]], fast: frozenset[int]
+    ) -> None:
+        used = 0
+        for frame in FC.parse(data):
+            used += len(frame.data)
+            if frame.msgid in fast and not frame.data[2] & FC.SIGNED:
+                out.append((frame, peer))
+            else:
+                self._parse(peer, frame.data, out)
+        if used < len(data):  # bytes that were no frame of a message known here
+            self.bad_frames += 1
+
     # --- sending ----------------------------------------------------------------------
-    def pack(self, message: Any) -> bytes:
-        """Encode ``message`` with this link's sequence numbers (and signing, if set)."""
+    def pack(self, message: Any, system_id: int | None = None) -> bytes:
+        """Encode ``message`` as sent by ``system_id`` (default: the link's), with that
+        system's sequence numbers on this link (and signing, if set)."""
+        system = self.system_id if system_id is None else system_id
+        self.mav.srcSystem = system
+        self.mav.seq = self._seq.get(system, 0)
         if self.mav.signing.sign_outgoing:
             keep_signing_clock(self.mav)
         self.mav.send(message)
+        self._seq[system] = self.mav.seq
         return self._out.frames.pop()
+
+    def next_seq(self, system_id: int) -> int:
+        """The sequence number of ``system_id``'s next frame here (for frames packed
+        without pymavlink)."""
+        seq = self._seq.get(system_id, 0)
+        self._seq[system_id] = (seq + 1) & 0xFF
+        return seq
+
+    @property
+    def signs(self) -> bool:
+        """Whether frames sent here must be signed."""
+        return bool(self.mav.signing.sign_outgoing)
 
     def send_bytes(self, frame: bytes) -> None:
         """Write an already packed frame to every live peer (and the fixed destination)."""

@@ -47,6 +47,16 @@ def _int16(x: float) -> int:
     return int(max(-32767, min(32767, round(x))))
 
 
+def check_controls(controls: Any) -> tuple[str, str] | None:
+    """(kind, reason) why four normalised rotor commands cannot be flown, or None."""
+    for i, u in enumerate(controls):
+        if not math.isfinite(u):
+            return "not_finite", f"motor command rejected: control {i} is {u}"
+        if not 0.0 <= u <= 1.0:
+            return "out_of_range", f"motor command rejected: control {i} = {u:g} not in [0, 1]"
+    return None
+
+
 class MotorPath:
     """State of the motor path for one vehicle. ``lockstep``: started with --lockstep."""
 
@@ -69,12 +79,9 @@ class MotorPath:
     # --- motor commands ---------------------------------------------------------------
     def check(self, msg: Any) -> tuple[str, str] | None:
         """(kind, reason) why this HIL_ACTUATOR_CONTROLS must be rejected, or None."""
-        controls = msg.controls[: L.N_ROTORS]
-        for i, u in enumerate(controls):
-            if not math.isfinite(u):
-                return "not_finite", f"motor command rejected: control {i} is {u}"
-            if not 0.0 <= u <= 1.0:
-                return "out_of_range", f"motor command rejected: control {i} = {u:g} not in [0, 1]"
+        problem = check_controls(msg.controls[: L.N_ROTORS])
+        if problem is not None:
+            return problem
         if msg.time_usec and msg.time_usec < self.last_command_usec:
             return "time_backwards", (
                 f"motor command rejected: time {msg.time_usec} µs is before the last "
@@ -82,33 +89,42 @@ class MotorPath:
             )
         return None
 
+    def reject(self, kind: str, reason: str) -> str | None:
+        """Count a rejected motor command; the reason, when it is worth a STATUSTEXT (the
+        first of each kind, then every 100th)."""
+        self.counters["rejected"] += 1
+        self.counters[kind] = self.counters.get(kind, 0) + 1
+        return reason if self.counters[kind] % 100 == 1 else None
+
     def command(self, msg: Any) -> str | None:
         """Apply one motor command (and step, in lockstep). Returns a problem worth
         reporting: the first rejection of each kind (then every 100th), or the first
         command ignored by a disarmed vehicle (then every 1000th)."""
         problem = self.check(msg)
         if problem is not None:
-            kind, reason = problem
-            self.counters["rejected"] += 1
-            self.counters[kind] = self.counters.get(kind, 0) + 1
-            return reason if self.counters[kind] % 100 == 1 else None
+            return self.reject(*problem)
+        warning = self.apply(msg.controls[: L.N_ROTORS], bool(msg.mode & ARMED_FLAG))
+        if msg.time_usec:
+            self.last_command_usec = msg.time_usec
+        if msg.flags & LOCKSTEP_FLAG or self.always_lockstep:
+            self.last_lockstep_wall = time.monotonic()
+            X.advance(self.vehicle)
+        return warning
+
+    def apply(self, controls: Any, armed: bool = True) -> str | None:
+        """Take checked normalised rotor commands (four, in [0, 1]); ``armed`` False stops
+        the motors. Returns a warning worth a STATUSTEXT, or None."""
         v = self.vehicle
-        speeds = np.asarray(msg.controls[: L.N_ROTORS], dtype=np.float64)
-        speeds *= v.airframe.max_rotor_speed
-        if not msg.mode & ARMED_FLAG:
+        speeds = np.asarray(controls, dtype=np.float64) * v.airframe.max_rotor_speed
+        if not armed:
             speeds[:] = 0.0  # the controller's own outputs are disarmed
         warning = None
-        if not v.armed and msg.mode & ARMED_FLAG:
+        if not v.armed and armed:
             self.counters["while_disarmed"] += 1
             if self.counters["while_disarmed"] % 1000 == 1:
                 warning = "motor commands ignored: vehicle disarmed (arm it first)"
         X.motor_command(v, speeds)
         self.counters["accepted"] += 1
-        if msg.time_usec:
-            self.last_command_usec = msg.time_usec
-        if msg.flags & LOCKSTEP_FLAG or self.always_lockstep:
-            self.last_lockstep_wall = time.monotonic()
-            X.advance(v)
         return warning
 
     # --- reset ------------------------------------------------------------------------

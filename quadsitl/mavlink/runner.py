@@ -26,6 +26,7 @@ from typing import Protocol
 
 import numpy as np
 
+from quadsitl.mavlink.fleet_server import FleetServer
 from quadsitl.mavlink.identity import get_identity
 from quadsitl.mavlink.links import Link
 from quadsitl.mavlink.server import MavlinkServer
@@ -33,6 +34,7 @@ from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.physics import Airframe, get_airframe
 from quadsitl.vehicle.controller import Autopilot
 from quadsitl.vehicle.geo import Home
+from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.results import Severity
 from quadsitl.vehicle.vehicle import Vehicle
 
@@ -52,7 +54,9 @@ class SimConfig:
     extra_urls: list[str] = field(default_factory=list)
     lockstep: bool = False  # simulated time moves only with motor commands
     signing_key: bytes | None = None  # MAVLink 2 signing key (32 bytes)
-    system_id: int = 1
+    system_id: int = 1  # of the first vehicle; vehicle i has system_id + i
+    vehicles: int = 1  # in this process, their physics stepped as one batch
+    spacing: float = 2.0  # m between the vehicles' start positions (a grid)
     autopilot_id: str = "px4"  # what the vehicle presents itself as: "px4" or "generic"
     home: Home = field(default_factory=Home)
     airframe: str = "paper"
@@ -68,6 +72,12 @@ class SimConfig:
         get_identity(self.autopilot_id)
         if not 1 <= self.system_id <= 254:
             raise ValueError(f"system id must be 1..254, got {self.system_id}")
+        if not 1 <= self.vehicles <= 255 - self.system_id:
+            raise ValueError(
+                f"{self.vehicles} vehicles from system id {self.system_id} need ids up to "
+                f"{self.system_id + self.vehicles - 1}; MAVLink system ids end at 254 (and "
+                "there must be at least one vehicle)"
+            )
         if not (math.isfinite(self.physics_rate) and 100 <= self.physics_rate <= 10_000):
             raise ValueError(f"physics rate must be 100..10000 Hz, got {self.physics_rate}")
         if not (math.isfinite(self.control_rate) and 10 <= self.control_rate <= self.physics_rate):
@@ -136,17 +146,21 @@ class Simulator:
         config.validate()
         self.config = config
         self.view: View | None = None
-        autopilot = make_autopilot(get_airframe(config.airframe)) if make_autopilot else None
-        self.vehicle = Vehicle(
+        airframe = get_airframe(config.airframe)
+        self.group = VehicleGroup(
+            config.vehicles,
             config.airframe,
             config.home,
             physics_dt=1.0 / config.physics_rate,
             control_period=1.0 / config.control_rate,
-            autopilot=autopilot,
+            spacing=config.spacing,
+            make_autopilot=(lambda: make_autopilot(airframe)) if make_autopilot else None,
         )
-        Vehicle(config.airframe).step()  # compile the kernels before the clock starts
-        for name, value in config.params.items():
-            self.vehicle.set_param(name, value)
+        self.vehicle = self.group.vehicles[0]
+        VehicleGroup(config.vehicles, config.airframe).step()  # compile before the clock starts
+        for vehicle in self.group.vehicles:
+            for name, value in config.params.items():
+                vehicle.set_param(name, value)
         self.links: list[Link] = []
         try:
             named = (("gcs", config.gcs_url), ("api", config.api_url), ("hil", config.hil_url))
@@ -162,21 +176,31 @@ class Simulator:
         if config.log_dir:
             stamp = time.strftime("%Y%m%d-%H%M%S")
             self.tlog = TlogWriter(Path(config.log_dir) / f"quadsitl-{stamp}-{os.getpid()}.tlog")
-        self.server = MavlinkServer(
-            self.vehicle,
-            self.links,
-            self.tlog,
-            config.system_id,
-            1,
-            echo=self._print,
-            lockstep=config.lockstep,
-            signing_key=config.signing_key,
-            identity=get_identity(config.autopilot_id),
-        )
+        self.servers = [
+            MavlinkServer(
+                vehicle,
+                self.links,
+                self.tlog,
+                config.system_id + i,
+                1,
+                echo=self._printer(config.system_id + i),
+                lockstep=config.lockstep,
+                signing_key=config.signing_key,
+                identity=get_identity(config.autopilot_id),
+            )
+            for i, vehicle in enumerate(self.group.vehicles)
+        ]
+        self.server = FleetServer(self.group, self.servers, self.tlog)
         self.timing = Timing()
         self.stopping = False
         if make_view is not None:
             self.view = make_view(self.vehicle)
+
+    def _printer(self, system_id: int) -> Callable[[str], None]:
+        """Vehicle events on the console; with several vehicles, each says who it is."""
+        if self.config.vehicles == 1:
+            return self._print
+        return lambda text: self._print(f"[system {system_id}] {text}")
 
     def _print(self, text: str) -> None:
         if not self.config.quiet:
@@ -189,7 +213,7 @@ class Simulator:
         self.stopping = True
 
     def run(self) -> None:
-        dt = self.vehicle.fleet.dt
+        dt = self.group.physics.dt
         wall_per_step = dt / self.config.speed
         start = time.monotonic()
         steps = 0  # physics steps taken on the wall-clock schedule since ``start``
@@ -199,11 +223,11 @@ class Simulator:
             now = time.monotonic()
             if end is not None and now >= end:
                 break
-            if self.server.motors.lockstep:
+            if self.server.lockstep:
                 start, steps = now, 0  # real time resumes from here when lockstep ends
                 # Poll while commands are flowing (waking from sleep costs more than a
                 # round trip); sleep once the client pauses.
-                busy = now - self.server.motors.last_lockstep_wall < LOCKSTEP_SPIN
+                busy = now - self.server.last_lockstep_wall < LOCKSTEP_SPIN
                 wait = 0.0 if busy else LOCKSTEP_WAIT
                 if now - last_tick >= LOCKSTEP_TICK:
                     self.server.tick(now)
@@ -231,6 +255,8 @@ class Simulator:
         if tlog.failure is None:
             return
         self.tlog = self.server.tlog = None
+        for server in self.servers:
+            server.tlog = None
         print(
             f"quadsitl sim: warning: {tlog.failure}; the flight goes on unlogged",
             file=sys.stderr,
@@ -248,7 +274,7 @@ class Simulator:
         for _ in range(due):
             scheduled = start + (steps + 1) * wall_per_step
             self.timing.record(max(0.0, time.monotonic() - scheduled))
-            self.vehicle.step()
+            self.group.step()
             steps += 1
         return steps
 
@@ -274,9 +300,14 @@ def run_simulator(
     signal.signal(signal.SIGTERM, sim.stop)
     links = ", ".join(f"{link.name} {link.url} (port {link.local_port})" for link in sim.links)
     signing = "on" if config.signing_key is not None else "off"
+    last = config.system_id + config.vehicles - 1
+    systems = (
+        f"system {config.system_id}"
+        if last == config.system_id
+        else (f"{config.vehicles} vehicles, systems {config.system_id}..{last}")
+    )
     sim._print(
-        f"quadsitl sim: system {config.system_id} ({config.autopilot_id}), signing {signing}, "
-        f"links: {links}"
+        f"quadsitl sim: {systems} ({config.autopilot_id}), signing {signing}, links: {links}"
     )
     exposed = [link for link in sim.links if link.exposed]
     if exposed and config.signing_key is None:

@@ -101,14 +101,14 @@ class MavlinkServer:
     def send(self, message: Any, link: Link | None = None) -> None:
         """Send on one link, or on all."""
         for target in [link] if link is not None else self.links:
-            frame = target.pack(message)
+            frame = target.pack(message, self.system_id)
             target.send_bytes(frame)
             if self.tlog is not None and target.name != MOTOR_LINK:
                 self.tlog.record(frame)
 
     def send_together(self, messages: list[Any], link: Link) -> None:
         """Several messages in one datagram (one system call, one wake-up at the peer)."""
-        frames = [link.pack(message) for message in messages]
+        frames = [link.pack(message, self.system_id) for message in messages]
         link.send_bytes(b"".join(frames))
         if self.tlog is not None and link.name != MOTOR_LINK:
             for frame in frames:

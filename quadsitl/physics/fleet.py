@@ -237,3 +237,41 @@ class Fleet(VehicleStates):
                     self.state, self.params, cmd, self.contact, self.touchdown_speed, self.dt
                 )
         self.time += n_substeps * self.dt
+
+
+class FleetSlot(VehicleStates):
+    """Vehicle ``index`` of a shared :class:`Fleet`, seen as a fleet of one.
+
+    Its arrays are views of the shared fleet's rows, so whoever steps the shared fleet
+    (:class:`quadsitl.vehicle.group.VehicleGroup`, one batch for all) moves this vehicle;
+    ``time`` is the shared clock, counted from this vehicle's own start (a reboot sets
+    it back to 0 for this vehicle alone).
+    """
+
+    def __init__(self, fleet: Fleet, index: int) -> None:
+        if not 0 <= index < fleet.n:
+            raise ValueError(f"vehicle {index} is not in a fleet of {fleet.n}")
+        rows = slice(index, index + 1)
+        self.shared, self.index = fleet, index
+        self.n, self.dt = 1, fleet.dt
+        self.airframes = [fleet.airframes[index]]
+        self.state = fleet.state[rows]
+        self.params = fleet.params[rows]
+        self.contact = fleet.contact[rows]
+        self.touchdown_speed = fleet.touchdown_speed[rows]
+        self._epoch = fleet.time
+
+    @property
+    def time(self) -> float:  # type: ignore[override]
+        return self.shared.time - self._epoch
+
+    @time.setter
+    def time(self, value: float) -> None:
+        self._epoch = self.shared.time - value
+
+    def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
+        """Step this vehicle alone: only when it is the whole fleet (a vehicle of a larger
+        group moves when the group steps)."""
+        if self.shared.n != 1:
+            raise RuntimeError("a vehicle of a group is stepped with its group")
+        self.shared.step(rotor_cmd, n_substeps)

@@ -74,9 +74,6 @@ def advance(v: Vehicle) -> None:
         for _ in range(v.substeps):
             v.step()
         return
-    v.control()
-    v.physics_steps += v.substeps
-    contact_before = int(v.fleet.contact[0])
+    before = v.begin_period()
     v.fleet.step(v.rotor_cmd, n_substeps=v.substeps)
-    v.watch_contact(contact_before)
-    v.drain_battery(v.control_period)
+    v.end_step(before, v.control_period)

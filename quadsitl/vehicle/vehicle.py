@@ -18,6 +18,7 @@ import numpy as np
 from quadsitl import frames
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
+from quadsitl.physics.fleet import FleetSlot
 from quadsitl.vehicle import external_control as X
 from quadsitl.vehicle import failsafe as FS
 from quadsitl.vehicle import guidance as G
@@ -46,6 +47,9 @@ class Vehicle:
             home position.
         physics_dt: physics step, s.
         control_period: onboard controller period, s (a multiple of ``physics_dt``).
+        fleet, rotor_cmd: for a vehicle of a group (:mod:`quadsitl.vehicle.group`), its
+            row of the group's physics and of the group's rotor commands; alone, it has
+            a physics of its own.
     """
 
     # Flight state, (re)set by _reset_flight_state.
@@ -72,6 +76,8 @@ class Vehicle:
         physics_dt: float = 0.001,
         control_period: float = 0.004,
         autopilot: Autopilot | None = None,
+        fleet: FleetSlot | None = None,
+        rotor_cmd: Vec | None = None,
     ) -> None:
         self.origin = home or Home()
         self.home_position = np.zeros(3)  # m, ENU: where home is in the local frame
@@ -80,7 +86,7 @@ class Vehicle:
             AIRFRAME_NAMES.index(get_airframe(airframe).name)
         )
         self.airframe = get_airframe(airframe)
-        self.fleet = Fleet(1, self.airframe, dt=physics_dt)
+        self.fleet: Fleet | FleetSlot = fleet or Fleet(1, self.airframe, dt=physics_dt)
         self.substeps = max(1, round(control_period / physics_dt))
         self.control_period = self.substeps * physics_dt
         # The cascade always exists: the gain parameters tune it, and it flies unless
@@ -92,7 +98,8 @@ class Vehicle:
         self.missions = MissionRunner(self)
         self.events: deque[tuple[int, str]] = deque(maxlen=100)
         self.items_reached: deque[int] = deque(maxlen=100)
-        self.rotor_cmd = np.zeros(L.N_ROTORS)  # rad/s, last command to the motors
+        # rad/s, last command to the motors
+        self.rotor_cmd = rotor_cmd if rotor_cmd is not None else np.zeros(L.N_ROTORS)
         for spec in PARAMETERS:
             P.apply(self, spec.name)
         self._reset_flight_state()
@@ -296,17 +303,33 @@ class Vehicle:
     # --- stepping ---------------------------------------------------------------------
     def step(self) -> None:
         """Advance one physics step; the controller runs every ``substeps`` of them."""
+        before = self.begin_step()
+        self.fleet.step(self.rotor_cmd)
+        self.end_step(before, self.fleet.dt)
+
+    def begin_step(self) -> int:
+        """Before one physics step (this vehicle's, or its group's): run the controller
+        when due. Returns the ground contact before the step."""
         if self.physics_steps % self.substeps == 0:
             self.control()
         self.physics_steps += 1
-        contact_before = int(self.fleet.contact[0])
-        self.fleet.step(self.rotor_cmd)
+        return int(self.fleet.contact[0])
+
+    def begin_period(self) -> int:
+        """Before one whole control period under external motor control, taken by the
+        physics in one call. Returns the ground contact before it."""
+        self.control()
+        self.physics_steps += self.substeps
+        return int(self.fleet.contact[0])
+
+    def end_step(self, contact_before: int, seconds: float) -> None:
+        """After the physics moved ``seconds``: touchdowns and crashes, battery."""
         self.watch_contact(contact_before)
-        self.drain_battery(self.fleet.dt)
+        self.drain_battery(seconds)
 
     def drain_battery(self, seconds: float) -> None:
-        rotors = self.fleet.state[0, L.ROTORS]
-        shaft_power = self.airframe.torque_coeff * float(np.sum(rotors**3))
+        cubes = sum(w * w * w for w in self.fleet.state[0, L.ROTORS].tolist())
+        shaft_power = self.airframe.torque_coeff * cubes
         self.battery.drain(shaft_power, seconds)
 
     def control(self) -> None:

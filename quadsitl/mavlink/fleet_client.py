@@ -1,0 +1,333 @@
+"""The learner's end of a fleet in lockstep: every vehicle of one simulator process
+stepped by one round trip, and resent until answered.
+
+Talks to ``quadsitl sim --vehicles N --lockstep --hil udpin:HOST:PORT``. A round is one
+datagram of SET_ACTUATOR_CONTROL_TARGET, one per vehicle (``target_system`` addresses
+it; ``time_usec`` is the simulated time the command applies from), answered by one
+datagram (or a few, for large fleets) holding each vehicle's ACTUATOR_OUTPUT_STATUS,
+NAMED_VALUE_INT ``CONTACT``, NAMED_VALUE_FLOAT ``TD_SPEED`` (on the ground only) and
+ODOMETRY, stamped with the time after the step. An answer is matched to its round by
+that time, so a late one is never taken for the next. A lost command or a lost answer:
+the commands of the vehicles still unanswered are sent again, unchanged, after
+``resend_after`` seconds; the simulator steps a round once and answers a repeat from
+its cache. :class:`SimulatorError` only when nothing comes back for ``timeout`` seconds.
+
+Resets are batched the same way: the two reset commands and the arming command of every
+vehicle to reset in one datagram, resent for the vehicles whose answers are missing.
+"""
+
+from __future__ import annotations
+
+import select
+import socket
+import time
+from collections import deque
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quadsitl.mavlink import fast_codec as FC
+from quadsitl.mavlink import mavlink as mav
+from quadsitl.mavlink.commands import FORCE_MAGIC
+from quadsitl.mavlink.hil_state import WireState
+from quadsitl.mavlink.links import is_loopback
+from quadsitl.mavlink.motor_client import SimulatorError
+from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_MOTION
+from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
+from quadsitl.physics import layout as L
+
+RESEND_AFTER = 0.02  # s without a complete answer before the missing commands go again
+ODOMETRY = mav.MAVLINK_MSG_ID_ODOMETRY
+ACTUATOR_OUTPUT_STATUS = mav.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS
+NAMED_VALUE_INT = mav.MAVLINK_MSG_ID_NAMED_VALUE_INT
+NAMED_VALUE_FLOAT = mav.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT
+COMMAND_ACK = mav.MAVLINK_MSG_ID_COMMAND_ACK
+SET_ACTUATOR_CONTROL_TARGET = mav.MAVLink_set_actuator_control_target_message
+MAX_DATAGRAM = 65535
+RESET_COMMANDS = 3  # stage motion, reset, arm
+
+
+class FleetClient:
+    """Lockstep rounds with the vehicles ``first_system_id`` … ``+ n − 1`` of one
+    simulator process, listening at ``host``:``port``.
+
+    Attributes:
+        time_usec: simulated time of the last complete answer (all vehicles share it).
+        answer: the last answer of every vehicle, a :class:`WireState` of (n, ·) arrays.
+        resent: rounds (and resets) that needed a resend; ``late``: answers dropped
+            because they belonged to an earlier round.
+    """
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        n: int,
+        first_system_id: int = 1,
+        timeout: float = 2.0,
+        signing_key: bytes | None = None,
+        resend_after: float = RESEND_AFTER,
+    ) -> None:
+        self.address = (host, port)
+        self.n, self.first = n, first_system_id
+        self.timeout, self.resend_after = timeout, resend_after
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1" if is_loopback(host) else "0.0.0.0", 0))
+        self.sock.setblocking(False)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 * 2**20)
+        self._frames: list[bytes] = []
+        self.mav = mav.MAVLink(_Sink(self._frames), srcSystem=255, srcComponent=191)
+        self.signing = signing_key is not None
+        if signing_key is not None:
+            sign_outgoing(self.mav, signing_key, link_id=0)
+        self.parser = mav.MAVLink(None)
+        self.parser.robust_parsing = True
+        self.seq = 0
+        self.time_usec = 0
+        self.answer = _empty_answer(n)
+        self.statustexts: deque[str] = deque(maxlen=100)
+        self.resent = 0
+        self.late = 0
+
+    # --- plumbing ---------------------------------------------------------------------
+    def _command_frame(self, command: int, index: int, *params: float) -> bytes:
+        values = list(params) + [0.0] * (7 - len(params))
+        return self._encode(
+            self.mav.command_long_encode(self.first + index, 1, command, 0, *values)
+        )
+
+    def _encode(self, message: Any) -> bytes:
+        if self.signing:
+            keep_signing_clock(self.mav)
+        self.mav.send(message)
+        return self._frames.pop()
+
+    def _send(self, frames: list[bytes]) -> None:
+        """Frames in as few datagrams as fit."""
+        chunk: list[bytes] = []
+        size = 0
+        for frame in frames:
+            if chunk and size + len(frame) > MAX_DATAGRAM - 1024:
+                self.sock.sendto(b"".join(chunk), self.address)
+                chunk, size = [], 0
+            chunk.append(frame)
+            size += len(frame)
+        if chunk:
+            self.sock.sendto(b"".join(chunk), self.address)
+
+    def _receive(self, until: float) -> list[FC.Frame]:
+        """The frames of the datagrams that arrive before ``until`` (wall, monotonic);
+        returns as soon as one datagram has been read."""
+        while True:
+            try:
+                data = self.sock.recv(MAX_DATAGRAM)
+            except BlockingIOError:
+                wait = until - time.monotonic()
+                if wait <= 0:
+                    return []
+                select.select([self.sock], [], [], wait)
+                continue
+            except ConnectionRefusedError:
+                raise SimulatorError(f"nothing listens at {self._where()}") from None
+            frames = list(FC.parse(data))
+            for frame in frames:
+                if frame.msgid == mav.MAVLINK_MSG_ID_STATUSTEXT:
+                    for message in self.parser.parse_buffer(frame.data) or []:
+                        self.statustexts.append(message.text)
+            return frames
+
+    def _where(self) -> str:
+        return f"{self.address[0]}:{self.address[1]}"
+
+    def _silent(self, what: str) -> SimulatorError:
+        recent = "; ".join(list(self.statustexts)[-3:])
+        return SimulatorError(
+            f"no {what} from the simulator at {self._where()} within {self.timeout:g} s"
+            + (f" (it said: {recent})" if recent else "")
+        )
+
+    def _index(self, sysid: int) -> int:
+        """Vehicle index of a system id, or −1 for one this client does not fly."""
+        index = sysid - self.first
+        return index if 0 <= index < self.n else -1
+
+    # --- connecting -------------------------------------------------------------------
+    def connect(self) -> None:
+        """Introduce ourselves (the udpin link learns its peer) and wait until every
+        vehicle's heartbeat has been heard."""
+        heard: set[int] = set()
+        hello = self._encode(
+            self.mav.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        )
+        deadline = time.monotonic() + self.timeout
+        next_hello = 0.0
+        while len(heard) < self.n:
+            now = time.monotonic()
+            if now >= deadline:
+                missing = sorted(self.first + i for i in set(range(self.n)) - heard)
+                raise self._silent(f"heartbeat of system(s) {missing}")
+            if now >= next_hello:
+                self._send([hello])
+                next_hello = now + 0.2
+            for frame in self._receive(min(deadline, next_hello)):
+                if frame.msgid == mav.MAVLINK_MSG_ID_HEARTBEAT and self._index(frame.sysid) >= 0:
+                    heard.add(self._index(frame.sysid))
+
+    # --- rounds -----------------------------------------------------------------------
+    def step(self, controls: NDArray[np.float64]) -> WireState:
+        """One lockstep round: ``controls`` (n, 4) normalised rotor commands in [0, 1]
+        (vehicle i is system ``first + i``); the answer of every vehicle, one control
+        period later."""
+        stamp = self.time_usec
+        frames = [
+            self._actuator_frame(stamp, i, row)
+            for i, row in enumerate(np.asarray(controls, dtype=np.float64).tolist())
+        ]
+        groups = [[frame] for frame in frames]
+        self._exchange(groups, list(range(self.n)), lambda i, t: t > stamp, None, "state answer")
+        self.time_usec = int(self.answer.time_usec)
+        return self.answer
+
+    def reset(
+        self, rows: list[int], wire: WireState, velocity_ned: NDArray[np.float64]
+    ) -> WireState:
+        """Put vehicles ``rows`` in the states of ``wire`` ((len(rows), ·) arrays, local
+        NED, see docs/mavlink.md; ``velocity_ned`` (len(rows), 3) m/s) and arm them; the
+        answer of every vehicle."""
+        groups = []
+        for k, i in enumerate(rows):
+            motion = [*velocity_ned[k], *wire.rates_frd[k], float(wire.rotor_speeds[k, 0])]
+            pose = [*wire.position_ned[k], *wire.q_ned_frd[k]]
+            groups.append(
+                [
+                    self._command_frame(STAGE_MOTION, i, *motion),
+                    self._command_frame(RESET_STATE, i, *pose),
+                    self._command_frame(mav.MAV_CMD_COMPONENT_ARM_DISARM, i, 1, FORCE_MAGIC),
+                ]
+            )
+        acks: dict[int, set[int]] = {i: set() for i in rows}
+        # A state counts only once its reset is acknowledged (the state follows the ACK).
+        self._exchange(groups, rows, lambda i, t: RESET_STATE in acks[i], acks, "reset answer")
+        return self.answer
+
+    def _actuator_frame(self, stamp: int, i: int, row: list[float]) -> bytes:
+        controls = [*row, 0.0, 0.0, 0.0, 0.0]
+        if self.signing:
+            return self._encode(
+                self.mav.set_actuator_control_target_encode(stamp, 0, self.first + i, 1, controls)
+            )
+        self.seq = (self.seq + 1) & 0xFF
+        values = (stamp, *controls, 0, self.first + i, 1)
+        return FC.pack(SET_ACTUATOR_CONTROL_TARGET, values, self.seq, 255, 191)
+
+    def _exchange(
+        self,
+        groups: list[list[bytes]],
+        rows: list[int],
+        fresh: Any,
+        acks: dict[int, set[int]] | None,
+        what: str,
+    ) -> None:
+        """Send the frames of vehicles ``rows`` (``groups``, one list each); collect
+        answers until each of them has one (and, for a reset, its three ACKs), sending
+        again the frames of those still missing."""
+        answered = {i: False for i in rows}
+
+        def done(i: int) -> bool:
+            return answered[i] and (acks is None or len(acks[i]) == RESET_COMMANDS)
+
+        self._send([f for group in groups for f in group])
+        # Silence is measured from the last progress (an answer completed): heartbeats
+        # or refusals alone do not keep a stuck round alive.
+        progress = sent_at = time.monotonic()
+        parts: dict[int, dict[str, Any]] = {}
+        while not all(done(i) for i in rows):
+            now = time.monotonic()
+            if now - progress > self.timeout:
+                raise self._silent(what)
+            if now - sent_at > self.resend_after:
+                self.resent += 1
+                self._send([f for i, g in zip(rows, groups, strict=True) if not done(i) for f in g])
+                sent_at = now
+            until = min(sent_at + self.resend_after, progress + self.timeout)
+            for frame in self._receive(until):
+                i = self._index(frame.sysid)
+                if i in answered and self._take(i, frame, fresh, parts, acks):
+                    answered[i] = True
+                    progress = time.monotonic()
+
+    def _take(
+        self,
+        i: int,
+        frame: FC.Frame,
+        fresh: Any,
+        parts: dict[int, dict[str, Any]],
+        acks: dict[int, set[int]] | None,
+    ) -> bool:
+        """Use one frame of vehicle i's answer; True when it completes a fresh answer."""
+        msgid = frame.msgid
+        if msgid == ACTUATOR_OUTPUT_STATUS:
+            values = frame.unpack()
+            parts.setdefault(i, {})["rotors"] = (values[0], values[2 : 2 + L.N_ROTORS])
+        elif msgid == NAMED_VALUE_INT:
+            _, value, name = frame.unpack()
+            if name.rstrip(b"\0") == b"CONTACT":
+                parts.setdefault(i, {})["contact"] = value
+        elif msgid == NAMED_VALUE_FLOAT:
+            _, value, name = frame.unpack()
+            if name.rstrip(b"\0") == b"TD_SPEED":
+                parts.setdefault(i, {})["touchdown"] = value
+        elif msgid == COMMAND_ACK and acks is not None:
+            command, result = frame.unpack()[:2]
+            if result != mav.MAV_RESULT_ACCEPTED:
+                text = self.statustexts[-1] if self.statustexts else "no reason given"
+                raise SimulatorError(
+                    f"system {frame.sysid} refused command {command} (MAV_RESULT {result}): {text}"
+                )
+            acks[i].add(command)
+        elif msgid == ODOMETRY:
+            values = frame.unpack()
+            got = parts.pop(i, {})
+            rotors = got.get("rotors")
+            if not fresh(i, values[0]) or rotors is None or rotors[0] != values[0]:
+                self.late += 1
+                return False
+            self._store(i, values, rotors[1], got)
+            return True
+        return False
+
+    def _store(self, i: int, odometry: tuple[Any, ...], rotors: Any, got: dict[str, Any]) -> None:
+        a = self.answer
+        a.time_usec = odometry[0]
+        a.position_ned[i] = odometry[1:4]
+        a.q_ned_frd[i] = odometry[4:8]
+        a.velocity_frd[i] = odometry[8:11]
+        a.rates_frd[i] = odometry[11:14]
+        a.rotor_speeds[i] = rotors
+        a.contact[i] = got.get("contact", L.AIRBORNE)
+        a.touchdown_speed[i] = got.get("touchdown", 0.0)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class _Sink:
+    def __init__(self, frames: list[bytes]) -> None:
+        self.frames = frames
+
+    def write(self, data: bytes) -> None:
+        self.frames.append(bytes(data))
+
+
+def _empty_answer(n: int) -> WireState:
+    return WireState(
+        time_usec=0,
+        position_ned=np.zeros((n, 3)),
+        q_ned_frd=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
+        velocity_frd=np.zeros((n, 3)),
+        rates_frd=np.zeros((n, 3)),
+        rotor_speeds=np.zeros((n, L.N_ROTORS)),
+        contact=np.zeros(n, np.int64),  # type: ignore[arg-type]
+        touchdown_speed=np.zeros(n),  # type: ignore[arg-type]
+    )

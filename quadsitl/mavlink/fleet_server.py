@@ -1,0 +1,284 @@
+"""The MAVLink face of a group of vehicles: one server per vehicle on shared links, and
+lockstep rounds that step them all at once.
+
+Every link carries every vehicle: each sends its own heartbeat and telemetry with its own
+system id (``--sysid`` … ``--sysid + N − 1``), and a message reaches the vehicle its
+``target_system`` names (0: all of them). A message for a system id this process does
+not host is counted and refused once in a while with a STATUSTEXT; it never holds up the
+others.
+
+Lockstep rounds (docs/mavlink.md, "A fleet in lockstep"): SET_ACTUATOR_CONTROL_TARGET
+addressed to each vehicle, stamped with the simulated time the round starts at. When
+every vehicle has its command for the round, the group advances one control period in
+one call of the physics and every vehicle's answer goes back together, in as few
+datagrams as fit. A repeat of the last round's command (the client lost the answer) is
+answered from the cache, without stepping again; a command stamped with any other time
+is refused, and answered with the vehicle's current state so the client can see where
+the simulator is.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from quadsitl.mavlink import fast_codec as FC
+from quadsitl.mavlink import mavlink as mav
+from quadsitl.mavlink.hil_state import WireState
+from quadsitl.mavlink.links import Link
+from quadsitl.mavlink.motor_path import NAN_COVARIANCE, check_controls
+from quadsitl.mavlink.server import MOTOR_LINK, MavlinkServer
+from quadsitl.mavlink.tlog import TlogWriter
+from quadsitl.physics import layout as L
+from quadsitl.vehicle.group import VehicleGroup
+from quadsitl.vehicle.results import Severity
+
+MAX_DATAGRAM = 60_000  # bytes of answers per datagram (UDP's limit is 65,507)
+FAST_IDS = frozenset({mav.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET})
+TICKS_PER_CALL = 8  # vehicles whose telemetry is looked at per tick in lockstep
+_encoder = mav.MAVLink(None)
+
+
+class FleetServer:
+    """Routes each link's messages to the vehicles' servers; runs lockstep rounds."""
+
+    def __init__(
+        self, group: VehicleGroup, servers: list[MavlinkServer], tlog: TlogWriter | None
+    ) -> None:
+        self.group, self.servers, self.tlog = group, servers, tlog
+        self.by_system = {server.system_id: i for i, server in enumerate(servers)}
+        self.pending: dict[int, list[float]] = {}  # vehicle index: controls of this round
+        self.previous_round: int | None = None  # µs, start of the last round stepped
+        self.cached: list[list[bytes]] = [[] for _ in servers]  # its answers
+        self.counters = {"unknown_system": 0, "duplicates": 0, "rounds": 0}
+        self._next_tick = 0
+
+    # --- the loop's hooks -------------------------------------------------------------
+    def receive(self, link: Link, received_at: float | None = None) -> None:
+        """Dispatch what arrived on ``link``; step a round once it is complete."""
+        replies: list[bytes] = []
+        signing = any(server.signing is not None for server in self.servers)
+        fast = FAST_IDS if link.name == MOTOR_LINK and not signing else frozenset()
+        for message, _peer in link.receive(fast):
+            if isinstance(message, FC.Frame):  # an unsigned round command, parsed fast
+                # time_usec, controls[8], group_mlx, target_system, target_component
+                values = message.unpack()
+                self._round_command(values[10], values[0], values[1:5], link, replies)
+                continue
+            if self.tlog is not None and link.name != MOTOR_LINK:
+                self.tlog.record(bytes(message.get_msgbuf()), received_at)
+            kind = message.get_type()
+            if kind == "SET_ACTUATOR_CONTROL_TARGET":
+                self._round_command(
+                    message.target_system,
+                    message.time_usec,
+                    message.controls[:4],
+                    link,
+                    replies,
+                    message,
+                )
+            elif kind == "HIL_ACTUATOR_CONTROLS" and len(self.servers) > 1:
+                self._refuse_unaddressed()
+            else:
+                self._dispatch(message, link)
+        if self.pending and len(self.pending) == len(self.servers):
+            replies += self._run_round(link)
+        self._send(replies, link)
+
+    def tick(self, wall_now: float) -> None:
+        """Every vehicle's events, heartbeat and telemetry; in lockstep (ticked every
+        few milliseconds of wall time) a few vehicles per call in turn, so that a large
+        fleet's telemetry cannot slow the rounds down."""
+        if not self.lockstep or len(self.servers) <= TICKS_PER_CALL:
+            for server in self.servers:
+                server.tick(wall_now)
+            return
+        for _ in range(TICKS_PER_CALL):
+            self.servers[self._next_tick].tick(wall_now)
+            self._next_tick = (self._next_tick + 1) % len(self.servers)
+
+    @property
+    def lockstep(self) -> bool:
+        """True while simulated time moves only with motor commands (any vehicle's)."""
+        return any(server.motors.lockstep for server in self.servers)
+
+    @property
+    def last_lockstep_wall(self) -> float:
+        return max(server.motors.last_lockstep_wall for server in self.servers)
+
+    def statustext(self, severity: int, text: str) -> None:
+        """From every vehicle (e.g. the log stopped: it concerns them all)."""
+        for server in self.servers:
+            server.statustext(severity, text)
+
+    # --- routing ----------------------------------------------------------------------
+    def _dispatch(self, message: Any, link: Link) -> None:
+        target = getattr(message, "target_system", 0)
+        if target == 0:
+            for server in self.servers:
+                server.dispatch(message, link)
+            return
+        index = self.by_system.get(target)
+        if index is None:
+            self._unknown(target)
+            return
+        self.servers[index].dispatch(message, link)
+
+    def _unknown(self, system_id: int) -> None:
+        self.counters["unknown_system"] += 1
+        if self.counters["unknown_system"] % 100 == 1:
+            first, last = min(self.by_system), max(self.by_system)
+            self.servers[0].statustext(
+                Severity.WARNING,
+                f"message for system {system_id} refused: this simulator hosts {first}..{last}",
+            )
+
+    def _refuse_unaddressed(self) -> None:
+        problem = self.servers[0].motors.reject(
+            "unaddressed",
+            f"HIL_ACTUATOR_CONTROLS refused: {len(self.servers)} vehicles here; address "
+            "each with SET_ACTUATOR_CONTROL_TARGET",
+        )
+        if problem is not None:
+            self.servers[0].statustext(Severity.WARNING, problem)
+
+    # --- lockstep rounds --------------------------------------------------------------
+    def _round_command(
+        self,
+        target: int,
+        stamp: int,
+        controls: Any,
+        link: Link,
+        replies: list[bytes],
+        signed: Any = None,
+    ) -> None:
+        """One vehicle's command of a round (``signed``: the pymavlink message, whose
+        signature is checked when signing is on)."""
+        index = self.by_system.get(target)
+        if index is None:
+            self._unknown(target)
+            return
+        server = self.servers[index]
+        if server.signing is not None and (signed is None or server.signing.verdict(signed)):
+            return
+        now = self.round_start
+        if stamp == self.previous_round and stamp != now:
+            self.counters["duplicates"] += 1  # its answer was lost: the same answer again
+            replies += self.cached[index]
+            return
+        controls = list(controls)
+        problem = check_controls(controls)
+        if problem is None and stamp != now:
+            problem = (
+                "wrong_round",
+                f"motor command refused: stamped {stamp} µs, the round starts at {now} µs",
+            )
+        if problem is not None:
+            reason = server.motors.reject(*problem)
+            if reason is not None:
+                server.statustext(Severity.WARNING, reason)
+            replies += self._answers(link, [index])
+            return
+        self.pending[index] = controls
+
+    @property
+    def round_start(self) -> int:
+        """µs: the simulated time of the group's vehicles (they share a clock)."""
+        return round(self.group.vehicles[0].time * 1e6)
+
+    def _run_round(self, link: Link) -> list[bytes]:
+        started = self.round_start
+        wall = time.monotonic()
+        for index, controls in self.pending.items():
+            motors = self.servers[index].motors
+            warning = motors.apply(controls)
+            motors.last_lockstep_wall = wall
+            if warning is not None:
+                self.servers[index].statustext(Severity.WARNING, warning)
+        self.pending.clear()
+        self.group.advance()
+        self.previous_round = started
+        self.counters["rounds"] += 1
+        return self._answers(link, list(range(len(self.servers))))
+
+    def _answers(self, link: Link, rows: list[int]) -> list[bytes]:
+        """The state answers of vehicles ``rows`` (cached as their last answer)."""
+        physics = self.group.physics
+        vehicle = self.group.vehicles[0]
+        time_usec = round(vehicle.time * 1e6)
+        wire = WireState.from_physics(
+            physics.state[rows],
+            vehicle.airframe.gear_height,
+            time_usec,
+            physics.contact[rows],
+            physics.touchdown_speed[rows],
+        )
+        out: list[bytes] = []
+        for k, i in enumerate(rows):
+            frames = self._answer_frames(link, i, wire, k, time_usec)
+            self.cached[i] = frames
+            out += frames
+        return out
+
+    def _answer_frames(
+        self, link: Link, i: int, wire: WireState, k: int, time_usec: int
+    ) -> list[bytes]:
+        server = self.servers[i]
+        sysid = server.system_id
+        contact = int(wire.contact[k])
+        time_ms = (time_usec // 1000) & 0xFFFFFFFF
+        p, q = wire.position_ned[k].tolist(), wire.q_ned_frd[k].tolist()
+        v, r = wire.velocity_frd[k].tolist(), wire.rates_frd[k].tolist()
+        rotors = wire.rotor_speeds[k].tolist()
+        parts: list[tuple[Any, tuple[Any, ...]]] = [
+            (
+                mav.MAVLink_actuator_output_status_message,
+                (time_usec, 0b1111, *rotors, *([0.0] * 28)),
+            ),
+            (mav.MAVLink_named_value_int_message, (time_ms, contact, b"CONTACT")),
+        ]
+        if contact != L.AIRBORNE:
+            touchdown = float(wire.touchdown_speed[k])
+            parts.append((mav.MAVLink_named_value_float_message, (time_ms, touchdown, b"TD_SPEED")))
+        parts.append(
+            (
+                mav.MAVLink_odometry_message,
+                (
+                    time_usec,
+                    *p,
+                    *q,
+                    *v,
+                    *r,
+                    *NAN_COVARIANCE,
+                    *NAN_COVARIANCE,
+                    mav.MAV_FRAME_LOCAL_NED,
+                    mav.MAV_FRAME_BODY_FRD,
+                    server.motors.resets & 0xFF,
+                    mav.MAV_ESTIMATOR_TYPE_UNKNOWN,
+                    100,
+                ),
+            )
+        )
+        if link.signs:  # pymavlink signs; the rest is packed here
+            return [link.pack(_decoded(cls, values), sysid) for cls, values in parts]
+        return [
+            FC.pack(cls, values, link.next_seq(sysid), sysid, server.component_id)
+            for cls, values in parts
+        ]
+
+    def _send(self, frames: list[bytes], link: Link) -> None:
+        chunk: list[bytes] = []
+        size = 0
+        for frame in frames:
+            if chunk and size + len(frame) > MAX_DATAGRAM:
+                link.send_bytes(b"".join(chunk))
+                chunk, size = [], 0
+            chunk.append(frame)
+            size += len(frame)
+        if chunk:
+            link.send_bytes(b"".join(chunk))
+
+
+def _decoded(cls: Any, values: tuple[Any, ...]) -> Any:
+    """The pymavlink message of ``cls`` with wire-ordered ``values`` (to be signed)."""
+    return _encoder.decode(FC.pack(cls, values, 0, 1, 1))
