@@ -218,6 +218,50 @@ def test_native_vector_env_over_two_simulators_matches_in_process():
         remote.close()
 
 
+@pytest.mark.parametrize(
+    ("task", "fleet"),
+    [("Land", {"vehicles_per_sim": 3}), ("TargetFollow", {"simulators": 2})],
+)
+def test_fleets_in_one_process_match_in_process_through_autoresets(task, fleet):
+    """Five envs as a fleet of 3 + 2 vehicles (or 3 + 2 over two processes): the same
+    observations, rewards and endings as in-process, through episode ends."""
+    kwargs = {"init_position_noise": 0.3, "init_attitude_noise": 0.1}
+    env_id = f"QuadSITL/{task}-v0"
+    local = gym.make_vec(env_id, 5, "vector_entry_point", **kwargs)
+    remote = gym.make_vec(env_id, 5, "vector_entry_point", backend="mavlink", **fleet, **kwargs)
+    try:
+        assert remote.unwrapped.backend.sizes == [3, 2]
+        assert len(remote.unwrapped.backend.processes) == 2
+        a, _ = local.reset(seed=11)
+        b, _ = remote.reset(seed=11)
+        np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
+        rng = np.random.default_rng(3)
+        ended = 0
+        for _ in range(150):
+            actions = rng.normal(0, 0.3, (5, 4)).astype(np.float32)
+            a, ra, ta, ua, _ = local.step(actions)
+            b, rb, tb, ub, _ = remote.step(actions)
+            np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
+            np.testing.assert_allclose(rb, ra, atol=REWARD_TOLERANCE)
+            assert (ta == tb).all() and (ua == ub).all()
+            ended += int((ta | ua).sum())
+        assert ended >= 5  # the comparison went through autoresets
+    finally:
+        local.close()
+        remote.close()
+
+
+def test_fleet_options_are_checked():
+    for bad, match in (
+        ({"vehicles_per_sim": 0}, "vehicles_per_sim must be a positive integer"),
+        ({"simulators": 9}, "9 simulators for 4 envs"),
+        ({"simulators": 2, "vehicles_per_sim": 2}, "not both"),
+        ({"system_id": 252, "vehicles_per_sim": 4}, "must lie in 1..254"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            gym.make_vec("QuadSITL/Hover-v0", 4, "vector_entry_point", backend="mavlink", **bad)
+
+
 def test_backend_options_are_checked():
     with pytest.raises(ValueError, match="unknown backend"):
         gym.make("QuadSITL/Hover-v0", backend="gazebo")

@@ -17,8 +17,9 @@ from typing import Any
 
 from quadsitl.envs.remote_fleet import RemoteFleet
 from quadsitl.envs.sim_process import SimProcess
+from quadsitl.mavlink.fleet_client import FleetClient
 from quadsitl.mavlink.links import parse_url
-from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
+from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.mavlink.signing import checked_key
 from quadsitl.physics import AIRFRAMES, get_airframe
 from quadsitl.tasks import TaskEngine, TaskOptions, TaskSpec
@@ -28,7 +29,15 @@ MAX_TIMEOUT = 3600.0  # s: longer than this, a stuck simulator looks like a hang
 SIM_PROCESS_BYTES = 200 * 2**20  # memory of one `quadsitl sim` process, measured
 MAX_SIMULATORS = 254  # one MAVLink system id each
 BACKENDS = ("inprocess", "mavlink")
-BACKEND_OPTIONS = ("sim_address", "gcs", "system_id", "timeout", "signing_key")
+BACKEND_OPTIONS = (
+    "sim_address",
+    "gcs",
+    "system_id",
+    "timeout",
+    "signing_key",
+    "vehicles_per_sim",
+    "simulators",
+)
 
 
 def reset_envs(engine: TaskEngine, backend: MavlinkBackend | None, mask: Any) -> None:
@@ -87,17 +96,39 @@ def max_spawned_simulators() -> int:
     return max(1, min(MAX_SIMULATORS, int(available // SIM_PROCESS_BYTES)))
 
 
+def fleet_sizes(n: int, vehicles_per_sim: Any, simulators: Any) -> list[int]:
+    """Vehicles of each simulator process: ``vehicles_per_sim`` each (the last one the
+    rest), or ``n`` spread over ``simulators`` processes."""
+    for name, value in (("vehicles_per_sim", vehicles_per_sim), ("simulators", simulators)):
+        if value is not None and (
+            isinstance(value, bool) or not isinstance(value, int) or value < 1
+        ):
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    if vehicles_per_sim is not None and simulators is not None:
+        raise ValueError("give vehicles_per_sim or simulators, not both")
+    if simulators is not None:
+        if simulators > n:
+            raise ValueError(f"{simulators} simulators for {n} envs: at most one per env")
+        per = -(-n // simulators)
+    else:
+        per = vehicles_per_sim or 1
+    sizes = [per] * (n // per) + ([n % per] if n % per else [])
+    return sizes
+
+
 def _check_options(
-    n: int, sim_address: Any, gcs: Any, system_id: Any, timeout: Any, signing_key: Any
+    sizes: list[int], sim_address: Any, gcs: Any, system_id: Any, timeout: Any, signing_key: Any
 ) -> None:
     """A clear ValueError at construction for any option the backend cannot use."""
+    n = sum(sizes)
     if sim_address is None:
         limit = max_spawned_simulators()
-        if n > limit:
+        if len(sizes) > limit:
             raise ValueError(
-                f"{n} envs would start {n} simulator processes (about "
+                f"{n} envs would start {len(sizes)} simulator processes (about "
                 f"{SIM_PROCESS_BYTES // 2**20} MB each); this machine's free memory holds "
-                f"{limit}; use fewer envs or start simulators elsewhere (sim_address)"
+                f"{limit}; put more vehicles in each (vehicles_per_sim), use fewer envs or "
+                "start simulators elsewhere (sim_address)"
             )
     if (
         isinstance(timeout, bool)
@@ -107,7 +138,7 @@ def _check_options(
         raise ValueError(f"timeout must be in (0, {MAX_TIMEOUT:g}] s, got {timeout!r}")
     if isinstance(system_id, bool) or not isinstance(system_id, int):
         raise ValueError(f"system_id must be an integer, got {system_id!r}")
-    if not (system_id >= 1 and system_id + n - 1 <= 254):
+    if not (system_id >= 1 and system_id + n - 1 <= 254):  # unique across processes
         raise ValueError(f"system ids {system_id}..{system_id + n - 1} must lie in 1..254")
     if signing_key is not None:
         if not isinstance(signing_key, (bytes, bytearray)):
@@ -123,18 +154,22 @@ def _check_options(
 
 
 class MavlinkBackend:
-    """Runs each of a task's vehicles in its own ``quadsitl sim``; ``fleet`` is the
+    """Runs a task's vehicles in ``quadsitl sim`` processes, ``vehicles_per_sim`` in each
+    (one lockstep round trip per process steps all of them); ``fleet`` is the
     RemoteFleet the engine steps (it stays the same object across restarts).
 
     Args:
         task, n, options: the task, the number of vehicles, the task options.
-        sim_address: "HOST:PORT" of a running ``quadsitl sim --lockstep --hil udpin:...``,
-            one per vehicle (a list) or None: start one process per vehicle.
-        gcs: ground-station link URL of the spawned simulators (None: none); with
-            several, each gets it with its own system id.
-        system_id: MAVLink system id of the first spawned simulator (then +1 each).
-        timeout: seconds to wait for any answer before raising SimulatorError.
+        sim_address: "HOST:PORT" of a running ``quadsitl sim --lockstep --hil udpin:...``
+            for each simulator process (a list; one string for one process) or None:
+            start them here. A running one must host the vehicles this backend expects of
+            it: process k the system ids ``system_id + k·vehicles_per_sim`` onwards.
+        gcs: ground-station link URL of the spawned simulators (None: none).
+        system_id: MAVLink system id of the first vehicle (then +1 each).
+        timeout: seconds without progress before raising SimulatorError.
         signing_key: 32-byte MAVLink 2 key (the spawned simulators require it too).
+        vehicles_per_sim: vehicles in each simulator process (default 1).
+        simulators: instead, the number of simulator processes (vehicles spread evenly).
     """
 
     def __init__(
@@ -147,6 +182,8 @@ class MavlinkBackend:
         system_id: int = 1,
         timeout: float = 2.0,
         signing_key: bytes | None = None,
+        vehicles_per_sim: int | None = None,
+        simulators: int | None = None,
     ) -> None:
         if options.param_randomization:
             raise ValueError("param_randomization is not available with backend='mavlink'")
@@ -156,10 +193,15 @@ class MavlinkBackend:
                 f"backend='mavlink' needs a preset airframe ({sorted(AIRFRAMES)}), "
                 f"got a custom one named {airframe.name!r}"
             )
-        _check_options(n, sim_address, gcs, system_id, timeout, signing_key)
         addresses = [sim_address] if isinstance(sim_address, str) else sim_address
-        if addresses is not None and len(addresses) != n:
-            raise ValueError(f"got {len(addresses)} simulator addresses for {n} envs")
+        if addresses is not None and vehicles_per_sim is None and simulators is None:
+            simulators = len(addresses)  # one address per process
+        self.sizes = fleet_sizes(n, vehicles_per_sim, simulators)
+        _check_options(self.sizes, sim_address, gcs, system_id, timeout, signing_key)
+        if addresses is not None and len(addresses) != len(self.sizes):
+            raise ValueError(
+                f"got {len(addresses)} simulator addresses for {len(self.sizes)} simulators"
+            )
         self.n, self.options, self.airframe = n, options, airframe
         self.fleet = RemoteFleet(
             n, airframe, options.physics_dt, options.control_period, task.ground
@@ -169,8 +211,9 @@ class MavlinkBackend:
         self.signing_key = bytes(signing_key) if signing_key is not None else None
         self.gcs = gcs
         self.system_id = system_id
+        self.first_ids = [system_id + sum(self.sizes[:k]) for k in range(len(self.sizes))]
         self.processes: list[SimProcess] = []
-        self.clients: list[MotorClient] = []
+        self.clients: list[FleetClient] = []
         self._connect()
 
     def _sim_args(self, index: int) -> list[str]:
@@ -183,7 +226,9 @@ class MavlinkBackend:
             "--airframe",
             self.airframe.name,
             "--sysid",
-            str(self.system_id + index),
+            str(self.first_ids[index]),
+            "--vehicles",
+            str(self.sizes[index]),
             "--gcs",
             self.gcs or "none",
             "--api",
@@ -193,20 +238,25 @@ class MavlinkBackend:
     def _connect(self) -> None:
         if self.addresses is None:
             key = {"QUADSITL_SIGNING_KEY": self.signing_key.hex()} if self.signing_key else {}
-            self.processes = [SimProcess(self._sim_args(i), env=key) for i in range(self.n)]
+            self.processes = [
+                SimProcess(self._sim_args(i), env=key) for i in range(len(self.sizes))
+            ]
             addresses = [("127.0.0.1", p.port) for p in self.processes]
         else:
             addresses = self.addresses
         try:
-            for host, port in addresses:
-                self.clients.append(MotorClient(host, port, self.timeout, self.signing_key))
-                self._wait_for_heartbeat(len(self.clients) - 1)
+            for k, (host, port) in enumerate(addresses):
+                client = FleetClient(
+                    host, port, self.sizes[k], self.first_ids[k], self.timeout, self.signing_key
+                )
+                self.clients.append(client)
+                self._wait_for_heartbeats(k)
         except BaseException:
             self._release()
             raise
         self.fleet.connect(self.clients)
 
-    def _wait_for_heartbeat(self, index: int) -> None:
+    def _wait_for_heartbeats(self, index: int) -> None:
         process = self.processes[index] if self.processes else None
         deadline = time.monotonic() + (START_TIMEOUT if process else self.timeout)
         while True:

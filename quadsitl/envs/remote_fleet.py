@@ -1,11 +1,12 @@
-"""A fleet whose physics runs in simulator processes, one vehicle each, over MAVLink.
+"""A fleet whose physics runs in simulator processes over MAVLink, several vehicles each.
 
 :class:`RemoteFleet` holds the same arrays as :class:`~quadsitl.physics.Fleet`
 (:class:`~quadsitl.physics.fleet.VehicleStates`) and steps them over the wire, so the
-task code is the same for both backends: ``step`` sends every
-vehicle's rotor commands as a lockstep HIL_ACTUATOR_CONTROLS, then collects the state
-answers (the simulators work in parallel); ``reset`` sends the reset commands
-(docs/mavlink.md) and arms the vehicle.
+task code is the same for both backends: ``step`` sends one lockstep round to every
+simulator process (the commands of all its vehicles together), then collects their
+answers (the simulators work in parallel); ``reset`` sends the reset commands of the
+vehicles to reset (docs/mavlink.md) and arms them. Lost datagrams are resent by the
+:class:`~quadsitl.mavlink.fleet_client.FleetClient` of each process.
 
 Tasks without a ground fly ``FLYING_ALTITUDE`` metres up in the simulator (which has
 one), far enough that every task's bounds end an episode before the ground is near.
@@ -13,6 +14,7 @@ one), far enough that every task's bounds end an episode before the ground is ne
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -20,8 +22,9 @@ from gymnasium.error import ClosedEnvironmentError
 from numpy.typing import ArrayLike
 
 from quadsitl import frames
+from quadsitl.mavlink.fleet_client import FleetClient
 from quadsitl.mavlink.hil_state import WireState
-from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
+from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe
 from quadsitl.physics.fleet import VehicleStates
@@ -30,23 +33,27 @@ FLYING_ALTITUDE = 20.0  # m: where the task origin of tasks without a ground is 
 
 
 class RemoteFleet(VehicleStates):
-    """The states of ``n`` vehicles, stepped in their simulators, one per client (given
-    by :meth:`connect`). ``ground``: whether the task has the ground plane (landing),
-    else the task is flown at altitude."""
+    """The states of ``n`` vehicles, stepped in their simulators through the clients
+    given by :meth:`connect` (client k flies the next ``client.n`` vehicles).
+    ``ground``: whether the task has the ground plane (landing), else the task is flown
+    at altitude."""
 
     def __init__(self, n: int, airframe: Airframe, dt: float, period: float, ground: bool) -> None:
         super().__init__(n, airframe, dt=dt, ground_z=0.0 if ground else -math.inf)
-        self.clients: list[MotorClient] = []
+        self.clients: list[FleetClient] = []
+        self.rows: list[slice] = []  # the vehicles of each client
         self.period_usec = round(period * 1e6)
         self.gear = airframe.gear_height
         self.offset = np.array([0.0, 0.0, 0.0 if ground else FLYING_ALTITUDE])
         self.closed = False
 
-    def connect(self, clients: list[MotorClient]) -> None:
-        """Fly through these clients (new simulators after a restart), one per vehicle."""
-        if len(clients) != self.n:
-            raise ValueError(f"got {len(clients)} clients for {self.n} vehicles")
+    def connect(self, clients: list[FleetClient]) -> None:
+        """Fly through these clients (new simulators after a restart)."""
+        if sum(c.n for c in clients) != self.n:
+            raise ValueError(f"the clients fly {sum(c.n for c in clients)} vehicles, not {self.n}")
         self.clients = clients
+        starts = np.cumsum([0] + [c.n for c in clients])
+        self.rows = [slice(int(a), int(b)) for a, b in itertools.pairwise(starts)]
 
     def close(self) -> None:
         """After this, ``reset`` and ``step`` raise ClosedEnvironmentError."""
@@ -64,23 +71,18 @@ class RemoteFleet(VehicleStates):
     ) -> None:
         self.check_open()
         super().reset(state, contact, mask)  # checks the input, as the local fleet does
-        rows = range(self.n) if mask is None else np.flatnonzero(mask).tolist()
-        for i in rows:
-            s = self.state[i].copy()
-            s[L.POS] += self.offset
-            wire = WireState.from_physics(s, self.gear, 0, L.AIRBORNE, 0.0)
-            if np.ptp(s[L.ROTORS]) > 1e-9:
-                raise ValueError("the MAVLink reset sets all four rotors to one speed")
-            client = self.clients[i]
-            answer = client.reset(
-                wire.position_ned,
-                wire.q_ned_frd,
-                frames.enu_to_ned(s[L.VEL]),
-                wire.rates_frd,
-                float(s[L.I_ROTOR0]),
-            )
-            client.arm(force=True)
-            self._take(i, answer)
+        chosen = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
+        if np.ptp(self.state[chosen][:, L.ROTORS], axis=1).max(initial=0.0) > 1e-9:
+            raise ValueError("the MAVLink reset sets all four rotors to one speed")
+        for client, rows in zip(self.clients, self.rows, strict=True):
+            local = np.flatnonzero(chosen[rows])
+            if local.size == 0:
+                continue
+            states = self.state[rows][local].copy()
+            states[:, L.POS] += self.offset
+            wire = WireState.from_physics(states, self.gear, 0, None, None)
+            answer = client.reset(local.tolist(), wire, frames.enu_to_ned(states[:, L.VEL]))
+            self._take(rows, answer, local)
 
     def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
         self.check_open()
@@ -88,24 +90,36 @@ class RemoteFleet(VehicleStates):
         if not np.isfinite(cmd).all():
             raise ValueError(f"rotor commands must be finite, got {cmd}")
         controls = np.clip(cmd / self.max_rotor_speed[:, None], 0.0, 1.0)
-        before = [c.state.time_usec if c.state is not None else None for c in self.clients]
-        for client, row in zip(self.clients, controls, strict=True):
-            client.send_controls(row)
-        for i, client in enumerate(self.clients):
-            answer = client.receive_state()
-            start = before[i]
-            if start is not None and answer.time_usec - start != self.period_usec:
+        before = [client.time_usec for client in self.clients]
+        for client, rows in zip(self.clients, self.rows, strict=True):
+            client.send_step(controls[rows])
+        for client, rows, start in zip(self.clients, self.rows, before, strict=True):
+            answer = client.receive_step()
+            if answer.time_usec - start != self.period_usec:
                 raise SimulatorError(
                     f"the simulator advanced {answer.time_usec - start} µs for one "
                     f"command; the task needs {self.period_usec} µs (start it with --lockstep "
                     f"--physics-rate {1 / self.dt:g} --control-rate {1e6 / self.period_usec:g})"
                 )
-            self._take(i, answer)
+            self._take(rows, answer)
         self.time += n_substeps * self.dt
 
-    def _take(self, i: int, answer: WireState) -> None:
-        state = answer.to_physics(self.gear)
-        state[L.POS] -= self.offset
-        self.state[i] = state
-        self.contact[i] = answer.contact
-        self.touchdown_speed[i] = answer.touchdown_speed
+    def _take(self, rows: slice, answer: WireState, local: np.ndarray | None = None) -> None:
+        """The physics state of the answered vehicles (``local``: of these only)."""
+        pick = slice(None) if local is None else local
+        wire = WireState(
+            time_usec=answer.time_usec,
+            position_ned=answer.position_ned[pick],
+            q_ned_frd=answer.q_ned_frd[pick],
+            velocity_frd=answer.velocity_frd[pick],
+            rates_frd=answer.rates_frd[pick],
+            rotor_speeds=answer.rotor_speeds[pick],
+            contact=answer.contact[pick],
+            touchdown_speed=answer.touchdown_speed[pick],
+        )
+        states = wire.to_physics(self.gear)
+        states[:, L.POS] -= self.offset
+        target = np.arange(self.n)[rows][pick]
+        self.state[target] = states
+        self.contact[target] = wire.contact
+        self.touchdown_speed[target] = wire.touchdown_speed

@@ -46,6 +46,7 @@ COMMAND_ACK = mav.MAVLINK_MSG_ID_COMMAND_ACK
 SET_ACTUATOR_CONTROL_TARGET = mav.MAVLink_set_actuator_control_target_message
 MAX_DATAGRAM = 65535
 RESET_COMMANDS = 3  # stage motion, reset, arm
+STATUSTEXT_CHUNK = 50  # bytes of text per STATUSTEXT
 
 
 class FleetClient:
@@ -81,14 +82,15 @@ class FleetClient:
         self.signing = signing_key is not None
         if signing_key is not None:
             sign_outgoing(self.mav, signing_key, link_id=0)
-        self.parser = mav.MAVLink(None)
-        self.parser.robust_parsing = True
         self.seq = 0
         self.time_usec = 0
         self.answer = _empty_answer(n)
         self.statustexts: deque[str] = deque(maxlen=100)
         self.resent = 0
         self.late = 0
+        self._round: list[list[bytes]] = []
+        self._chunks: tuple[int, bytes] = (0, b"")  # a long STATUSTEXT being put together
+        self._sent_at = 0.0
 
     # --- plumbing ---------------------------------------------------------------------
     def _command_frame(self, command: int, index: int, *params: float) -> bytes:
@@ -133,9 +135,21 @@ class FleetClient:
             frames = list(FC.parse(data))
             for frame in frames:
                 if frame.msgid == mav.MAVLINK_MSG_ID_STATUSTEXT:
-                    for message in self.parser.parse_buffer(frame.data) or []:
-                        self.statustexts.append(message.text)
+                    self._statustext(*frame.unpack()[1:])
             return frames
+
+    def _statustext(self, chunk: bytes, text_id: int, seq: int) -> None:
+        """Keep the simulator's texts, long ones put together from their chunks."""
+        data = chunk.rstrip(b"\0")
+        if text_id == 0:
+            self.statustexts.append(data.decode("utf-8", "replace"))
+            return
+        if seq == 0 or self._chunks[0] != text_id:
+            self._chunks = (text_id, b"")
+        self._chunks = (text_id, self._chunks[1] + data)
+        if len(data) < STATUSTEXT_CHUNK:  # the last chunk
+            self.statustexts.append(self._chunks[1].decode("utf-8", "replace"))
+            self._chunks = (0, b"")
 
     def _where(self) -> str:
         return f"{self.address[0]}:{self.address[1]}"
@@ -179,13 +193,24 @@ class FleetClient:
         """One lockstep round: ``controls`` (n, 4) normalised rotor commands in [0, 1]
         (vehicle i is system ``first + i``); the answer of every vehicle, one control
         period later."""
+        self.send_step(controls)
+        return self.receive_step()
+
+    def send_step(self, controls: NDArray[np.float64]) -> None:
+        """The first half of :meth:`step` (to drive several simulators at once)."""
         stamp = self.time_usec
-        frames = [
-            self._actuator_frame(stamp, i, row)
+        self._round = [
+            [self._actuator_frame(stamp, i, row)]
             for i, row in enumerate(np.asarray(controls, dtype=np.float64).tolist())
         ]
-        groups = [[frame] for frame in frames]
-        self._exchange(groups, list(range(self.n)), lambda i, t: t > stamp, None, "state answer")
+        self._send([group[0] for group in self._round])
+        self._sent_at = time.monotonic()
+
+    def receive_step(self) -> WireState:
+        """The second half of :meth:`step`: the answers, resending what goes missing."""
+        stamp = self.time_usec
+        rows = list(range(self.n))
+        self._collect(self._round, rows, lambda i, t: t > stamp, None, "state answer")
         self.time_usec = int(self.answer.time_usec)
         return self.answer
 
@@ -207,8 +232,10 @@ class FleetClient:
                 ]
             )
         acks: dict[int, set[int]] = {i: set() for i in rows}
+        self._send([f for group in groups for f in group])
+        self._sent_at = time.monotonic()
         # A state counts only once its reset is acknowledged (the state follows the ACK).
-        self._exchange(groups, rows, lambda i, t: RESET_STATE in acks[i], acks, "reset answer")
+        self._collect(groups, rows, lambda i, t: RESET_STATE in acks[i], acks, "reset answer")
         return self.answer
 
     def _actuator_frame(self, stamp: int, i: int, row: list[float]) -> bytes:
@@ -221,7 +248,7 @@ class FleetClient:
         values = (stamp, *controls, 0, self.first + i, 1)
         return FC.pack(SET_ACTUATOR_CONTROL_TARGET, values, self.seq, 255, 191)
 
-    def _exchange(
+    def _collect(
         self,
         groups: list[list[bytes]],
         rows: list[int],
@@ -229,18 +256,17 @@ class FleetClient:
         acks: dict[int, set[int]] | None,
         what: str,
     ) -> None:
-        """Send the frames of vehicles ``rows`` (``groups``, one list each); collect
-        answers until each of them has one (and, for a reset, its three ACKs), sending
-        again the frames of those still missing."""
+        """Collect answers to the frames just sent (``groups``, one list per vehicle of
+        ``rows``) until each vehicle has one (and, for a reset, its three ACKs), sending
+        again the frames of those still missing after ``resend_after``."""
         answered = {i: False for i in rows}
 
         def done(i: int) -> bool:
             return answered[i] and (acks is None or len(acks[i]) == RESET_COMMANDS)
 
-        self._send([f for group in groups for f in group])
         # Silence is measured from the last progress (an answer completed): heartbeats
         # or refusals alone do not keep a stuck round alive.
-        progress = sent_at = time.monotonic()
+        progress = sent_at = self._sent_at
         parts: dict[int, dict[str, Any]] = {}
         while not all(done(i) for i in rows):
             now = time.monotonic()
