@@ -8,9 +8,10 @@ datagram (or a few, for large fleets) holding each vehicle's ACTUATOR_OUTPUT_STA
 NAMED_VALUE_INT ``CONTACT``, NAMED_VALUE_FLOAT ``TD_SPEED`` (on the ground only) and
 ODOMETRY, stamped with the time after the step. An answer is matched to its round by
 that time, so a late one is never taken for the next. A lost command or a lost answer:
-the commands of the vehicles still unanswered are sent again, unchanged, after
-``resend_after`` seconds; the simulator steps a round once and answers a repeat from
-its cache. :class:`SimulatorError` only when nothing comes back for ``timeout`` seconds.
+the commands of the vehicles still unanswered are sent again, unchanged, after four
+usual round trips (at least 2 ms, at most ``resend_after``); the simulator steps a round
+once and answers a repeat from its cache. :class:`SimulatorError` only when no answer
+comes back for ``timeout`` seconds.
 
 Resets are batched the same way: the two reset commands and the arming command of every
 vehicle to reset in one datagram, resent for the vehicles whose answers are missing.
@@ -18,6 +19,7 @@ vehicle to reset in one datagram, resent for the vehicles whose answers are miss
 
 from __future__ import annotations
 
+import math
 import select
 import socket
 import time
@@ -37,7 +39,8 @@ from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_MOTION
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
 
-RESEND_AFTER = 0.02  # s without a complete answer before the missing commands go again
+RESEND_AFTER = 0.05  # s: the longest wait for an answer before the commands go again
+MIN_RESEND_AFTER = 0.002  # s: the shortest; in between, 4 times the usual round trip
 ODOMETRY = mav.MAVLINK_MSG_ID_ODOMETRY
 ACTUATOR_OUTPUT_STATUS = mav.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS
 NAMED_VALUE_INT = mav.MAVLINK_MSG_ID_NAMED_VALUE_INT
@@ -89,8 +92,10 @@ class FleetClient:
         self.resent = 0
         self.late = 0
         self._round: list[list[bytes]] = []
+        self._rows: list[Any] = [None] * n  # each vehicle's answer of the current exchange
         self._chunks: tuple[int, bytes] = (0, b"")  # a long STATUSTEXT being put together
         self._sent_at = 0.0
+        self.round_trip = math.nan  # s, running mean of rounds answered without a resend
 
     # --- plumbing ---------------------------------------------------------------------
     def _command_frame(self, command: int, index: int, *params: float) -> bytes:
@@ -187,6 +192,16 @@ class FleetClient:
             for frame in self._receive(min(deadline, next_hello)):
                 if frame.msgid == mav.MAVLINK_MSG_ID_HEARTBEAT and self._index(frame.sysid) >= 0:
                     heard.add(self._index(frame.sysid))
+        # Answers to resets without HIL_STATE_QUATERNION (this client reads ODOMETRY).
+        rows = list(range(self.n))
+        leave_out = (mav.MAVLINK_MSG_ID_HIL_STATE_QUATERNION, -1)
+        groups = [
+            [self._command_frame(mav.MAV_CMD_SET_MESSAGE_INTERVAL, i, *leave_out)] for i in rows
+        ]
+        self._send([group[0] for group in groups])
+        self._sent_at = time.monotonic()
+        acks: dict[int, set[int]] = {i: set() for i in rows}
+        self._collect(groups, rows, lambda i, t: False, acks, "acknowledgement", 1, state=False)
 
     # --- rounds -----------------------------------------------------------------------
     def step(self, controls: NDArray[np.float64]) -> WireState:
@@ -255,33 +270,49 @@ class FleetClient:
         fresh: Any,
         acks: dict[int, set[int]] | None,
         what: str,
+        needed: int = RESET_COMMANDS,
+        state: bool = True,
     ) -> None:
         """Collect answers to the frames just sent (``groups``, one list per vehicle of
-        ``rows``) until each vehicle has one (and, for a reset, its three ACKs), sending
+        ``rows``) until each vehicle has one (and ``needed`` ACKs, with ``acks``), sending
         again the frames of those still missing after ``resend_after``."""
-        answered = {i: False for i in rows}
+        answered = {i: not state for i in rows}  # ``state`` False: the ACKs are all
 
         def done(i: int) -> bool:
-            return answered[i] and (acks is None or len(acks[i]) == RESET_COMMANDS)
+            return answered[i] and (acks is None or len(acks[i]) == needed)
 
         # Silence is measured from the last progress (an answer completed): heartbeats
         # or refusals alone do not keep a stuck round alive.
         progress = sent_at = self._sent_at
+        wait = self._resend_wait()
+        resent = False
         parts: dict[int, dict[str, Any]] = {}
         while not all(done(i) for i in rows):
             now = time.monotonic()
             if now - progress > self.timeout:
                 raise self._silent(what)
-            if now - sent_at > self.resend_after:
+            if now - sent_at > wait:
                 self.resent += 1
+                resent = True
                 self._send([f for i, g in zip(rows, groups, strict=True) if not done(i) for f in g])
                 sent_at = now
-            until = min(sent_at + self.resend_after, progress + self.timeout)
+                wait = min(2 * wait, self.resend_after)  # back off while nothing comes
+            until = min(sent_at + wait, progress + self.timeout)
             for frame in self._receive(until):
                 i = self._index(frame.sysid)
                 if i in answered and self._take(i, frame, fresh, parts, acks):
                     answered[i] = True
                     progress = time.monotonic()
+        self._store(rows)
+        if not resent and acks is None:
+            took = time.monotonic() - self._sent_at
+            mean = self.round_trip
+            self.round_trip = took if math.isnan(mean) else 0.9 * mean + 0.1 * took
+
+    def _resend_wait(self) -> float:
+        if math.isnan(self.round_trip):
+            return self.resend_after
+        return min(self.resend_after, max(MIN_RESEND_AFTER, 4 * self.round_trip))
 
     def _take(
         self,
@@ -291,19 +322,29 @@ class FleetClient:
         parts: dict[int, dict[str, Any]],
         acks: dict[int, set[int]] | None,
     ) -> bool:
-        """Use one frame of vehicle i's answer; True when it completes a fresh answer."""
+        """Use one frame of vehicle i's answer; True when it completes a fresh answer.
+        An answer is ACTUATOR_OUTPUT_STATUS, then (on the ground only) CONTACT and
+        TD_SPEED, then ODOMETRY, all with the same time, in one datagram."""
         msgid = frame.msgid
+        if msgid == ODOMETRY:
+            values = frame.unpack()
+            got = parts.pop(i, None)
+            if got is None or got["time"] != values[0] or not fresh(i, values[0]):
+                self.late += 1
+                return False
+            self._rows[i] = (values, got)
+            return True
         if msgid == ACTUATOR_OUTPUT_STATUS:
             values = frame.unpack()
-            parts.setdefault(i, {})["rotors"] = (values[0], values[2 : 2 + L.N_ROTORS])
-        elif msgid == NAMED_VALUE_INT:
+            parts[i] = {"time": values[0], "rotors": values[2 : 2 + L.N_ROTORS]}
+        elif msgid == NAMED_VALUE_INT and i in parts:
             _, value, name = frame.unpack()
             if name.rstrip(b"\0") == b"CONTACT":
-                parts.setdefault(i, {})["contact"] = value
-        elif msgid == NAMED_VALUE_FLOAT:
+                parts[i]["contact"] = value
+        elif msgid == NAMED_VALUE_FLOAT and i in parts:
             _, value, name = frame.unpack()
             if name.rstrip(b"\0") == b"TD_SPEED":
-                parts.setdefault(i, {})["touchdown"] = value
+                parts[i]["touchdown"] = value
         elif msgid == COMMAND_ACK and acks is not None:
             command, result = frame.unpack()[:2]
             if result != mav.MAV_RESULT_ACCEPTED:
@@ -312,27 +353,26 @@ class FleetClient:
                     f"system {frame.sysid} refused command {command} (MAV_RESULT {result}): {text}"
                 )
             acks[i].add(command)
-        elif msgid == ODOMETRY:
-            values = frame.unpack()
-            got = parts.pop(i, {})
-            rotors = got.get("rotors")
-            if not fresh(i, values[0]) or rotors is None or rotors[0] != values[0]:
-                self.late += 1
-                return False
-            self._store(i, values, rotors[1], got)
-            return True
         return False
 
-    def _store(self, i: int, odometry: tuple[Any, ...], rotors: Any, got: dict[str, Any]) -> None:
+    def _store(self, rows: list[int]) -> None:
+        """Move the answers of ``rows`` into :attr:`answer` (one array write per field)."""
+        taken = [(i, *self._rows[i]) for i in rows if self._rows[i] is not None]
+        if not taken:
+            return
+        index = [t[0] for t in taken]
+        odometry = np.array([t[1][:14] for t in taken])
         a = self.answer
-        a.time_usec = odometry[0]
-        a.position_ned[i] = odometry[1:4]
-        a.q_ned_frd[i] = odometry[4:8]
-        a.velocity_frd[i] = odometry[8:11]
-        a.rates_frd[i] = odometry[11:14]
-        a.rotor_speeds[i] = rotors
-        a.contact[i] = got.get("contact", L.AIRBORNE)
-        a.touchdown_speed[i] = got.get("touchdown", 0.0)
+        a.time_usec = int(odometry[-1, 0])
+        a.position_ned[index] = odometry[:, 1:4]
+        a.q_ned_frd[index] = odometry[:, 4:8]
+        a.velocity_frd[index] = odometry[:, 8:11]
+        a.rates_frd[index] = odometry[:, 11:14]
+        a.rotor_speeds[index] = [t[2]["rotors"] for t in taken]
+        a.contact[index] = [t[2].get("contact", L.AIRBORNE) for t in taken]
+        a.touchdown_speed[index] = [t[2].get("touchdown", 0.0) for t in taken]
+        for i in index:
+            self._rows[i] = None
 
     def close(self) -> None:
         self.sock.close()

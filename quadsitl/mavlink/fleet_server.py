@@ -35,6 +35,7 @@ from quadsitl.vehicle.results import Severity
 
 MAX_DATAGRAM = 60_000  # bytes of answers per datagram (UDP's limit is 65,507)
 FAST_IDS = frozenset({mav.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET})
+UNUSED = (0.0,) * 28  # ACTUATOR_OUTPUT_STATUS has 32 outputs; 4 are rotors
 TICKS_PER_CALL = 8  # vehicles whose telemetry is looked at per tick in lockstep
 _encoder = mav.MAVLink(None)
 
@@ -231,14 +232,11 @@ class FleetServer:
         v, r = wire.velocity_frd[k].tolist(), wire.rates_frd[k].tolist()
         rotors = wire.rotor_speeds[k].tolist()
         parts: list[tuple[Any, tuple[Any, ...]]] = [
-            (
-                mav.MAVLink_actuator_output_status_message,
-                (time_usec, 0b1111, *rotors, *([0.0] * 28)),
-            ),
-            (mav.MAVLink_named_value_int_message, (time_ms, contact, b"CONTACT")),
+            (mav.MAVLink_actuator_output_status_message, (time_usec, 0b1111, *rotors, *UNUSED)),
         ]
-        if contact != L.AIRBORNE:
+        if contact != L.AIRBORNE:  # no CONTACT means airborne: the answer stays lean
             touchdown = float(wire.touchdown_speed[k])
+            parts.append((mav.MAVLink_named_value_int_message, (time_ms, contact, b"CONTACT")))
             parts.append((mav.MAVLink_named_value_float_message, (time_ms, touchdown, b"TD_SPEED")))
         parts.append(
             (
@@ -260,13 +258,17 @@ class FleetServer:
             )
         )
         if link.signs:  # pymavlink signs; the rest is packed here
-            return [link.pack(_decoded(cls, values), sysid) for cls, values in parts]
+            return [b"".join(link.pack(_decoded(cls, values), sysid) for cls, values in parts)]
         return [
-            FC.pack(cls, values, link.next_seq(sysid), sysid, server.component_id)
-            for cls, values in parts
+            b"".join(
+                FC.pack(cls, values, link.next_seq(sysid), sysid, server.component_id)
+                for cls, values in parts
+            )
         ]
 
     def _send(self, frames: list[bytes], link: Link) -> None:
+        """In as few datagrams as fit; a vehicle's answer is never split (its frames are
+        joined before they come here)."""
         chunk: list[bytes] = []
         size = 0
         for frame in frames:
