@@ -98,6 +98,13 @@ class VehicleClient:
             self.home = msg
         return msg
 
+    def drain(self) -> None:
+        """File everything already received. A client that has not read for a while
+        calls this before a request: a full socket buffer (a few hundred datagrams, a
+        fraction of a second of a fleet's telemetry) would drop the answer."""
+        while self.conn.recv_match(blocking=False) is not None:
+            pass
+
     def wait(self, predicate: Callable[[], bool], timeout: float, what: str) -> None:
         deadline = time.monotonic() + timeout
         while not predicate():

@@ -130,8 +130,7 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         type=float,
         default=2.0,
         metavar="M",
-        help="metres between the vehicles' start positions, a grid east then north "
-        "(default: 2)",
+        help="metres between the vehicles' start positions, a grid east then north (default: 2)",
     )
     sim.add_argument(
         "--autopilot-id",

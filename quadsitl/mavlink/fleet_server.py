@@ -131,7 +131,7 @@ class FleetServer:
             first, last = min(self.by_system), max(self.by_system)
             self.servers[0].statustext(
                 Severity.WARNING,
-                f"message for system {system_id} refused: this simulator hosts {first}..{last}",
+                f"refused: no system {system_id} here ({first}..{last})",
             )
 
     def _refuse_unaddressed(self) -> None:

@@ -63,12 +63,16 @@ def param_name(raw: Any) -> str:
     return str(raw).split("\x00", 1)[0].strip()
 
 
+LIST_BURST = 10  # PARAM_VALUEs per tick while sending the list
+
+
 class ParamProtocol:
     def __init__(self, vehicle: Vehicle, encoder: Any, notify: Callable[[int, str], None]) -> None:
         self.vehicle = vehicle
         self.encoder = encoder
         self.notify = notify  # (severity, text) -> STATUSTEXT
         self.names = [spec.name for spec in PARAMETERS]
+        self.listing: list[tuple[str, Reply]] = []  # parameters still to send, paced
 
     def value_message(self, name: str) -> Any:
         raw, param_type = encode_value(self.vehicle.params[name], SPECS[name].integer)
@@ -77,8 +81,15 @@ class ParamProtocol:
         )
 
     def on_request_list(self, msg: Any, reply: Reply) -> None:
-        for name in self.names:
+        """Queue the whole list; :meth:`tick` sends it a few at a time (a burst of them
+        to every ground station of a fleet would overflow the socket's buffer)."""
+        self.listing += [(name, reply) for name in self.names]
+
+    def tick(self) -> None:
+        """Send the next few parameters of a requested list."""
+        for name, reply in self.listing[:LIST_BURST]:
             reply(self.value_message(name))
+        del self.listing[:LIST_BURST]
 
     def on_request_read(self, msg: Any, reply: Reply) -> None:
         if msg.param_index >= 0:

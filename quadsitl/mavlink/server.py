@@ -188,6 +188,7 @@ class MavlinkServer:
             self.last_mission_progress = progress  # is_mission_finished reads it
             self.send(T.build_mission_current(self.snapshot()))
         self.missions.tick(wall_now)
+        self.params.tick()
         if self.signing is not None and wall_now - self._signing_reported[0] > 1.0:
             self._report_signing(wall_now)
         wall_cap = wall_now if self.motors.lockstep else None

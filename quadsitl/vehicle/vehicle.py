@@ -21,6 +21,7 @@ from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import FleetSlot
 from quadsitl.vehicle import external_control as X
 from quadsitl.vehicle import failsafe as FS
+from quadsitl.vehicle import ground_contact as GC
 from quadsitl.vehicle import guidance as G
 from quadsitl.vehicle import mission as M
 from quadsitl.vehicle import param_binding as P
@@ -324,7 +325,7 @@ class Vehicle:
 
     def end_step(self, contact_before: int, seconds: float) -> None:
         """After the physics moved ``seconds``: touchdowns and crashes, battery."""
-        self.watch_contact(contact_before)
+        GC.watch_contact(self, contact_before)
         self.drain_battery(seconds)
 
     def drain_battery(self, seconds: float) -> None:
@@ -364,7 +365,7 @@ class Vehicle:
             self.event(Severity.WARNING, "offboard setpoints lost: holding position")
             self.enter_mode(Mode.LOITER)
         if self.on_ground and not self.crashed:
-            self._on_ground_timers()
+            GC.on_ground_timers(self)
         if self.mode is Mode.TAKEOFF and self.activity.done:
             self.event(Severity.INFO, "take-off complete: holding")
             self.enter_mode(Mode.LOITER)
@@ -372,43 +373,6 @@ class Vehicle:
             self.activity = self.rtl_stages.pop(0)
         elif self.mode is Mode.MISSION:
             self.missions.progress()
-
-    def _on_ground_timers(self) -> None:
-        landing = isinstance(self.activity, Land)
-        if landing and self.armed:
-            self.activity.done = True
-            if self.landed_at is None:
-                self.landed_at = self.time
-            if self.time - self.landed_at >= self.params["COM_DISARM_LAND"]:
-                self.disarm()
-                self.event(Severity.INFO, "landed: disarmed")
-                if self.mode is Mode.MISSION:
-                    self.missions.item_reached()
-                self.enter_mode(Mode.LOITER)
-            return
-        limit = self.params["COM_DISARM_PRFLT"]
-        if self.armed and limit > 0 and self.time - self.armed_at > limit and not self.flew:
-            self.disarm()
-            self.event(Severity.NOTICE, f"disarmed: no take-off within {limit:g} s")
-
-    def watch_contact(self, before: int) -> None:
-        after = int(self.fleet.contact[0])
-        if after == before:
-            return
-        if after == L.CRASHED:
-            self.armed = False
-            self.rotor_cmd[:] = 0.0
-            speed = float(self.fleet.touchdown_speed[0])
-            self.event(
-                Severity.CRITICAL, f"crashed (touchdown {speed:.1f} m/s): reboot to fly again"
-            )
-        elif after == L.ON_GROUND:
-            self.landed_at = self.time
-            self.event(Severity.INFO, "landed")
-        elif after == L.AIRBORNE:
-            self.flew = True
-            self.landed_at = None
-            self.event(Severity.INFO, "took off")
 
     # --- modes ------------------------------------------------------------------------
     def enter_mode(self, mode: Mode) -> None:

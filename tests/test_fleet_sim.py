@@ -1,0 +1,93 @@
+"""``quadsitl sim --vehicles N``: N complete MAVLink vehicles in one process, seen and
+flown one by one by an independent pymavlink ground station over real UDP."""
+
+from __future__ import annotations
+
+import subprocess
+import time
+
+import pytest
+
+from gcs_tools.client import VehicleClient, Waypoint, mav
+from gcs_tools.scripted_flight import mission_items
+from tests.conftest import cli, free_udp_port
+
+VEHICLES = 4
+
+
+@pytest.fixture(scope="module")
+def fleet():
+    port = free_udp_port()
+    process = subprocess.Popen(
+        cli(
+            f"sim --vehicles {VEHICLES} --sysid 11 --spacing 3 --gcs udpin:127.0.0.1:{port} "
+            "--api none --logs none"
+        ),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    clients = [VehicleClient(f"udpout:127.0.0.1:{port}", target=11 + i) for i in range(VEHICLES)]
+    try:
+        yield clients
+    finally:
+        for client in clients:
+            client.close()
+        process.terminate()
+        process.wait(10)
+
+
+def test_each_vehicle_has_its_own_system_id_home_and_parameters(fleet):
+    beats = [client.connect(timeout=30) for client in fleet]
+    assert [b.get_srcSystem() for b in beats] == [11, 12, 13, 14]
+    assert all(b.autopilot == mav.MAV_AUTOPILOT_PX4 for b in beats)
+    homes = []
+    for client in fleet:
+        client.drain()  # the others' telemetry piled up while this one was not reading
+        homes.append(client.request_home())
+    # A grid 3 m apart: vehicle 2 is east of vehicle 1, vehicle 3 north of vehicle 1.
+    assert homes[1].longitude > homes[0].longitude and homes[1].latitude == homes[0].latitude
+    assert homes[2].latitude > homes[0].latitude and homes[2].longitude == homes[0].longitude
+    fleet[1].drain()
+    assert fleet[1].set_param("MPC_XY_CRUISE", 3.5) == pytest.approx(3.5)
+    fleet[0].drain()
+    fleet[0].conn.mav.param_request_read_send(11, 1, b"MPC_XY_CRUISE", -1)
+    value = fleet[0].wait_message("PARAM_VALUE", 5, lambda m: m.param_id == "MPC_XY_CRUISE")
+    assert value.param_value != pytest.approx(3.5)  # each vehicle has its own parameters
+
+
+def test_each_vehicle_flies_its_own_mission_at_the_same_time(fleet):
+    for client in fleet:
+        client.connect(timeout=30)
+    heights = [3.0, 4.0, 5.0, 6.0]
+    for client, up in zip(fleet, heights, strict=True):
+        client.drain()
+        items = mission_items((Waypoint(0, 0, up), Waypoint(2, 0, up)))
+        assert client.upload_mission(items) == mav.MAV_MISSION_ACCEPTED
+    for client in fleet:
+        client.drain()
+        client.arm()
+        client.set_mode("MISSION")
+    tops = [0.0] * VEHICLES
+    deadline = time.monotonic() + 90
+    while not all(len(c.reached) >= 3 and not c.armed for c in fleet):
+        assert time.monotonic() < deadline, [c.reached for c in fleet]
+        for i, client in enumerate(fleet):
+            client.pump(0.005)
+            if "LOCAL_POSITION_NED" in client.latest:
+                tops[i] = max(tops[i], client.position_enu()[2])
+    for top, up in zip(tops, heights, strict=True):
+        assert top == pytest.approx(up, abs=0.3)  # each flew its own mission
+
+
+def test_a_message_for_a_system_not_hosted_is_refused_and_the_others_fly_on(fleet):
+    client = fleet[0]
+    client.connect(timeout=30)
+    client.drain()
+    client.conn.mav.command_long_send(
+        99, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0
+    )
+    text = client.wait_message("STATUSTEXT", 10, lambda m: "system 99" in m.text)
+    assert text.text == "refused: no system 99 here (11..14)"
+    fleet[3].drain()
+    assert fleet[3].connect(timeout=10).get_srcSystem() == 14
