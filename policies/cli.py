@@ -33,6 +33,11 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         help="physics in-process, or in quadsitl sim processes over MAVLink",
     )
     train.add_argument(
+        "--vehicles-per-sim",
+        type=_count(1),
+        help="with --backend mavlink: vehicles (envs) in each simulator process (default: 64)",
+    )
+    train.add_argument(
         "--steps",
         type=_count(1),
         help="environment steps, at least one batch (default: the preset's)",
@@ -125,6 +130,7 @@ def _train(args: argparse.Namespace) -> int:
         args.preset,
         args.seed,
         backend=args.backend,
+        vehicles_per_sim=args.vehicles_per_sim,
         total_steps=args.steps,
         num_envs=args.num_envs,
     )

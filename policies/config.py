@@ -30,6 +30,7 @@ class TrainConfig:
     preset: str = "paper"
     seed: int = 0
     backend: str = "inprocess"  # or "mavlink": the vehicles fly in simulator processes
+    vehicles_per_sim: int = 64  # with backend "mavlink": vehicles in each simulator process
     num_envs: int = 1  # parallel envs collecting each batch
     steps_per_env: int = 256  # rollout length; batch = num_envs * steps_per_env
     total_steps: int = 1_280_000  # environment steps (the paper: 5000 x 256)
@@ -88,6 +89,7 @@ class TrainConfig:
 
 _POSITIVE_INTS = (
     "num_envs",
+    "vehicles_per_sim",
     "steps_per_env",
     "total_steps",
     "hidden",
@@ -229,8 +231,7 @@ def check_task(task: str) -> None:
         )
 
 
-MAVLINK_ENVS = 2  # default envs (simulator processes) through the wire
-MAX_MAVLINK_ENVS = 16
+MAX_SIMULATORS = 16  # simulator processes a run through the wire may start
 
 
 def make_config(
@@ -265,13 +266,14 @@ def make_config(
         raise ValueError(f"unknown training option(s) {sorted(unknown)}")
     values.update({k: v for k, v in overrides.items() if v is not None})
     if values.get("backend") == "mavlink":
-        # Every env is a simulator process: a few, each with a longer rollout.
-        if overrides.get("num_envs") is None:
-            values["num_envs"] = min(values.get("num_envs", 1), MAVLINK_ENVS)
-        if values["num_envs"] > MAX_MAVLINK_ENVS:
+        # Each simulator process flies vehicles_per_sim of the envs.
+        per = values.get("vehicles_per_sim", TrainConfig.vehicles_per_sim)
+        processes = -(-values.get("num_envs", 1) // per)
+        if processes > MAX_SIMULATORS:
             raise ValueError(
-                f"backend 'mavlink' runs one simulator process per env: at most "
-                f"{MAX_MAVLINK_ENVS}, got {values['num_envs']}"
+                f"backend 'mavlink' with {values['num_envs']} envs and {per} vehicles per "
+                f"simulator would start {processes} simulator processes; at most "
+                f"{MAX_SIMULATORS} (raise --vehicles-per-sim)"
             )
     config = TrainConfig(**values)
     if config.total_steps < config.batch_size:

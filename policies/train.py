@@ -120,7 +120,10 @@ def train(
     # Everything that can fail at start happens before the folder is touched.
     seed = _seed(config.seed, start.iteration)
     seed_everything(seed)
-    env = make_vector_env(config.task, config.num_envs, config.backend, **config.task_options)
+    wire = {"vehicles_per_sim": config.vehicles_per_sim} if config.backend == "mavlink" else {}
+    env = make_vector_env(
+        config.task, config.num_envs, config.backend, **wire, **config.task_options
+    )
     try:
         obs_size = int(np.prod(env.single_observation_space.shape or (1,)))
         act_size = int(np.prod(env.single_action_space.shape or (1,)))

@@ -91,3 +91,44 @@ def test_a_message_for_a_system_not_hosted_is_refused_and_the_others_fly_on(flee
     assert text.text == "refused: no system 99 here (11..14)"
     fleet[3].drain()
     assert fleet[3].connect(timeout=10).get_srcSystem() == 14
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ("--vehicles 0", "--vehicles must be at least 1, got 0"),
+        ("--sysid 250 --vehicles 10", "need ids up to 259; MAVLink system ids end at 254"),
+        ("--vehicles 3 --spacing -1", "--spacing must be a distance ≥ 0 m"),
+    ],
+)
+def test_bad_fleet_options_are_refused_before_anything_starts(options, message):
+    done = subprocess.run(
+        cli(f"sim {options} --gcs none --api none --hil udpin:127.0.0.1:0 --logs none"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2 and message in done.stderr
+
+
+def test_training_through_the_wire_flies_its_envs_as_fleets(tmp_path):
+    """``quadsitl train --backend mavlink``: 8 envs as two simulator processes of 4
+    vehicles; two PPO iterations, metrics written, no simulator left running."""
+    done = subprocess.run(
+        cli(
+            "train --task hover --algo ppo --preset fast --backend mavlink --num-envs 8 "
+            f"--vehicles-per-sim 4 --steps 512 --runs {tmp_path}"
+        ),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    run = tmp_path / "hover-ppo-fast-seed0"
+    rows = (run / "metrics.csv").read_text().strip().splitlines()
+    assert len(rows) == 3  # header and two iterations
+    assert '"vehicles_per_sim": 4' in (run / "config.json").read_text()
+    assert "2 iterations of 256 steps" in done.stdout
+    time.sleep(0.5)
+    leftovers = subprocess.run(["pgrep", "-f", "quadsitl.cli sim --lockstep"], capture_output=True)
+    assert leftovers.returncode == 1, leftovers.stdout  # the simulators went with the run

@@ -243,11 +243,11 @@ def test_shipped_checkpoints_load_and_succeed(task):
     assert result.success_rate >= 0.9, result.lines()
 
 
-def test_training_through_the_wire_uses_a_few_simulator_processes():
+def test_training_through_the_wire_flies_the_preset_envs_as_fleets():
     config = make_config("hover", "ppo", "fast", backend="mavlink")
-    assert config.num_envs == 2
-    with pytest.raises(ValueError, match="one simulator process per env"):
-        make_config("hover", "ppo", "fast", backend="mavlink", num_envs=64)
+    assert config.num_envs == 128 and config.vehicles_per_sim == 64  # two processes
+    with pytest.raises(ValueError, match="would start 32 simulator processes; at most 16"):
+        make_config("hover", "ppo", "fast", backend="mavlink", vehicles_per_sim=4)
 
 
 def test_waypoint_policy_flies_take_off_and_goto_as_autopilot():

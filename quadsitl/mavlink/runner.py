@@ -72,12 +72,15 @@ class SimConfig:
         get_identity(self.autopilot_id)
         if not 1 <= self.system_id <= 254:
             raise ValueError(f"system id must be 1..254, got {self.system_id}")
-        if not 1 <= self.vehicles <= 255 - self.system_id:
+        if self.vehicles < 1:
+            raise ValueError(f"--vehicles must be at least 1, got {self.vehicles}")
+        if self.system_id + self.vehicles - 1 > 254:
             raise ValueError(
                 f"{self.vehicles} vehicles from system id {self.system_id} need ids up to "
-                f"{self.system_id + self.vehicles - 1}; MAVLink system ids end at 254 (and "
-                "there must be at least one vehicle)"
+                f"{self.system_id + self.vehicles - 1}; MAVLink system ids end at 254"
             )
+        if not (math.isfinite(self.spacing) and self.spacing >= 0):
+            raise ValueError(f"--spacing must be a distance ≥ 0 m, got {self.spacing}")
         if not (math.isfinite(self.physics_rate) and 100 <= self.physics_rate <= 10_000):
             raise ValueError(f"physics rate must be 100..10000 Hz, got {self.physics_rate}")
         if not (math.isfinite(self.control_rate) and 10 <= self.control_rate <= self.physics_rate):
