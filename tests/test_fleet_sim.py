@@ -128,7 +128,7 @@ def test_training_through_the_wire_flies_its_envs_as_fleets(tmp_path):
     rows = (run / "metrics.csv").read_text().strip().splitlines()
     assert len(rows) == 3  # header and two iterations
     assert '"vehicles_per_sim": 4' in (run / "config.json").read_text()
-    assert "2 iterations of 256 steps" in done.stdout
+    assert "2 iterations of 256 steps" in done.stdout + done.stderr
     time.sleep(0.5)
     leftovers = subprocess.run(["pgrep", "-f", "quadsitl.cli sim --lockstep"], capture_output=True)
     assert leftovers.returncode == 1, leftovers.stdout  # the simulators went with the run
