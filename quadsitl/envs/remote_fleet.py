@@ -30,6 +30,7 @@ from quadsitl.physics.airframe import Airframe
 from quadsitl.physics.fleet import VehicleStates
 
 FLYING_ALTITUDE = 20.0  # m: where the task origin of tasks without a ground is flown
+ROW_BY_ROW = 4  # up to this many answers, convert the states one by one
 
 
 class RemoteFleet(VehicleStates):
@@ -106,20 +107,22 @@ class RemoteFleet(VehicleStates):
 
     def _take(self, rows: slice, answer: WireState, local: np.ndarray | None = None) -> None:
         """The physics state of the answered vehicles (``local``: of these only)."""
-        pick = slice(None) if local is None else local
-        wire = WireState(
-            time_usec=answer.time_usec,
-            position_ned=answer.position_ned[pick],
-            q_ned_frd=answer.q_ned_frd[pick],
-            velocity_frd=answer.velocity_frd[pick],
-            rates_frd=answer.rates_frd[pick],
-            rotor_speeds=answer.rotor_speeds[pick],
-            contact=answer.contact[pick],
-            touchdown_speed=answer.touchdown_speed[pick],
-        )
-        states = wire.to_physics(self.gear)
+        pick = np.arange(rows.stop - rows.start) if local is None else local
+        if len(pick) <= ROW_BY_ROW:  # a whole-array conversion costs more for a few
+            states = np.array([answer.row(k).to_physics(self.gear) for k in pick])
+        else:
+            states = WireState(
+                time_usec=answer.time_usec,
+                position_ned=answer.position_ned[pick],
+                q_ned_frd=answer.q_ned_frd[pick],
+                velocity_frd=answer.velocity_frd[pick],
+                rates_frd=answer.rates_frd[pick],
+                rotor_speeds=answer.rotor_speeds[pick],
+                contact=None,
+                touchdown_speed=None,
+            ).to_physics(self.gear)
         states[:, L.POS] -= self.offset
-        target = np.arange(self.n)[rows][pick]
+        target = rows.start + pick
         self.state[target] = states
-        self.contact[target] = wire.contact
-        self.touchdown_speed[target] = wire.touchdown_speed
+        self.contact[target] = answer.contact[pick]
+        self.touchdown_speed[target] = answer.touchdown_speed[pick]

@@ -19,6 +19,7 @@ the simulator is.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -35,6 +36,7 @@ from quadsitl.vehicle.results import Severity
 
 MAX_DATAGRAM = 60_000  # bytes of answers per datagram (UDP's limit is 65,507)
 FAST_IDS = frozenset({mav.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET})
+ROW_BY_ROW = 4  # up to this many answers, convert the states one by one
 UNUSED = (0.0,) * 28  # ACTUATOR_OUTPUT_STATUS has 32 outputs; 4 are rotors
 TICKS_PER_CALL = 8  # vehicles whose telemetry is looked at per tick in lockstep
 _encoder = mav.MAVLink(None)
@@ -53,6 +55,7 @@ class FleetServer:
         self.cached: list[list[bytes]] = [[] for _ in servers]  # its answers
         self.counters = {"unknown_system": 0, "duplicates": 0, "rounds": 0}
         self._next_tick = 0
+        self._round_wall = -math.inf  # wall time of the last round command
 
     # --- the loop's hooks -------------------------------------------------------------
     def receive(self, link: Link, received_at: float | None = None) -> None:
@@ -105,7 +108,9 @@ class FleetServer:
 
     @property
     def last_lockstep_wall(self) -> float:
-        return max(server.motors.last_lockstep_wall for server in self.servers)
+        """Wall time of the last lockstep command (a round, or one vehicle's HIL)."""
+        single = self.servers[0].motors.last_lockstep_wall if len(self.servers) == 1 else -1.0
+        return max(self._round_wall, single)
 
     def statustext(self, severity: int, text: str) -> None:
         """From every vehicle (e.g. the log stopped: it concerns them all)."""
@@ -181,6 +186,7 @@ class FleetServer:
             replies += self._answers(link, [index])
             return
         self.pending[index] = controls
+        self._round_wall = time.monotonic()
 
     @property
     def round_start(self) -> int:
@@ -207,35 +213,49 @@ class FleetServer:
         physics = self.group.physics
         vehicle = self.group.vehicles[0]
         time_usec = round(vehicle.time * 1e6)
-        wire = WireState.from_physics(
-            physics.state[rows],
-            vehicle.airframe.gear_height,
-            time_usec,
-            physics.contact[rows],
-            physics.touchdown_speed[rows],
-        )
+        gear = vehicle.airframe.gear_height
+        if len(rows) <= ROW_BY_ROW:  # a whole-array conversion costs more for a few
+            wires = [
+                WireState.from_physics(
+                    physics.state[i],
+                    gear,
+                    time_usec,
+                    int(physics.contact[i]),
+                    float(physics.touchdown_speed[i]),
+                )
+                for i in rows
+            ]
+        else:
+            batch = WireState.from_physics(
+                physics.state[rows],
+                gear,
+                time_usec,
+                physics.contact[rows],
+                physics.touchdown_speed[rows],
+            )
+            wires = [batch.row(k) for k in range(len(rows))]
         out: list[bytes] = []
-        for k, i in enumerate(rows):
-            frames = self._answer_frames(link, i, wire, k, time_usec)
+        for i, wire in zip(rows, wires, strict=True):
+            frames = self._answer_frames(link, i, wire)
             self.cached[i] = frames
             out += frames
         return out
 
-    def _answer_frames(
-        self, link: Link, i: int, wire: WireState, k: int, time_usec: int
-    ) -> list[bytes]:
+    def _answer_frames(self, link: Link, i: int, wire: WireState) -> list[bytes]:
+        """Vehicle i's answer, its frames joined (a datagram never splits it)."""
         server = self.servers[i]
         sysid = server.system_id
-        contact = int(wire.contact[k])
+        time_usec = wire.time_usec
+        contact = wire.contact
         time_ms = (time_usec // 1000) & 0xFFFFFFFF
-        p, q = wire.position_ned[k].tolist(), wire.q_ned_frd[k].tolist()
-        v, r = wire.velocity_frd[k].tolist(), wire.rates_frd[k].tolist()
-        rotors = wire.rotor_speeds[k].tolist()
+        p, q = wire.position_ned.tolist(), wire.q_ned_frd.tolist()
+        v, r = wire.velocity_frd.tolist(), wire.rates_frd.tolist()
+        rotors = wire.rotor_speeds.tolist()
         parts: list[tuple[Any, tuple[Any, ...]]] = [
             (mav.MAVLink_actuator_output_status_message, (time_usec, 0b1111, *rotors, *UNUSED)),
         ]
         if contact != L.AIRBORNE:  # no CONTACT means airborne: the answer stays lean
-            touchdown = float(wire.touchdown_speed[k])
+            touchdown = wire.touchdown_speed
             parts.append((mav.MAVLink_named_value_int_message, (time_ms, contact, b"CONTACT")))
             parts.append((mav.MAVLink_named_value_float_message, (time_ms, touchdown, b"TD_SPEED")))
         parts.append(

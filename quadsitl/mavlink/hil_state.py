@@ -56,6 +56,19 @@ class WireState:
             touchdown_speed=touchdown,
         )
 
+    def row(self, k: int) -> WireState:
+        """Vehicle k of a batch, as a WireState of its own."""
+        return WireState(
+            time_usec=self.time_usec,
+            position_ned=self.position_ned[k],
+            q_ned_frd=self.q_ned_frd[k],
+            velocity_frd=self.velocity_frd[k],
+            rates_frd=self.rates_frd[k],
+            rotor_speeds=self.rotor_speeds[k],
+            contact=int(self.contact[k]),
+            touchdown_speed=float(self.touchdown_speed[k]),
+        )
+
     def global_position(self, origin: Any) -> tuple[float, float, float]:
         """(lat deg, lon deg, alt m AMSL) of the ground-level position; ``origin``: the
         :class:`~quadsitl.vehicle.geo.Home` of the local frame."""

@@ -22,13 +22,14 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
 from quadsitl.mavlink.fleet_server import FleetServer
 from quadsitl.mavlink.identity import get_identity
 from quadsitl.mavlink.links import Link
+from quadsitl.mavlink.motor_path import LOCKSTEP_IDLE
 from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.physics import Airframe, get_airframe
@@ -195,6 +196,7 @@ class Simulator:
         ]
         self.server = FleetServer(self.group, self.servers, self.tlog)
         self.timing = Timing()
+        self._socket_map: dict[Any, Link] | None = None
         self.stopping = False
         if make_view is not None:
             self.view = make_view(self.vehicle)
@@ -226,30 +228,42 @@ class Simulator:
             now = time.monotonic()
             if end is not None and now >= end:
                 break
-            if self.server.lockstep:
+            last_command = self.server.last_lockstep_wall
+            if self.config.lockstep or now - last_command < LOCKSTEP_IDLE:
                 start, steps = now, 0  # real time resumes from here when lockstep ends
                 # Poll while commands are flowing (waking from sleep costs more than a
                 # round trip); sleep once the client pauses.
-                busy = now - self.server.last_lockstep_wall < LOCKSTEP_SPIN
-                wait = 0.0 if busy else LOCKSTEP_WAIT
+                wait = 0.0 if now - last_command < LOCKSTEP_SPIN else LOCKSTEP_WAIT
                 if now - last_tick >= LOCKSTEP_TICK:
                     self.server.tick(now)
                     last_tick = now
+                    self._housekeeping(now)
             else:
                 steps = self._real_time_steps(start, steps, wall_per_step)
                 self.server.tick(now)
+                self._housekeeping(now)
                 wait = start + (steps + 1) * wall_per_step - time.monotonic()
-            if self.tlog is not None:
-                self._flush_log(self.tlog)
-            if self.view is not None:
-                self.view.tick(now)
-            sockets = {s: link for link in self.links for s in link.sockets()}
+            sockets = self._sockets()
             readable, _, _ = select.select(list(sockets), [], [], max(0.0, wait))
             if not readable and wait == 0.0:
                 os.sched_yield()  # polling: let a client sharing this core run first
             received_at = time.time()
             for link in {sockets[s] for s in readable}:
                 self.server.receive(link, received_at)
+
+    def _housekeeping(self, now: float) -> None:
+        """The log and the view (with the telemetry: not on every poll in lockstep)."""
+        if self.tlog is not None:
+            self._flush_log(self.tlog)
+        if self.view is not None:
+            self.view.tick(now)
+
+    def _sockets(self) -> dict[Any, Link]:
+        """Every socket to wait on, and its link (cached unless a TCP link has peers
+        coming and going)."""
+        if self._socket_map is None or any(link.kind == "tcpin" for link in self.links):
+            self._socket_map = {s: link for link in self.links for s in link.sockets()}
+        return self._socket_map
 
     def _flush_log(self, tlog: TlogWriter) -> None:
         """Write the log; if it fails, say so on the console and to every ground station,
