@@ -8,8 +8,8 @@ datagram (or a few, for large fleets) holding each vehicle's ACTUATOR_OUTPUT_STA
 NAMED_VALUE_INT ``CONTACT``, NAMED_VALUE_FLOAT ``TD_SPEED`` (on the ground only) and
 ODOMETRY, stamped with the time after the step. An answer is matched to its round by
 that time, so a late one is never taken for the next. A lost command or a lost answer:
-the commands of the vehicles still unanswered are sent again, unchanged, after four
-usual round trips (at least 2 ms, at most ``resend_after``); the simulator steps a round
+the commands of the vehicles still unanswered are sent again, unchanged, after 2.5
+usual round trips (at least 1 ms, at most ``resend_after``); the simulator steps a round
 once and answers a repeat from its cache. :class:`SimulatorError` only when no answer
 comes back for ``timeout`` seconds.
 
@@ -40,7 +40,8 @@ from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
 
 RESEND_AFTER = 0.05  # s: the longest wait for an answer before the commands go again
-MIN_RESEND_AFTER = 0.002  # s: the shortest; in between, 4 times the usual round trip
+MIN_RESEND_AFTER = 0.001  # s: the shortest; in between, RESEND_ROUND_TRIPS usual round trips
+RESEND_ROUND_TRIPS = 2.5
 ODOMETRY = mav.MAVLINK_MSG_ID_ODOMETRY
 ACTUATOR_OUTPUT_STATUS = mav.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS
 NAMED_VALUE_INT = mav.MAVLINK_MSG_ID_NAMED_VALUE_INT
@@ -312,7 +313,7 @@ class FleetClient:
     def _resend_wait(self) -> float:
         if math.isnan(self.round_trip):
             return self.resend_after
-        return min(self.resend_after, max(MIN_RESEND_AFTER, 4 * self.round_trip))
+        return min(self.resend_after, max(MIN_RESEND_AFTER, RESEND_ROUND_TRIPS * self.round_trip))
 
     def _take(
         self,

@@ -34,7 +34,6 @@ from quadsitl.physics import layout as L
 from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.results import Severity
 
-MAX_DATAGRAM = 60_000  # bytes of answers per datagram (UDP's limit is 65,507)
 FAST_IDS = frozenset({mav.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET})
 ROW_BY_ROW = 4  # up to this many answers, convert the states one by one
 UNUSED = (0.0,) * 28  # ACTUATOR_OUTPUT_STATUS has 32 outputs; 4 are rotors
@@ -61,6 +60,13 @@ class FleetServer:
     def receive(self, link: Link, received_at: float | None = None) -> None:
         """Dispatch what arrived on ``link``; step a round once it is complete."""
         replies: list[bytes] = []
+        link.hold()  # every answer to this datagram goes back in one (or a few)
+        try:
+            self._receive(link, replies, received_at)
+        finally:
+            link.release()
+
+    def _receive(self, link: Link, replies: list[bytes], received_at: float | None) -> None:
         signing = any(server.signing is not None for server in self.servers)
         fast = FAST_IDS if link.name == MOTOR_LINK and not signing else frozenset()
         for message, _peer in link.receive(fast):
@@ -87,7 +93,8 @@ class FleetServer:
                 self._dispatch(message, link)
         if self.pending and len(self.pending) == len(self.servers):
             replies += self._run_round(link)
-        self._send(replies, link)
+        for answer in replies:
+            link.send_bytes(answer)
 
     def tick(self, wall_now: float) -> None:
         """Every vehicle's events, heartbeat and telemetry; in lockstep (ticked every
@@ -285,20 +292,6 @@ class FleetServer:
                 for cls, values in parts
             )
         ]
-
-    def _send(self, frames: list[bytes], link: Link) -> None:
-        """In as few datagrams as fit; a vehicle's answer is never split (its frames are
-        joined before they come here)."""
-        chunk: list[bytes] = []
-        size = 0
-        for frame in frames:
-            if chunk and size + len(frame) > MAX_DATAGRAM:
-                link.send_bytes(b"".join(chunk))
-                chunk, size = [], 0
-            chunk.append(frame)
-            size += len(frame)
-        if chunk:
-            link.send_bytes(b"".join(chunk))
 
 
 def _decoded(cls: Any, values: tuple[Any, ...]) -> Any:

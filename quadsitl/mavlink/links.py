@@ -63,6 +63,9 @@ def is_loopback(host: str) -> bool:
         return False
 
 
+HELD_DATAGRAM = 60_000  # bytes per datagram when held frames go out (UDP's limit: 65,507)
+
+
 class _Capture:
     """File-like sink for pymavlink's encoder: keeps the last packed frame."""
 
@@ -97,6 +100,7 @@ class Link:
         self.mav = mavlink.MAVLink(self._out, srcSystem=system_id, srcComponent=component_id)
         self.system_id = system_id
         self._seq: dict[int, int] = {}  # next sequence number of each system sending here
+        self._held: list[bytes] | None = None  # frames kept back by hold()
         self.peers: dict[Any, Peer] = {}
         self.destination: tuple[str, int] | None = None
         self.bad_frames = 0
@@ -238,8 +242,32 @@ class Link:
         """Whether frames sent here must be signed."""
         return bool(self.mav.signing.sign_outgoing)
 
+    def hold(self) -> None:
+        """Collect what is sent from now on, until :meth:`release` sends it together."""
+        if self._held is None:
+            self._held = []
+
+    def release(self) -> None:
+        """Send what was held, in as few datagrams as fit (each unit given to
+        :meth:`send_bytes` stays whole)."""
+        held, self._held = self._held, None
+        chunk: list[bytes] = []
+        size = 0
+        for unit in held or []:
+            if chunk and size + len(unit) > HELD_DATAGRAM:
+                self.send_bytes(b"".join(chunk))
+                chunk, size = [], 0
+            chunk.append(unit)
+            size += len(unit)
+        if chunk:
+            self.send_bytes(b"".join(chunk))
+
     def send_bytes(self, frame: bytes) -> None:
-        """Write an already packed frame to every live peer (and the fixed destination)."""
+        """Write already packed frames to every live peer (and the fixed destination),
+        or keep them for :meth:`release` while held."""
+        if self._held is not None:
+            self._held.append(frame)
+            return
         now = time.monotonic()
         targets = []
         if self.destination is not None:
