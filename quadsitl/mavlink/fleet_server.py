@@ -23,6 +23,8 @@ import math
 import time
 from typing import Any
 
+import numpy as np
+
 from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.hil_state import WireState
@@ -31,11 +33,13 @@ from quadsitl.mavlink.motor_path import NAN_COVARIANCE, check_controls
 from quadsitl.mavlink.server import MOTOR_LINK, MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.physics import layout as L
+from quadsitl.physics.layout import P_OMEGA_MAX
 from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.results import Severity
 
 FAST_IDS = frozenset({mav.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET})
 ROW_BY_ROW = 4  # up to this many answers, convert the states one by one
+WIRE_FIELDS = ("position_ned", "q_ned_frd", "velocity_frd", "rates_frd", "rotor_speeds")
 UNUSED = (0.0,) * 28  # ACTUATOR_OUTPUT_STATUS has 32 outputs; 4 are rotors
 TICKS_PER_CALL = 8  # vehicles whose telemetry is looked at per tick in lockstep
 _encoder = mav.MAVLink(None)
@@ -203,17 +207,23 @@ class FleetServer:
     def _run_round(self, link: Link) -> list[bytes]:
         started = self.round_start
         wall = time.monotonic()
-        for index, controls in self.pending.items():
+        order = range(len(self.servers))
+        for index in order:
             motors = self.servers[index].motors
-            warning = motors.apply(controls)
+            warning = motors.apply(self.pending[index], speeds=False)
             motors.last_lockstep_wall = wall
             if warning is not None:
                 self.servers[index].statustext(Severity.WARNING, warning)
+        # The rotor speeds of all vehicles in one array operation (0 where disarmed).
+        controls = np.array([self.pending[index] for index in order])
+        armed = np.array([v.armed for v in self.group.vehicles])
+        max_speed = self.group.physics.params[:, P_OMEGA_MAX]
+        self.group.rotor_cmd[:] = controls * (max_speed * armed)[:, None]
         self.pending.clear()
         self.group.advance()
         self.previous_round = started
         self.counters["rounds"] += 1
-        return self._answers(link, list(range(len(self.servers))))
+        return self._answers(link, list(order))
 
     def _answers(self, link: Link, rows: list[int]) -> list[bytes]:
         """The state answers of vehicles ``rows`` (cached as their last answer)."""
@@ -222,47 +232,42 @@ class FleetServer:
         time_usec = round(vehicle.time * 1e6)
         gear = vehicle.airframe.gear_height
         if len(rows) <= ROW_BY_ROW:  # a whole-array conversion costs more for a few
-            wires = [
-                WireState.from_physics(
-                    physics.state[i],
-                    gear,
-                    time_usec,
-                    int(physics.contact[i]),
-                    float(physics.touchdown_speed[i]),
-                )
-                for i in rows
-            ]
+            wires = [WireState.from_physics(physics.state[i], gear, 0, 0, 0.0) for i in rows]
+            columns = [[getattr(w, f).tolist() for w in wires] for f in WIRE_FIELDS]
         else:
-            batch = WireState.from_physics(
-                physics.state[rows],
-                gear,
-                time_usec,
-                physics.contact[rows],
-                physics.touchdown_speed[rows],
-            )
-            wires = [batch.row(k) for k in range(len(rows))]
+            batch = WireState.from_physics(physics.state[rows], gear, 0, None, None)
+            columns = [getattr(batch, f).tolist() for f in WIRE_FIELDS]
+        contacts = physics.contact[rows].tolist()
+        touchdowns = physics.touchdown_speed[rows].tolist()
         out: list[bytes] = []
-        for i, wire in zip(rows, wires, strict=True):
-            frames = self._answer_frames(link, i, wire)
+        for k, i in enumerate(rows):
+            p, q, v, r, rotors = (column[k] for column in columns)
+            frames = self._answer_frames(
+                link, i, time_usec, (p, q, v, r, rotors), contacts[k], touchdowns[k]
+            )
             self.cached[i] = frames
             out += frames
         return out
 
-    def _answer_frames(self, link: Link, i: int, wire: WireState) -> list[bytes]:
-        """Vehicle i's answer, its frames joined (a datagram never splits it)."""
+    def _answer_frames(
+        self,
+        link: Link,
+        i: int,
+        time_usec: int,
+        state: tuple[list[float], ...],
+        contact: int,
+        touchdown: float,
+    ) -> list[bytes]:
+        """Vehicle i's answer, its frames joined (a datagram never splits it).
+        ``state``: position NED, quaternion, body velocity and rates FRD, rotor speeds."""
         server = self.servers[i]
         sysid = server.system_id
-        time_usec = wire.time_usec
-        contact = wire.contact
         time_ms = (time_usec // 1000) & 0xFFFFFFFF
-        p, q = wire.position_ned.tolist(), wire.q_ned_frd.tolist()
-        v, r = wire.velocity_frd.tolist(), wire.rates_frd.tolist()
-        rotors = wire.rotor_speeds.tolist()
+        p, q, v, r, rotors = state
         parts: list[tuple[Any, tuple[Any, ...]]] = [
             (mav.MAVLink_actuator_output_status_message, (time_usec, 0b1111, *rotors, *UNUSED)),
         ]
         if contact != L.AIRBORNE:  # no CONTACT means airborne: the answer stays lean
-            touchdown = wire.touchdown_speed
             parts.append((mav.MAVLink_named_value_int_message, (time_ms, contact, b"CONTACT")))
             parts.append((mav.MAVLink_named_value_float_message, (time_ms, touchdown, b"TD_SPEED")))
         parts.append(

@@ -111,19 +111,22 @@ class MotorPath:
             X.advance(self.vehicle)
         return warning
 
-    def apply(self, controls: Any, armed: bool = True) -> str | None:
+    def apply(self, controls: Any, armed: bool = True, speeds: bool = True) -> str | None:
         """Take checked normalised rotor commands (four, in [0, 1]); ``armed`` False stops
-        the motors. Returns a warning worth a STATUSTEXT, or None."""
+        the motors. ``speeds`` False: the caller sets the rotor speeds itself (a group
+        round does it for all vehicles at once). Returns a warning worth a STATUSTEXT,
+        or None."""
         v = self.vehicle
-        speeds = np.asarray(controls, dtype=np.float64) * v.airframe.max_rotor_speed
-        if not armed:
-            speeds[:] = 0.0  # the controller's own outputs are disarmed
         warning = None
         if not v.armed and armed:
             self.counters["while_disarmed"] += 1
             if self.counters["while_disarmed"] % 1000 == 1:
                 warning = "motor commands ignored: vehicle disarmed (arm it first)"
-        X.motor_command(v, speeds)
+        if speeds:
+            rotor_speeds = np.asarray(controls, dtype=np.float64) * v.airframe.max_rotor_speed
+            X.motor_command(v, rotor_speeds if armed else np.zeros(L.N_ROTORS))
+        else:
+            X.motor_command(v, None)
         self.counters["accepted"] += 1
         return warning
 

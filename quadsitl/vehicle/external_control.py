@@ -19,17 +19,18 @@ if TYPE_CHECKING:
     from quadsitl.vehicle.vehicle import Vehicle
 
 
-def motor_command(v: Vehicle, rotor_speeds: Vec) -> None:
+def motor_command(v: Vehicle, rotor_speeds: Vec | None) -> None:
     """Rotor speeds (rad/s, finite, within [0, Ω_max]; the caller checks) from an
     external controller: the onboard controller is bypassed until the commands stop
     for MOTOR_TIMEOUT, the mode changes, or :meth:`release_motors`. A disarmed vehicle
-    keeps its rotors stopped."""
+    keeps its rotors stopped. ``None``: the caller writes ``v.rotor_cmd`` itself."""
     if not v.motor_control:
         v.motor_control = True
         v.mode = Mode.OFFBOARD
         v.event(Severity.INFO, "external motor control")
     v.motor_command_time = v.time
-    v.rotor_cmd[:] = rotor_speeds if v.armed else 0.0
+    if rotor_speeds is not None:
+        v.rotor_cmd[:] = rotor_speeds if v.armed else 0.0
 
 
 def release_motors(v: Vehicle, reason: str) -> None:

@@ -83,13 +83,20 @@ class VehicleGroup:
         """One physics step of every vehicle (each runs its controller when due)."""
         contacts = [v.begin_step() for v in self.vehicles]
         self.physics.step(self.rotor_cmd)
-        for v, before in zip(self.vehicles, contacts, strict=True):
-            v.end_step(before, self.physics.dt)
+        self._end(contacts, self.physics.dt)
 
     def advance(self) -> None:
         """One control period of every vehicle under external motor control (lockstep
         rounds), in one call of the physics."""
         contacts = [v.begin_period() for v in self.vehicles]
         self.physics.step(self.rotor_cmd, n_substeps=self.substeps)
-        for v, before in zip(self.vehicles, contacts, strict=True):
-            v.end_step(before, self.control_period)
+        self._end(contacts, self.control_period)
+
+    def _end(self, contacts: list[int], seconds: float) -> None:
+        """Each vehicle's part after the physics, with every shaft power (Q = k_Q·Ω²,
+        P = Q·Ω per rotor) computed in one array operation."""
+        physics = self.physics
+        rotors = physics.state[:, L.ROTORS]
+        powers = (physics.params[:, L.P_KQ] * (rotors**3).sum(axis=1)).tolist()
+        for v, before, power in zip(self.vehicles, contacts, powers, strict=True):
+            v.end_step(before, seconds, power)

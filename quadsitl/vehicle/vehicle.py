@@ -323,14 +323,15 @@ class Vehicle:
         self.physics_steps += self.substeps
         return int(self.fleet.contact[0])
 
-    def end_step(self, contact_before: int, seconds: float) -> None:
-        """After the physics moved ``seconds``: touchdowns and crashes, battery."""
+    def end_step(
+        self, contact_before: int, seconds: float, shaft_power: float | None = None
+    ) -> None:
+        """After the physics moved ``seconds``: touchdowns and crashes, battery
+        (``shaft_power``, W, when the caller has it for the whole group)."""
         GC.watch_contact(self, contact_before)
-        self.drain_battery(seconds)
-
-    def drain_battery(self, seconds: float) -> None:
-        cubes = sum(w * w * w for w in self.fleet.state[0, L.ROTORS].tolist())
-        shaft_power = self.airframe.torque_coeff * cubes
+        if shaft_power is None:
+            cubes = sum(w * w * w for w in self.fleet.state[0, L.ROTORS].tolist())
+            shaft_power = self.airframe.torque_coeff * cubes
         self.battery.drain(shaft_power, seconds)
 
     def control(self) -> None:
