@@ -4,8 +4,8 @@
   (gym.make, with Gymnasium's wrappers), each step one lockstep round trip;
 * ``mavlink_env_steps_per_s_2proc``: the native vector env over two simulator processes;
 * the fleet curve: the native vector env over ONE simulator process hosting 1, 8, 64
-  and 254 vehicles (``vehicles_per_sim``; 254 system ids are all MAVLink has), env steps/s; ``mavlink_env_steps_per_s_fleet``
-  is the 64-vehicle point (target ≥ 20,000);
+  and 254 vehicles (``vehicles_per_sim``; 254 system ids are all MAVLink has), env
+  steps/s; ``mavlink_env_steps_per_s_fleet`` is the 64-vehicle point (target ≥ 20,000);
 * ``lockstep_vs_udp_limit``: single-vehicle lockstep round trips per second divided by
   a plain Python UDP ping-pong between two processes, measured in the same run
   (target ≥ 0.5);

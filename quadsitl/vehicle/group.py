@@ -71,6 +71,7 @@ class VehicleGroup:
                     autopilot=make_autopilot() if make_autopilot else None,
                     fleet=FleetSlot(self.physics, i),
                     rotor_cmd=self.rotor_cmd[i],
+                    control_phase=i,  # the controllers take turns: no step runs them all
                 )
             )
         self.substeps = self.vehicles[0].substeps

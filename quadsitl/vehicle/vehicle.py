@@ -51,6 +51,8 @@ class Vehicle:
         fleet, rotor_cmd: for a vehicle of a group (:mod:`quadsitl.vehicle.group`), its
             row of the group's physics and of the group's rotor commands; alone, it has
             a physics of its own.
+        control_phase: physics steps by which this vehicle's controller runs early (a
+            group spreads its vehicles' controllers over the steps of a period).
     """
 
     # Flight state, (re)set by _reset_flight_state.
@@ -79,6 +81,7 @@ class Vehicle:
         autopilot: Autopilot | None = None,
         fleet: FleetSlot | None = None,
         rotor_cmd: Vec | None = None,
+        control_phase: int = 0,
     ) -> None:
         self.origin = home or Home()
         self.home_position = np.zeros(3)  # m, ENU: where home is in the local frame
@@ -89,6 +92,7 @@ class Vehicle:
         self.airframe = get_airframe(airframe)
         self.fleet: Fleet | FleetSlot = fleet or Fleet(1, self.airframe, dt=physics_dt)
         self.substeps = max(1, round(control_period / physics_dt))
+        self.control_phase = control_phase % self.substeps
         self.control_period = self.substeps * physics_dt
         # The cascade always exists: the gain parameters tune it, and it flies unless
         # another autopilot (e.g. a trained policy) is passed in.
@@ -311,7 +315,7 @@ class Vehicle:
     def begin_step(self) -> int:
         """Before one physics step (this vehicle's, or its group's): run the controller
         when due. Returns the ground contact before the step."""
-        if self.physics_steps % self.substeps == 0:
+        if (self.physics_steps + self.control_phase) % self.substeps == 0:
             self.control()
         self.physics_steps += 1
         return int(self.fleet.contact[0])
