@@ -361,11 +361,21 @@ class FleetClient:
         taken = [(i, *self._rows[i]) for i in rows if self._rows[i] is not None]
         if not taken:
             return
+        a = self.answer
+        if len(taken) == 1:  # one vehicle: row writes beat building an array
+            i, odometry, got = taken[0]
+            a.time_usec = odometry[0]
+            a.position_ned[i], a.q_ned_frd[i] = odometry[1:4], odometry[4:8]
+            a.velocity_frd[i], a.rates_frd[i] = odometry[8:11], odometry[11:14]
+            a.rotor_speeds[i] = got["rotors"]
+            a.contact[i] = got.get("contact", L.AIRBORNE)
+            a.touchdown_speed[i] = got.get("touchdown", 0.0)
+            self._rows[i] = None
+            return
         index: Any = [t[0] for t in taken]
         if len(index) == self.n:
             index = slice(None)  # every vehicle, in order: cheaper than a list index
         values = np.array([t[1][:14] + tuple(t[2]["rotors"]) for t in taken])
-        a = self.answer
         a.time_usec = int(values[-1, 0])
         a.position_ned[index] = values[:, 1:4]
         a.q_ned_frd[index] = values[:, 4:8]

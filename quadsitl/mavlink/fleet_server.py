@@ -208,17 +208,18 @@ class FleetServer:
         started = self.round_start
         wall = time.monotonic()
         order = range(len(self.servers))
+        few = len(order) <= ROW_BY_ROW  # array operations pay off for more
         for index in order:
             motors = self.servers[index].motors
-            warning = motors.apply(self.pending[index], speeds=False)
+            warning = motors.apply(self.pending[index], speeds=few)
             motors.last_lockstep_wall = wall
             if warning is not None:
                 self.servers[index].statustext(Severity.WARNING, warning)
-        # The rotor speeds of all vehicles in one array operation (0 where disarmed).
-        controls = np.array([self.pending[index] for index in order])
-        armed = np.array([v.armed for v in self.group.vehicles])
-        max_speed = self.group.physics.params[:, P_OMEGA_MAX]
-        self.group.rotor_cmd[:] = controls * (max_speed * armed)[:, None]
+        if not few:  # the rotor speeds of all vehicles at once (0 where disarmed)
+            controls = np.array([self.pending[index] for index in order])
+            armed = np.array([v.armed for v in self.group.vehicles])
+            max_speed = self.group.physics.params[:, P_OMEGA_MAX]
+            self.group.rotor_cmd[:] = controls * (max_speed * armed)[:, None]
         self.pending.clear()
         self.group.advance()
         self.previous_round = started

@@ -24,6 +24,7 @@ from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.vehicle import Vehicle
 
 MAX_VEHICLES = 254  # one MAVLink system id each
+FEW = 4  # up to this many vehicles, per-vehicle arithmetic beats array operations
 
 
 def grid_offsets(n: int, spacing: float) -> list[tuple[float, float]]:
@@ -97,6 +98,10 @@ class VehicleGroup:
         """Each vehicle's part after the physics, with every shaft power (Q = k_Q·Ω²,
         P = Q·Ω per rotor) computed in one array operation."""
         physics = self.physics
+        if physics.n <= FEW:  # array operations pay off for more
+            for v, before in zip(self.vehicles, contacts, strict=True):
+                v.end_step(before, seconds)
+            return
         rotors = physics.state[:, L.ROTORS]
         powers = (physics.params[:, L.P_KQ] * (rotors**3).sum(axis=1)).tolist()
         for v, before, power in zip(self.vehicles, contacts, powers, strict=True):
