@@ -93,6 +93,38 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
     plot.add_argument("runs", nargs="+", help="run folders (any tasks, algorithms, seeds)")
     plot.add_argument("-o", "--output", default="docs/images", help="folder for the PNGs")
 
+    sweep = commands.add_parser(
+        "sweep",
+        help="a grid or search over training runs on Ray Tune (docs/distributed.md)",
+        description="Each trial is one `quadsitl train` run in its own folder under --runs; "
+        "Tune schedules them, shows a progress table, stops searches early (ASHA) and "
+        "resumes an interrupted sweep.",
+    )
+    sweep.add_argument(
+        "--grid",
+        nargs="+",
+        default=[],
+        metavar="KEY=VALUES",
+        help="grid axes: task=hover,land algo=ppo,trpo seed=0..2 learning_rate=1e-4,3e-4 ...",
+    )
+    sweep.add_argument(
+        "--search",
+        nargs="+",
+        default=[],
+        metavar="KEY=DIST",
+        help="search axes: KEY=loguniform:LOW:HIGH, uniform:LOW:HIGH, randint:LOW:HIGH or "
+        "choice:V1,V2 (stopped early by ASHA on mean_return)",
+    )
+    sweep.add_argument(
+        "--samples", type=_count(1), default=1, help="samples of the search (default: 1)"
+    )
+    sweep.add_argument("--steps", type=_count(1), help="environment steps of every trial")
+    sweep.add_argument("--runs", default="runs", help="folder of the trials' runs (default: runs)")
+    sweep.add_argument("--name", default="sweep", help="the sweep's name (default: sweep)")
+    sweep.add_argument("--cpus", type=_count(1), help="CPUs of the local Ray (default: all)")
+    sweep.add_argument("--address", help="join the Ray cluster at ADDRESS (ray start --head)")
+    sweep.add_argument("--resume", action="store_true", help="finish an interrupted sweep")
+
 
 def _count(low: int):  # type: ignore[no-untyped-def]
     """An argparse type: an integer ≥ ``low``, else a clear usage error."""
@@ -117,7 +149,41 @@ def run(args: argparse.Namespace) -> int:
         return _train(args)
     if args.command == "eval":
         return _eval(args)
+    if args.command == "sweep":
+        return _sweep(args)
     return _plot(args)
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from policies.plots import learning_curves
+    from policies.sweep import parse_grid, parse_search, run_sweep, table
+
+    grid, search = parse_grid(args.grid), parse_search(args.search)
+    fixed = {"total_steps": args.steps} if args.steps else {}
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        raise ValueError("quadsitl sweep needs Ray Tune: pip install 'quadsitl[sweep]'") from None
+    results = run_sweep(
+        grid,
+        search,
+        fixed,
+        Path(args.runs),
+        args.name,
+        args.samples,
+        args.cpus,
+        args.address,
+        args.resume,
+    )
+    out = Path(args.runs) / "sweeps" / args.name
+    text = table(results)
+    (out / "results.md").write_text(text)
+    runs = [Path(r["run"]) for r in results]
+    curves = learning_curves([r for r in runs if (r / "metrics.csv").is_file()], out)
+    print(text, end="")
+    print(f"results: {out / 'results.md'}; curves: {', '.join(str(c) for c in curves)}")
+    failed = [r for r in results if r.get("error")]
+    return 1 if failed else 0
 
 
 def _train(args: argparse.Namespace) -> int:

@@ -22,6 +22,7 @@ import random
 import shutil
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -100,9 +101,11 @@ def train(
     progress: bool = True,
     mode: str = "new",
     tensorboard: bool = False,
+    on_iteration: Callable[[dict[str, float]], None] | None = None,
 ) -> RunResult:
     """Train ``config`` into ``run_dir``; ``mode``: "new", "resume" or "overwrite";
-    ``tensorboard``: also write every metrics column to ``run_dir/tensorboard``."""
+    ``tensorboard``: also write every metrics column to ``run_dir/tensorboard``;
+    ``on_iteration``: called with each iteration's metrics row (e.g. a sweep's report)."""
     run_dir = Path(run_dir)
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
@@ -137,6 +140,7 @@ def train(
         run_dir.mkdir(parents=True, exist_ok=True)
         (run_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n")
         log = _Log(config, run_dir, progress, start, tensorboard)
+        log.on_iteration = on_iteration
     except BaseException:
         env.close()
         raise
@@ -250,6 +254,7 @@ class _Log:
         self.diverged = False
         self.interrupted = False
         self.eval_seconds = 0.0  # spent in evaluations (included in wall_seconds)
+        self.on_iteration: Callable[[dict[str, float]], None] | None = None
 
     def iteration(self, it: int, rollout, stats: dict[str, float], algo) -> None:  # type: ignore[no-untyped-def]
         config = self.config
@@ -261,6 +266,8 @@ class _Log:
             row["eval_success"] = self._evaluate(algo, it)
         self.writer.writerow(row)
         self.file.flush()
+        if self.on_iteration is not None:
+            self.on_iteration(row)
         if self.board is not None:  # every column, against environment steps
             for key, value in row.items():
                 if key not in ("iteration", "env_steps") and math.isfinite(value):

@@ -322,7 +322,7 @@ def _main(argv: Sequence[str] | None = None) -> int:
             )
         except ValueError as error:
             parser.exit(2, f"quadsitl demo: error: {error}\n")
-    if args.command in ("train", "eval", "plot"):
+    if args.command in ("train", "eval", "plot", "sweep"):
         from policies.cli import run as run_policy_command
 
         try:
