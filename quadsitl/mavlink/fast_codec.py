@@ -86,3 +86,19 @@ def parse(data: bytes) -> Iterator[Frame]:
             payload = payload + bytes(full - length)
         yield Frame(msgid, data[i + 5], data[i + 6], payload[:full], data[i : i + size])
         i += size
+
+
+def message(message_class: Any, values: tuple[Any, ...]) -> Any:
+    """The pymavlink message of ``message_class`` whose fields are ``values`` in wire
+    order (arrays flattened): for frames that must go through pymavlink (signing)."""
+    fields: dict[str, Any] = {}
+    rest = list(values)
+    types = dict(zip(message_class.fieldnames, message_class.fieldtypes, strict=True))
+    for name, length in zip(
+        message_class.ordered_fieldnames, message_class.array_lengths, strict=True
+    ):
+        if length and types[name] != "char":  # a char array is one bytes value
+            fields[name], rest = rest[:length], rest[length:]
+        else:
+            fields[name], rest = rest[0], rest[1:]
+    return message_class(*(fields[name] for name in message_class.fieldnames))

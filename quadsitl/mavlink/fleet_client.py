@@ -92,18 +92,17 @@ class FleetClient:
         self.statustexts: deque[str] = deque(maxlen=100)
         self.resent = 0
         self.late = 0
-        self._round: list[list[bytes]] = []
+        self._round: list[list[Any]] = []
         self._rows: list[Any] = [None] * n  # each vehicle's answer of the current exchange
         self._chunks: tuple[int, bytes] = (0, b"")  # a long STATUSTEXT being put together
         self._sent_at = 0.0
         self.round_trip = math.nan  # s, running mean of rounds answered without a resend
 
     # --- plumbing ---------------------------------------------------------------------
-    def _command_frame(self, command: int, index: int, *params: float) -> bytes:
+    def _command_frame(self, command: int, index: int, *params: float) -> Any:
+        """A COMMAND_LONG to vehicle ``index`` (encoded when sent: see :meth:`_send`)."""
         values = list(params) + [0.0] * (7 - len(params))
-        return self._encode(
-            self.mav.command_long_encode(self.first + index, 1, command, 0, *values)
-        )
+        return self.mav.command_long_encode(self.first + index, 1, command, 0, *values)
 
     def _encode(self, message: Any) -> bytes:
         if self.signing:
@@ -111,11 +110,14 @@ class FleetClient:
         self.mav.send(message)
         return self._frames.pop()
 
-    def _send(self, frames: list[bytes]) -> None:
-        """Frames in as few datagrams as fit."""
+    def _send(self, items: list[Any]) -> None:
+        """Frames in as few datagrams as fit. An item is a packed frame or a pymavlink
+        message, encoded now: each resend of a signed message gets a new signature (a
+        signed frame sent twice is a replay, which the simulator refuses)."""
         chunk: list[bytes] = []
         size = 0
-        for frame in frames:
+        for item in items:
+            frame = item if isinstance(item, bytes) else self._encode(item)
             if chunk and size + len(frame) > MAX_DATAGRAM - 1024:
                 self.sock.sendto(b"".join(chunk), self.address)
                 chunk, size = [], 0
@@ -177,9 +179,7 @@ class FleetClient:
         """Introduce ourselves (the udpin link learns its peer) and wait until every
         vehicle's heartbeat has been heard."""
         heard: set[int] = set()
-        hello = self._encode(
-            self.mav.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-        )
+        hello = self.mav.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
         deadline = time.monotonic() + self.timeout
         next_hello = 0.0
         while len(heard) < self.n:
@@ -254,11 +254,11 @@ class FleetClient:
         self._collect(groups, rows, lambda i, t: RESET_STATE in acks[i], acks, "reset answer")
         return self.answer
 
-    def _actuator_frame(self, stamp: int, i: int, row: list[float]) -> bytes:
+    def _actuator_frame(self, stamp: int, i: int, row: list[float]) -> Any:
         controls = [*row, 0.0, 0.0, 0.0, 0.0]
-        if self.signing:
-            return self._encode(
-                self.mav.set_actuator_control_target_encode(stamp, 0, self.first + i, 1, controls)
+        if self.signing:  # signed by pymavlink when sent
+            return self.mav.set_actuator_control_target_encode(
+                stamp, 0, self.first + i, 1, controls
             )
         self.seq = (self.seq + 1) & 0xFF
         values = (stamp, *controls, 0, self.first + i, 1)
@@ -266,7 +266,7 @@ class FleetClient:
 
     def _collect(
         self,
-        groups: list[list[bytes]],
+        groups: list[list[Any]],
         rows: list[int],
         fresh: Any,
         acks: dict[int, set[int]] | None,

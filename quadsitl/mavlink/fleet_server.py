@@ -42,7 +42,6 @@ ROW_BY_ROW = 4  # up to this many answers, convert the states one by one
 WIRE_FIELDS = ("position_ned", "q_ned_frd", "velocity_frd", "rates_frd", "rotor_speeds")
 UNUSED = (0.0,) * 28  # ACTUATOR_OUTPUT_STATUS has 32 outputs; 4 are rotors
 TICKS_PER_CALL = 8  # vehicles whose telemetry is looked at per tick in lockstep
-_encoder = mav.MAVLink(None)
 
 
 class FleetServer:
@@ -291,15 +290,10 @@ class FleetServer:
             )
         )
         if link.signs:  # pymavlink signs; the rest is packed here
-            return [b"".join(link.pack(_decoded(cls, values), sysid) for cls, values in parts)]
+            return [b"".join(link.pack(FC.message(cls, values), sysid) for cls, values in parts)]
         return [
             b"".join(
                 FC.pack(cls, values, link.next_seq(sysid), sysid, server.component_id)
                 for cls, values in parts
             )
         ]
-
-
-def _decoded(cls: Any, values: tuple[Any, ...]) -> Any:
-    """The pymavlink message of ``cls`` with wire-ordered ``values`` (to be signed)."""
-    return _encoder.decode(FC.pack(cls, values, 0, 1, 1))
