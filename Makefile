@@ -41,6 +41,7 @@ bench-training: venv
 	$(BIN)/python benchmarks/training.py
 
 bench-algorithms: venv
+	$(BIN)/python benchmarks/sweep.py
 	$(BIN)/python benchmarks/algorithms.py
 	$(BIN)/python benchmarks/algorithms.py --preset paper --tasks hover
 
