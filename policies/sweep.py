@@ -117,13 +117,20 @@ def parse_search(items: list[str]) -> dict[str, tuple[str, list[Any]]]:
     return space
 
 
-def check_trials(grid: dict[str, list[Any]], fixed: dict[str, Any]) -> list[dict[str, Any]]:
+def check_trials(
+    grid: dict[str, list[Any]],
+    fixed: dict[str, Any],
+    search: dict[str, tuple[str, list[Any]]] | None = None,
+) -> list[dict[str, Any]]:
     """Every grid point as a full set of run options, each checked by ``make_config``
-    (an unknown task or algorithm, a bad value: SweepError now, not in a trial)."""
-    if not grid and not fixed:
+    (an unknown task or algorithm, a bad value: SweepError now, not in a trial). A
+    searched option is checked at its bounds (or each of its choices)."""
+    search = search or {}
+    if not grid and not search:
         raise SweepError("the sweep is empty: give --grid (and/or --search)")
+    axes = {**grid, **{key: values for key, (_, values) in search.items()}}
     points: list[dict[str, Any]] = [{}]
-    for key, values in grid.items():
+    for key, values in axes.items():
         points = [{**p, key: v} for p in points for v in values]
     trials = [{"preset": "fast", "seed": 0, **fixed, **p} for p in points]
     for trial in trials:
@@ -197,7 +204,7 @@ def run_sweep(
     resume: bool = False,
 ) -> list[dict[str, Any]]:
     """Run (or, with ``resume``, finish) the sweep; the results, one dict per trial."""
-    check_trials(grid, fixed)  # everything checked before Ray starts
+    check_trials(grid, fixed, search)  # everything checked before Ray starts
     if address is not None:
         check_address(address)
     storage = (Path(runs) / "sweeps").resolve()

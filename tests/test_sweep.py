@@ -93,6 +93,8 @@ def test_resume_after_an_interruption_runs_only_the_missing_trials(tmp_path):
         ("--grid task=hover algo=ppo --search learning_rate=normal:0:1", "loguniform:LOW:HIGH"),
         ("--grid task=hover algo=ppo --search learning_rate=loguniform:0:1", "0 < LOW < HIGH"),
         ("--grid task=hover algo=ppo --address 127.0.0.1:9", "no Ray cluster answers"),
+        ("--grid task=hover --search algo=choice:ppo,sac", "unknown algorithm 'sac'"),
+        ("--grid task=hover algo=ppo --search gamma=uniform:0.9:1.5", "gamma"),
         ("--grid task=hover algo=ppo --resume", "nothing to resume"),
     ],
 )
