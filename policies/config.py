@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from policies.algos import ALGORITHMS
+from quadsitl.envs.mavlink_backend import fleet_sizes
 from quadsitl.tasks import TASKS
 
 BACKENDS = ("inprocess", "mavlink")
@@ -268,7 +269,7 @@ def make_config(
     if values.get("backend") == "mavlink":
         # Each simulator process flies vehicles_per_sim of the envs.
         per = values.get("vehicles_per_sim", TrainConfig.vehicles_per_sim)
-        processes = -(-values.get("num_envs", 1) // per)
+        processes = len(fleet_sizes(values.get("num_envs", 1), per, None))
         if processes > MAX_SIMULATORS:
             raise ValueError(
                 f"backend 'mavlink' with {values['num_envs']} envs and {per} vehicles per "

@@ -23,14 +23,13 @@ from numpy.typing import ArrayLike
 
 from quadsitl import frames
 from quadsitl.mavlink.fleet_client import FleetClient
-from quadsitl.mavlink.hil_state import WireState
+from quadsitl.mavlink.hil_state import ROW_BY_ROW, WireState
 from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe
 from quadsitl.physics.fleet import VehicleStates
 
 FLYING_ALTITUDE = 20.0  # m: where the task origin of tasks without a ground is flown
-ROW_BY_ROW = 4  # up to this many answers, convert the states one by one
 
 
 class RemoteFleet(VehicleStates):

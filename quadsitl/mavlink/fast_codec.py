@@ -23,6 +23,7 @@ HEADER_SIZE = 10
 CRC_SIZE = 2
 SIGNATURE_SIZE = 13
 SIGNED = 0x01  # incompat flag
+DATAGRAM_LIMIT = 60_000  # bytes of frames per datagram (UDP's limit is 65,507)
 
 
 class Frame:
@@ -56,6 +57,21 @@ def pack(message_class: Any, values: tuple[Any, ...], seq: int, sysid: int, comp
     )
     body = header[1:] + payload
     return header[:1] + body + _crc(body, message_class.crc_extra).to_bytes(2, "little")
+
+
+def datagrams(units: list[bytes], limit: int = DATAGRAM_LIMIT) -> Iterator[bytes]:
+    """``units`` (frames, or a vehicle's frames joined) joined into as few datagrams of
+    at most ``limit`` bytes as they fit in; a unit is never split."""
+    chunk: list[bytes] = []
+    size = 0
+    for unit in units:
+        if chunk and size + len(unit) > limit:
+            yield b"".join(chunk)
+            chunk, size = [], 0
+        chunk.append(unit)
+        size += len(unit)
+    if chunk:
+        yield b"".join(chunk)
 
 
 def parse(data: bytes) -> Iterator[Frame]:

@@ -33,7 +33,7 @@ from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.commands import FORCE_MAGIC
 from quadsitl.mavlink.hil_state import WireState
-from quadsitl.mavlink.links import is_loopback
+from quadsitl.mavlink.links import MAX_DATAGRAM, is_loopback
 from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_MOTION
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
@@ -48,7 +48,6 @@ NAMED_VALUE_INT = mav.MAVLINK_MSG_ID_NAMED_VALUE_INT
 NAMED_VALUE_FLOAT = mav.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT
 COMMAND_ACK = mav.MAVLINK_MSG_ID_COMMAND_ACK
 SET_ACTUATOR_CONTROL_TARGET = mav.MAVLink_set_actuator_control_target_message
-MAX_DATAGRAM = 65535
 RESET_COMMANDS = 3  # stage motion, reset, arm
 STATUSTEXT_CHUNK = 50  # bytes of text per STATUSTEXT
 
@@ -114,17 +113,9 @@ class FleetClient:
         """Frames in as few datagrams as fit. An item is a packed frame or a pymavlink
         message, encoded now: each resend of a signed message gets a new signature (a
         signed frame sent twice is a replay, which the simulator refuses)."""
-        chunk: list[bytes] = []
-        size = 0
-        for item in items:
-            frame = item if isinstance(item, bytes) else self._encode(item)
-            if chunk and size + len(frame) > MAX_DATAGRAM - 1024:
-                self.sock.sendto(b"".join(chunk), self.address)
-                chunk, size = [], 0
-            chunk.append(frame)
-            size += len(frame)
-        if chunk:
-            self.sock.sendto(b"".join(chunk), self.address)
+        frames = [item if isinstance(item, bytes) else self._encode(item) for item in items]
+        for datagram in FC.datagrams(frames):
+            self.sock.sendto(datagram, self.address)
 
     def _receive(self, until: float) -> list[FC.Frame]:
         """The frames of the datagrams that arrive before ``until`` (wall, monotonic);

@@ -27,20 +27,17 @@ import numpy as np
 
 from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.hil_state import WireState
+from quadsitl.mavlink.hil_state import ROW_BY_ROW, WireState
 from quadsitl.mavlink.links import Link
-from quadsitl.mavlink.motor_path import NAN_COVARIANCE, check_controls
+from quadsitl.mavlink.motor_path import LOCKSTEP_IDLE, answer_parts, check_controls
 from quadsitl.mavlink.server import MOTOR_LINK, MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
-from quadsitl.physics import layout as L
 from quadsitl.physics.layout import P_OMEGA_MAX
 from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.results import Severity
 
 FAST_IDS = frozenset({mav.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET})
-ROW_BY_ROW = 4  # up to this many answers, convert the states one by one
 WIRE_FIELDS = ("position_ned", "q_ned_frd", "velocity_frd", "rates_frd", "rotor_speeds")
-UNUSED = (0.0,) * 28  # ACTUATOR_OUTPUT_STATUS has 32 outputs; 4 are rotors
 TICKS_PER_CALL = 8  # vehicles whose telemetry is looked at per tick in lockstep
 
 
@@ -103,7 +100,7 @@ class FleetServer:
         """Every vehicle's events, heartbeat and telemetry; in lockstep (ticked every
         few milliseconds of wall time) a few vehicles per call in turn, so that a large
         fleet's telemetry cannot slow the rounds down."""
-        if not self.lockstep or len(self.servers) <= TICKS_PER_CALL:
+        if not self.in_lockstep(wall_now) or len(self.servers) <= TICKS_PER_CALL:
             for server in self.servers:
                 server.tick(wall_now)
             return
@@ -111,10 +108,11 @@ class FleetServer:
             self.servers[self._next_tick].tick(wall_now)
             self._next_tick = (self._next_tick + 1) % len(self.servers)
 
-    @property
-    def lockstep(self) -> bool:
-        """True while simulated time moves only with motor commands (any vehicle's)."""
-        return any(server.motors.lockstep for server in self.servers)
+    def in_lockstep(self, wall_now: float) -> bool:
+        """Whether simulated time moves only with motor commands: always with
+        ``--lockstep``, else until LOCKSTEP_IDLE wall seconds after the last one."""
+        motors = self.servers[0].motors
+        return motors.always_lockstep or wall_now - self.last_lockstep_wall < LOCKSTEP_IDLE
 
     @property
     def last_lockstep_wall(self) -> float:
@@ -262,33 +260,7 @@ class FleetServer:
         ``state``: position NED, quaternion, body velocity and rates FRD, rotor speeds."""
         server = self.servers[i]
         sysid = server.system_id
-        time_ms = (time_usec // 1000) & 0xFFFFFFFF
-        p, q, v, r, rotors = state
-        parts: list[tuple[Any, tuple[Any, ...]]] = [
-            (mav.MAVLink_actuator_output_status_message, (time_usec, 0b1111, *rotors, *UNUSED)),
-        ]
-        if contact != L.AIRBORNE:  # no CONTACT means airborne: the answer stays lean
-            parts.append((mav.MAVLink_named_value_int_message, (time_ms, contact, b"CONTACT")))
-            parts.append((mav.MAVLink_named_value_float_message, (time_ms, touchdown, b"TD_SPEED")))
-        parts.append(
-            (
-                mav.MAVLink_odometry_message,
-                (
-                    time_usec,
-                    *p,
-                    *q,
-                    *v,
-                    *r,
-                    *NAN_COVARIANCE,
-                    *NAN_COVARIANCE,
-                    mav.MAV_FRAME_LOCAL_NED,
-                    mav.MAV_FRAME_BODY_FRD,
-                    server.motors.resets & 0xFF,
-                    mav.MAV_ESTIMATOR_TYPE_UNKNOWN,
-                    100,
-                ),
-            )
-        )
+        parts = answer_parts(time_usec, state, contact, touchdown, server.motors.resets, lean=True)
         if link.signs:  # pymavlink signs; the rest is packed here
             return [b"".join(link.pack(FC.message(cls, values), sysid) for cls, values in parts)]
         return [

@@ -21,6 +21,9 @@ from quadsitl import frames
 from quadsitl.physics import layout as L
 
 Vec = NDArray[np.float64]
+# Up to this many states, converting them one by one (the scalar fast paths of frames.py)
+# costs less than one whole-array conversion.
+ROW_BY_ROW = 4
 
 
 @dataclass

@@ -63,9 +63,6 @@ def is_loopback(host: str) -> bool:
         return False
 
 
-HELD_DATAGRAM = 60_000  # bytes per datagram when held frames go out (UDP's limit: 65,507)
-
-
 class _Capture:
     """File-like sink for pymavlink's encoder: keeps the last packed frame."""
 
@@ -251,16 +248,8 @@ class Link:
         """Send what was held, in as few datagrams as fit (each unit given to
         :meth:`send_bytes` stays whole)."""
         held, self._held = self._held, None
-        chunk: list[bytes] = []
-        size = 0
-        for unit in held or []:
-            if chunk and size + len(unit) > HELD_DATAGRAM:
-                self.send_bytes(b"".join(chunk))
-                chunk, size = [], 0
-            chunk.append(unit)
-            size += len(unit)
-        if chunk:
-            self.send_bytes(b"".join(chunk))
+        for datagram in FC.datagrams(held or []):
+            self.send_bytes(datagram)
 
     def send_bytes(self, frame: bytes) -> None:
         """Write already packed frames to every live peer (and the fixed destination),

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from quadsitl import frames
+from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.physics import layout as L
@@ -45,6 +46,49 @@ STANDARD_GRAVITY = 9.80665  # m/s² per g: the unit of HIL_STATE_QUATERNION's mG
 
 def _int16(x: float) -> int:
     return int(max(-32767, min(32767, round(x))))
+
+
+UNUSED_OUTPUTS = (0.0,) * 28  # ACTUATOR_OUTPUT_STATUS has 32 outputs; 4 are rotors
+
+
+def answer_parts(
+    time_usec: int,
+    state: tuple[list[float], ...],
+    contact: int,
+    touchdown: float,
+    resets: int,
+    lean: bool = False,
+) -> list[tuple[Any, tuple[Any, ...]]]:
+    """A state answer as (message class, values in wire order): ACTUATOR_OUTPUT_STATUS,
+    NAMED_VALUE_INT ``CONTACT`` (``lean``: only when not airborne, its absence meaning
+    airborne), NAMED_VALUE_FLOAT ``TD_SPEED`` (only when not airborne), ODOMETRY last.
+    ``state``: position NED, quaternion FRD -> NED, body velocity and rates FRD, rotor
+    speeds, as lists."""
+    p, q, v, r, rotors = state
+    time_ms = (time_usec // 1000) & 0xFFFFFFFF
+    parts: list[tuple[Any, tuple[Any, ...]]] = [
+        (mav.MAVLink_actuator_output_status_message, (time_usec, 0b1111, *rotors, *UNUSED_OUTPUTS))
+    ]
+    if contact != L.AIRBORNE or not lean:
+        parts.append((mav.MAVLink_named_value_int_message, (time_ms, contact, b"CONTACT")))
+    if contact != L.AIRBORNE:
+        parts.append((mav.MAVLink_named_value_float_message, (time_ms, touchdown, b"TD_SPEED")))
+    odometry = (
+        time_usec,
+        *p,
+        *q,
+        *v,
+        *r,
+        *NAN_COVARIANCE,
+        *NAN_COVARIANCE,
+        mav.MAV_FRAME_LOCAL_NED,
+        mav.MAV_FRAME_BODY_FRD,
+        resets & 0xFF,
+        mav.MAV_ESTIMATOR_TYPE_UNKNOWN,
+        100,
+    )
+    parts.append((mav.MAVLink_odometry_message, odometry))
+    return parts
 
 
 def check_controls(controls: Any) -> tuple[str, str] | None:
@@ -193,41 +237,16 @@ class MotorPath:
         wire = WireState.from_physics(
             v.state, v.airframe.gear_height, time_usec, contact, float(v.fleet.touchdown_speed[0])
         )
-        time_ms = (time_usec // 1000) & 0xFFFFFFFF
         messages = [self._hil_state_quaternion(wire)] if hil_state else []
-        messages += [
-            _encoder.actuator_output_status_encode(
-                time_usec, 0b1111, [float(w) for w in wire.rotor_speeds] + [0.0] * 28
-            ),
-            _encoder.named_value_int_encode(time_ms, b"CONTACT", contact),
-        ]
-        if contact != L.AIRBORNE:
-            messages.append(
-                _encoder.named_value_float_encode(time_ms, b"TD_SPEED", wire.touchdown_speed)
-            )
-        p, q, vel, r = wire.position_ned, wire.q_ned_frd, wire.velocity_frd, wire.rates_frd
-        odometry = _encoder.odometry_encode(
-            time_usec,
-            mav.MAV_FRAME_LOCAL_NED,
-            mav.MAV_FRAME_BODY_FRD,
-            p[0],
-            p[1],
-            p[2],
-            list(q),
-            vel[0],
-            vel[1],
-            vel[2],
-            r[0],
-            r[1],
-            r[2],
-            NAN_COVARIANCE,
-            NAN_COVARIANCE,
-            self.resets & 0xFF,
-            mav.MAV_ESTIMATOR_TYPE_UNKNOWN,
-            100,
+        state = (
+            wire.position_ned.tolist(),
+            wire.q_ned_frd.tolist(),
+            wire.velocity_frd.tolist(),
+            wire.rates_frd.tolist(),
+            wire.rotor_speeds.tolist(),
         )
-        messages.append(odometry)
-        return messages
+        parts = answer_parts(time_usec, state, contact, wire.touchdown_speed, self.resets)
+        return messages + [FC.message(cls, values) for cls, values in parts]
 
     def _hil_state_quaternion(self, wire: WireState) -> Any:
         v = self.vehicle

@@ -29,7 +29,6 @@ import numpy as np
 from quadsitl.mavlink.fleet_server import FleetServer
 from quadsitl.mavlink.identity import get_identity
 from quadsitl.mavlink.links import Link
-from quadsitl.mavlink.motor_path import LOCKSTEP_IDLE
 from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.physics import Airframe, get_airframe
@@ -228,12 +227,12 @@ class Simulator:
             now = time.monotonic()
             if end is not None and now >= end:
                 break
-            last_command = self.server.last_lockstep_wall
-            if self.config.lockstep or now - last_command < LOCKSTEP_IDLE:
+            if self.server.in_lockstep(now):
                 start, steps = now, 0  # real time resumes from here when lockstep ends
                 # Poll while commands are flowing (waking from sleep costs more than a
                 # round trip); sleep once the client pauses.
-                wait = 0.0 if now - last_command < LOCKSTEP_SPIN else LOCKSTEP_WAIT
+                busy = now - self.server.last_lockstep_wall < LOCKSTEP_SPIN
+                wait = 0.0 if busy else LOCKSTEP_WAIT
                 if now - last_tick >= LOCKSTEP_TICK:
                     self.server.tick(now)
                     last_tick = now

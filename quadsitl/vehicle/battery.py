@@ -9,8 +9,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+from numpy.typing import ArrayLike
+
 CELL_FULL_V = 4.2  # V, LiPo cell fully charged
 CELL_EMPTY_V = 3.5  # V, LiPo cell at the end of usable charge
+
+
+def shaft_power(torque_coeff: ArrayLike, rotor_speeds: ArrayLike) -> np.ndarray:
+    """Shaft power of the rotors, W: Σ kq·Ω³ over the last axis (one vehicle's (4,)
+    speeds, or (N, 4) with ``torque_coeff`` (N,))."""
+    return np.asarray(torque_coeff) * (np.asarray(rotor_speeds) ** 3).sum(axis=-1)
 
 
 @dataclass

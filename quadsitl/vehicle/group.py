@@ -19,12 +19,12 @@ import numpy as np
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import FleetSlot
+from quadsitl.vehicle.battery import shaft_power
 from quadsitl.vehicle.controller import Autopilot
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.vehicle import Vehicle
 
 MAX_VEHICLES = 254  # one MAVLink system id each
-FEW = 4  # up to this many vehicles, per-vehicle arithmetic beats array operations
 
 
 def grid_offsets(n: int, spacing: float) -> list[tuple[float, float]]:
@@ -98,11 +98,7 @@ class VehicleGroup:
         """Each vehicle's part after the physics, with every shaft power (Q = k_Q·Ω²,
         P = Q·Ω per rotor) computed in one array operation."""
         physics = self.physics
-        if physics.n <= FEW:  # array operations pay off for more
-            for v, before in zip(self.vehicles, contacts, strict=True):
-                v.end_step(before, seconds)
-            return
         rotors = physics.state[:, L.ROTORS]
-        powers = (physics.params[:, L.P_KQ] * (rotors**3).sum(axis=1)).tolist()
+        powers = shaft_power(physics.params[:, L.P_KQ], rotors).tolist()
         for v, before, power in zip(self.vehicles, contacts, powers, strict=True):
             v.end_step(before, seconds, power)

@@ -26,6 +26,7 @@ from quadsitl.vehicle import guidance as G
 from quadsitl.vehicle import mission as M
 from quadsitl.vehicle import param_binding as P
 from quadsitl.vehicle.battery import Battery
+from quadsitl.vehicle.battery import shaft_power as battery_power
 from quadsitl.vehicle.controller import Autopilot, CascadedController, Setpoint, Vec
 from quadsitl.vehicle.failsafe import Failsafes
 from quadsitl.vehicle.geo import Home
@@ -334,8 +335,8 @@ class Vehicle:
         (``shaft_power``, W, when the caller has it for the whole group)."""
         GC.watch_contact(self, contact_before)
         if shaft_power is None:
-            cubes = sum(w * w * w for w in self.fleet.state[0, L.ROTORS].tolist())
-            shaft_power = self.airframe.torque_coeff * cubes
+            rotors = self.fleet.state[0, L.ROTORS]
+            shaft_power = float(battery_power(self.airframe.torque_coeff, rotors))
         self.battery.drain(shaft_power, seconds)
 
     def control(self) -> None:
