@@ -36,6 +36,31 @@ def test_single_vehicle_accepts_a_flat_command():
     assert fleet.time == pytest.approx(0.01)
 
 
+@pytest.mark.parametrize("backend", ["compiled", "reference"])
+@pytest.mark.parametrize("n", [1, 3])
+def test_every_form_of_a_command_steps_the_same(backend, n):
+    """(n, 4) or, for one vehicle, (4,); float64 or not, contiguous or not, array or list:
+    the fast path of Fleet.step takes some as they are and converts the rest."""
+    command = np.linspace(150.0, 320.0, 4 * n).reshape(n, 4)
+    wide = np.zeros((n, 8))
+    wide[:, ::2] = command  # a non-contiguous view of the same numbers
+    forms = [command, wide[:, ::2], command.tolist(), command.astype(np.float32)]
+    if n == 1:
+        forms += [command[0], wide[0, ::2], command[0].tolist()]
+    results = []
+    for form in forms:
+        fleet = Fleet(n, backend=backend)
+        fleet.step(form, n_substeps=3)
+        results.append(fleet.state.copy())
+    expected = Fleet(n, backend=backend)
+    expected.step(command.astype(np.float32).astype(np.float64), n_substeps=3)
+    assert not np.array_equal(expected.state, results[0])  # the forms are told apart
+    for form, state in zip(forms, results, strict=True):
+        # float32 differs from float64 only by the rounding of the command itself
+        same_as = expected.state if np.asarray(form).dtype == np.float32 else results[0]
+        np.testing.assert_array_equal(state, same_as)
+
+
 def test_unknown_airframe_name():
     with pytest.raises(ValueError, match=r"unknown airframe 'bogus'.*paper"):
         get_airframe("bogus")

@@ -20,6 +20,7 @@ from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe, get_airframe, hover_rotor_speed
 
 BACKENDS = ("compiled", "reference")
+_FLOAT64, _NDARRAY = np.dtype(np.float64), np.ndarray  # the fast path of Fleet.step
 
 
 def initial_state(
@@ -198,8 +199,13 @@ class Fleet(VehicleStates):
             raise ValueError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
         super().__init__(n, airframe, dt, ground_z)
         self.backend = backend
-        self._compiled = backend == "compiled"
         self._cmd_shape = (self.n, L.N_ROTORS)
+        # A fleet of one also takes a (4,) command (checked first: it is the common one).
+        self._one_vehicle_shape = (L.N_ROTORS,) if self.n == 1 else self._cmd_shape
+        if backend == "reference":
+            self._step_arrays = _reference_step
+        else:
+            self._step_arrays = kernel.single_step if self.n == 1 else kernel.batch_step
 
     # --- stepping -------------------------------------------------------------------
     def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
@@ -208,35 +214,35 @@ class Fleet(VehicleStates):
         ``rotor_cmd`` has shape (n, 4) (or (4,) for a fleet of one). Commands are clipped
         to [0, Ω_max]; NaN or inf raise ValueError and leave the state untouched.
         """
-        cmd = np.ascontiguousarray(rotor_cmd, dtype=np.float64)
-        if cmd.shape != self._cmd_shape:
-            if cmd.shape != (L.N_ROTORS,) or self.n != 1:
-                raise ValueError(
-                    f"rotor commands must have shape ({self.n}, {L.N_ROTORS}), got {cmd.shape}"
-                )
-            cmd = cmd.reshape(self._cmd_shape)
-        if self._compiled:
-            bad = kernel.step(
-                self.state,
-                self.params,
-                cmd,
-                self.contact,
-                self.touchdown_speed,
-                self.dt,
-                n_substeps,
+        cmd = rotor_cmd
+        if type(cmd) is not _NDARRAY or cmd.dtype is not _FLOAT64:
+            cmd = np.asarray(cmd, dtype=np.float64)
+        if cmd.shape != self._one_vehicle_shape and cmd.shape != self._cmd_shape:
+            raise ValueError(
+                f"rotor commands must have shape ({self.n}, {L.N_ROTORS}), got {cmd.shape}"
             )
-            if bad >= 0:
-                raise ValueError(f"rotor command of vehicle {bad} is not finite: {cmd[bad]}")
-        else:
-            bad_rows = ~np.isfinite(cmd).all(axis=1)
-            if bad_rows.any():
-                bad = int(np.argmax(bad_rows))
-                raise ValueError(f"rotor command of vehicle {bad} is not finite: {cmd[bad]}")
-            for _ in range(n_substeps):
-                self.state, self.contact, self.touchdown_speed = reference.step(
-                    self.state, self.params, cmd, self.contact, self.touchdown_speed, self.dt
-                )
-        self.time += n_substeps * self.dt
+        dt = self.dt
+        bad = self._step_arrays(
+            self.state, self.params, cmd, self.contact, self.touchdown_speed, dt, n_substeps
+        )
+        if bad >= 0:
+            rows = cmd.reshape(self._cmd_shape)
+            raise ValueError(f"rotor command of vehicle {bad} is not finite: {rows[bad]}")
+        self.time += n_substeps * dt
+
+
+def _reference_step(state, params, rotor_cmd, contact, touchdown_speed, dt, n_substeps) -> int:
+    """The kernel's ``step`` contract in numpy: steps in place; returns -1, or the first
+    vehicle with a non-finite command (and then changes nothing)."""
+    cmd = rotor_cmd.reshape(len(state), L.N_ROTORS)
+    bad_rows = ~np.isfinite(cmd).all(axis=1)
+    if bad_rows.any():
+        return int(np.argmax(bad_rows))
+    for _ in range(n_substeps):
+        state[:], contact[:], touchdown_speed[:] = reference.step(
+            state, params, cmd, contact, touchdown_speed, dt
+        )
+    return -1
 
 
 class FleetSlot(VehicleStates):
