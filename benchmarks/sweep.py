@@ -1,10 +1,12 @@
-"""The same reduced grid through the hand-made process pool of ``benchmarks/algorithms.py``
-and through ``quadsitl sweep`` (Ray Tune), in one run: ``sweep_vs_pool_wall_clock``
-is the sweep's wall clock over the pool's (target ≤ 1.05).
+"""The same reduced grid through a hand-made process pool (how ``benchmarks/algorithms.py``
+scheduled its runs before it became a sweep) and through ``quadsitl sweep`` (Ray Tune),
+in one run: ``sweep_vs_pool_wall_clock`` is the sweep's wall clock over the pool's
+(target ≤ 1.05).
 
 Grid: hover × PPO, TRPO × seeds 0, 1 on the fast preset, ``--steps`` each (default
-98,304: 24 iterations), two at a time (one per core of this machine) both ways. The
-sweep's figure includes starting Ray; on grids of real length that start matters less.
+98,304: 24 iterations), each run's best checkpoint then tested on ``TEST_EPISODES``
+episodes, two at a time (one per core of this machine) both ways. The sweep's figure
+includes starting Ray; on grids of real length that start matters less.
 
     python benchmarks/sweep.py [--steps N]
 """
@@ -21,17 +23,20 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from policies.comparison import score_run
 from policies.config import make_config
 from policies.sweep import run_sweep
 from policies.train import train
 
 GRID = {"task": ["hover"], "algo": ["ppo", "trpo"], "seed": [0, 1]}
+TEST_EPISODES = 25
 
 
 def _pool_run(task: str, algo: str, seed: int, steps: int, runs: str) -> None:
     torch.set_num_threads(1)
     config = make_config(task, algo, "fast", seed, total_steps=steps)
-    train(config, Path(runs) / f"{task}-{algo}-seed{seed}", progress=False)
+    result = train(config, Path(runs) / f"{task}-{algo}-seed{seed}", progress=False)
+    score_run(result.run_dir, TEST_EPISODES)
 
 
 def pool_seconds(steps: int) -> float:
@@ -51,7 +56,9 @@ def pool_seconds(steps: int) -> float:
 def sweep_seconds(steps: int) -> float:
     with tempfile.TemporaryDirectory() as runs:
         start = time.perf_counter()
-        results = run_sweep(GRID, {}, {"total_steps": steps}, Path(runs), cpus=2)
+        results = run_sweep(
+            GRID, {}, {"total_steps": steps}, Path(runs), cpus=2, test_episodes=TEST_EPISODES
+        )
         seconds = time.perf_counter() - start
     failed = [r for r in results if r.get("error")]
     if failed:

@@ -18,9 +18,11 @@ import sys
 from pathlib import Path
 
 import torch
-from algorithms import one_run  # benchmarks/algorithms.py, beside this script
 
-from policies.config import FAST_STEPS
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from policies.comparison import score_run
+from policies.config import FAST_STEPS, make_config
+from policies.train import train
 
 TARGETS = {  # task: (success target, wall-clock seconds), PPO with the fast preset
     "hover": (0.95, 60.0),
@@ -38,15 +40,17 @@ def main() -> None:
     runs = Path(args.runs)
     for task in args.tasks:
         target, limit = TARGETS[task]
-        r = one_run(task, "ppo", "fast", 0, FAST_STEPS[task], runs, target)
-        met = r["reach_seconds"] <= limit and r["success"] >= target
+        config = make_config(task, "ppo", "fast", 0, total_steps=FAST_STEPS[task])
+        run = train(config, runs / f"{task}-ppo-fast-seed0", progress=False, mode="overwrite")
+        r = score_run(run.run_dir, 100, target)
+        met = r["reach_seconds"] <= limit and r["test_success"] >= target
         print(
-            f"{task} ppo fast: test success {r['success']:.0%} (best checkpoint, 100 "
+            f"{task} ppo fast: test success {r['test_success']:.0%} (best checkpoint, 100 "
             f"episodes); validation success ≥ {target:.0%} first at {r['reach_seconds']:.0f} s; "
-            f"run {r['seconds']:.0f} s, {r['steps']:,.0f} steps; target ≥ {target:.0%} within "
+            f"run {run.seconds:.0f} s, {run.env_steps:,.0f} steps; target ≥ {target:.0%} within "
             f"{limit:.0f} s: {'meets' if met else 'MISSES'}"
         )
-        print(f"{task}_ppo_fast_success: {r['success']:.3f}")
+        print(f"{task}_ppo_fast_success: {r['test_success']:.3f}")
         print(f"{task}_ppo_fast_seconds_to_target: {r['reach_seconds']:.1f}")
         sys.stdout.flush()
 

@@ -38,6 +38,15 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         help="with --backend mavlink: vehicles (envs) in each simulator process (default: 64)",
     )
     train.add_argument(
+        "--ray",
+        nargs="?",
+        const="local",
+        metavar="ADDR",
+        help="with --backend mavlink: start the simulators as Ray actors spread over a Ray "
+        "cluster (ADDR, e.g. 10.0.0.1:6379; without it: RAY_ADDRESS's cluster or a local "
+        "Ray); see docs/distributed.md",
+    )
+    train.add_argument(
         "--steps",
         type=_count(1),
         help="environment steps, at least one batch (default: the preset's)",
@@ -124,6 +133,13 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
     sweep.add_argument("--cpus", type=_count(1), help="CPUs of the local Ray (default: all)")
     sweep.add_argument("--address", help="join the Ray cluster at ADDRESS (ray start --head)")
     sweep.add_argument("--resume", action="store_true", help="finish an interrupted sweep")
+    sweep.add_argument(
+        "--test-episodes",
+        type=_count(0),
+        default=0,
+        help="after training, test each run's best checkpoint on N deterministic episodes "
+        "and add the algorithms-comparison table to the results (default: 0, no test)",
+    )
 
 
 def _count(low: int):  # type: ignore[no-untyped-def]
@@ -155,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
+    from policies.comparison import comparison_table
     from policies.plots import learning_curves
     from policies.sweep import parse_grid, parse_search, run_sweep, table
 
@@ -174,9 +191,13 @@ def _sweep(args: argparse.Namespace) -> int:
         args.cpus,
         args.address,
         args.resume,
+        args.test_episodes,
     )
     out = Path(args.runs) / "sweeps" / args.name
     text = table(results)
+    tested = [r for r in results if "test_success" in r]
+    if tested:
+        text += "\n" + comparison_table(tested)
     (out / "results.md").write_text(text)
     runs = [Path(r["run"]) for r in results]
     curves = learning_curves([r for r in runs if (r / "metrics.csv").is_file()], out)
@@ -197,6 +218,7 @@ def _train(args: argparse.Namespace) -> int:
         args.seed,
         backend=args.backend,
         vehicles_per_sim=args.vehicles_per_sim,
+        ray=args.ray,
         total_steps=args.steps,
         num_envs=args.num_envs,
     )

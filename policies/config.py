@@ -32,6 +32,7 @@ class TrainConfig:
     seed: int = 0
     backend: str = "inprocess"  # or "mavlink": the vehicles fly in simulator processes
     vehicles_per_sim: int = 64  # with backend "mavlink": vehicles in each simulator process
+    ray: str = ""  # with backend "mavlink": simulators as Ray actors ("local" or an address)
     num_envs: int = 1  # parallel envs collecting each batch
     steps_per_env: int = 256  # rollout length; batch = num_envs * steps_per_env
     total_steps: int = 1_280_000  # environment steps (the paper: 5000 x 256)
@@ -124,7 +125,7 @@ _BOOLS = ("anneal_lr", "normalize_obs", "normalize_advantages")
 def _check(config: TrainConfig) -> None:
     """A clear ValueError for any value a run cannot use (types included: a checkpoint's
     config comes from a file)."""
-    for name in ("task", "algo", "preset", "backend"):
+    for name in ("task", "algo", "preset", "backend", "ray"):
         if not isinstance(getattr(config, name), str):
             raise ValueError(f"{name} must be a string, got {getattr(config, name)!r}")
     check_task(config.task)
@@ -132,6 +133,8 @@ def _check(config: TrainConfig) -> None:
         raise ValueError(f"unknown algorithm {config.algo!r}; choose one of {ALGORITHMS}")
     if config.backend not in BACKENDS:
         raise ValueError(f"unknown backend {config.backend!r}; choose one of {BACKENDS}")
+    if config.ray and config.backend != "mavlink":
+        raise ValueError("ray places simulators: it needs backend 'mavlink'")
     for name in (*_POSITIVE_INTS, *_NON_NEGATIVE_INTS):
         value = getattr(config, name)
         least = 1 if name in _POSITIVE_INTS else 0
@@ -266,8 +269,9 @@ def make_config(
     if unknown:
         raise ValueError(f"unknown training option(s) {sorted(unknown)}")
     values.update({k: v for k, v in overrides.items() if v is not None})
-    if values.get("backend") == "mavlink":
-        # Each simulator process flies vehicles_per_sim of the envs.
+    if values.get("backend") == "mavlink" and not values.get("ray"):
+        # Each simulator process flies vehicles_per_sim of the envs (on a Ray cluster
+        # they are spread over its nodes, so this machine's limit does not apply).
         per = values.get("vehicles_per_sim", TrainConfig.vehicles_per_sim)
         processes = len(fleet_sizes(values.get("num_envs", 1), per, None))
         if processes > MAX_SIMULATORS:

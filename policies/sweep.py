@@ -18,14 +18,17 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import socket
 import statistics
 from pathlib import Path
 from typing import Any
 
 from policies.config import TrainConfig, make_config
+from quadsitl.envs.ray_simulators import check_ray_address
 
 RUN_KEYS = ("task", "algo", "preset", "seed")  # make_config's own arguments
+# Options of the sweep, not of a run: the runs' folder, test episodes after training
+# (0: none), and per-task step budgets ({task: steps}, for the algorithms comparison).
+SWEEP_KEYS = ("runs", "test_episodes", "steps_per_task")
 FIXED = frozenset({"backend"})  # options a sweep does not vary (a run per process)
 REPORTED = ("iteration", "env_steps", "wall_seconds", "mean_return", "success_rate")
 DISTRIBUTIONS = ("loguniform", "uniform", "randint", "choice")
@@ -144,7 +147,10 @@ def check_trials(
 
 
 def config_of(trial: dict[str, Any]) -> TrainConfig:
-    options = {k: v for k, v in trial.items() if k not in RUN_KEYS and k != "runs"}
+    options = {k: v for k, v in trial.items() if k not in (*RUN_KEYS, *SWEEP_KEYS)}
+    budget = (trial.get("steps_per_task") or {}).get(trial["task"])
+    if budget is not None:
+        options.setdefault("total_steps", budget)
     return make_config(trial["task"], trial["algo"], trial["preset"], trial["seed"], **options)
 
 
@@ -153,25 +159,26 @@ def run_name(trial: dict[str, Any]) -> str:
     name = (
         f"{trial['task'].replace('/', '_')}-{trial['algo']}-{trial['preset']}-seed{trial['seed']}"
     )
-    extra = sorted((k, v) for k, v in trial.items() if k not in (*RUN_KEYS, "runs"))
+    extra = sorted((k, v) for k, v in trial.items() if k not in (*RUN_KEYS, *SWEEP_KEYS))
     return name + "".join(f"-{k}{v:g}" if isinstance(v, float) else f"-{k}{v}" for k, v in extra)
 
 
 def check_address(address: str) -> None:
     """An unreachable cluster is an error now (``ray.init`` would wait a long time)."""
-    host, _, port = address.removeprefix("ray://").rpartition(":")
     try:
-        with socket.create_connection((host or "127.0.0.1", int(port)), timeout=3):
-            return
-    except (OSError, ValueError) as error:
-        raise SweepError(f"no Ray cluster answers at {address!r} ({error})") from None
+        check_ray_address(address)
+    except ValueError as error:
+        raise SweepError(str(error)) from None
 
 
 def trial(params: dict[str, Any]) -> None:  # runs in a Ray worker
-    """One training run, every iteration's metrics reported to Tune."""
+    """One training run, every iteration's metrics reported to Tune; then, with
+    ``test_episodes``, its best checkpoint tested (:func:`policies.comparison.score_run`)
+    and the test figures reported too."""
     import torch
     from ray import tune
 
+    from policies.comparison import score_run
     from policies.train import holds_run, train
 
     torch.set_num_threads(1)
@@ -189,7 +196,12 @@ def trial(params: dict[str, Any]) -> None:  # runs in a Ray worker
     except ValueError as error:
         if "has already run" not in str(error):
             raise
-        tune.report({"iteration": float(config.iterations), "done": 1.0})
+        last.update({"iteration": float(config.iterations), "done": 1.0})
+        if not params.get("test_episodes"):
+            tune.report(last)
+    if params.get("test_episodes"):
+        last.update(score_run(run_dir, int(params["test_episodes"])))
+        tune.report({k: v for k, v in last.items() if math.isfinite(v)})
 
 
 def run_sweep(
@@ -202,9 +214,14 @@ def run_sweep(
     cpus: int | None = None,
     address: str | None = None,
     resume: bool = False,
+    test_episodes: int = 0,
+    steps_per_task: dict[str, int] | None = None,
 ) -> list[dict[str, Any]]:
-    """Run (or, with ``resume``, finish) the sweep; the results, one dict per trial."""
-    check_trials(grid, fixed, search)  # everything checked before Ray starts
+    """Run (or, with ``resume``, finish) the sweep; the results, one dict per trial.
+    ``test_episodes``: test each run's best checkpoint on that many episodes after
+    training; ``steps_per_task``: each task's step budget (unless ``fixed`` sets one)."""
+    sweep_options = {"test_episodes": test_episodes, "steps_per_task": steps_per_task or {}}
+    check_trials(grid, {**fixed, **sweep_options}, search)  # checked before Ray starts
     if address is not None:
         check_address(address)
     storage = (Path(runs) / "sweeps").resolve()
@@ -232,7 +249,7 @@ def run_sweep(
             )
         else:
             space: dict[str, Any] = {"runs": str(Path(runs).resolve())}
-            space |= {"preset": "fast", "seed": 0, **fixed}
+            space |= {"preset": "fast", "seed": 0, **sweep_options, **fixed}
             space |= {k: tune.grid_search(v) for k, v in grid.items()}
             distributions = {
                 "loguniform": lambda v: tune.loguniform(*v),
@@ -249,7 +266,11 @@ def run_sweep(
             tuner = tune.Tuner(
                 runnable,
                 param_space=space,
-                tune_config=tune.TuneConfig(num_samples=samples, scheduler=scheduler),
+                # A trial's worker process stays for the next trial: no new interpreter
+                # (and torch import) per run.
+                tune_config=tune.TuneConfig(
+                    num_samples=samples, scheduler=scheduler, reuse_actors=True
+                ),
                 run_config=tune.RunConfig(storage_path=str(storage), name=name, verbose=1),
             )
         results = tuner.fit()

@@ -123,7 +123,9 @@ def train(
     # Everything that can fail at start happens before the folder is touched.
     seed = _seed(config.seed, start.iteration)
     seed_everything(seed)
-    wire = {"vehicles_per_sim": config.vehicles_per_sim} if config.backend == "mavlink" else {}
+    wire: dict[str, Any] = {}
+    if config.backend == "mavlink":
+        wire = {"vehicles_per_sim": config.vehicles_per_sim, "ray": config.ray or None}
     env = make_vector_env(
         config.task, config.num_envs, config.backend, **wire, **config.task_options
     )

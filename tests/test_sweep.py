@@ -5,6 +5,7 @@ before Ray starts."""
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import time
@@ -38,13 +39,19 @@ def _iterations_reported(runs: Path) -> dict[str, int]:
 
 
 def test_a_grid_of_four_trials_reports_every_iteration_and_writes_the_table(tmp_path):
-    sweep = _sweep(tmp_path, "--grid task=hover algo=ppo,trpo seed=0..1 --cpus 2")
+    sweep = _sweep(tmp_path, "--grid task=hover algo=ppo,trpo seed=0..1 --cpus 2 --test-episodes 5")
     output, _ = sweep.communicate(timeout=400)
     assert sweep.returncode == 0, output[-3000:]
     reported = _iterations_reported(tmp_path)
-    assert len(reported) == 4 and set(reported.values()) == {2}, reported
+    # two iterations, then the test of the best checkpoint: three reports per trial
+    assert len(reported) == 4 and set(reported.values()) == {3}, reported
     table = (tmp_path / "sweeps" / "sweep" / "results.md").read_text()
     assert "| hover | ppo | 2 |" in table and "| hover | trpo | 2 |" in table
+    # the algorithms comparison: each run's best checkpoint tested on 5 episodes
+    assert "| task | algorithm | test success (mean ± std; per seed) |" in table
+    for algo in ("PPO", "TRPO"):
+        row = next(line for line in table.splitlines() if line.startswith(f"| hover | {algo} |"))
+        assert re.search(r"\| \d+% ± \d+% \(\d+%, \d+%\) \| final position error ", row), row
     runs = sorted(p.name for p in tmp_path.glob("hover-*"))
     assert runs == [
         f"hover-{algo}-fast-seed{seed}-total_steps{TWO_ITERATIONS}"

@@ -11,10 +11,12 @@ from __future__ import annotations
 
 import math
 import os
+import secrets
 import time
 import warnings
 from typing import Any
 
+from quadsitl.envs.ray_simulators import LOCAL, RaySimulator, join_ray, place_simulators
 from quadsitl.envs.remote_fleet import RemoteFleet
 from quadsitl.envs.sim_process import SimProcess
 from quadsitl.mavlink.fleet_client import FleetClient
@@ -37,6 +39,7 @@ BACKEND_OPTIONS = (
     "signing_key",
     "vehicles_per_sim",
     "simulators",
+    "ray",
 )
 
 
@@ -116,19 +119,32 @@ def fleet_sizes(n: int, vehicles_per_sim: Any, simulators: Any) -> list[int]:
     return sizes
 
 
+def ray_address(ray: Any, sim_address: Any) -> str | None:
+    """The ``ray`` option as an address to join (``"local"`` for True), or None."""
+    if ray is None or ray is False:
+        return None
+    if ray is not True and (not isinstance(ray, str) or not ray.strip()):
+        raise ValueError(
+            f"ray must be True or a Ray cluster address such as 10.0.0.1:6379, got {ray!r}"
+        )
+    if sim_address is not None:
+        raise ValueError("give sim_address (running simulators) or ray (place them), not both")
+    return LOCAL if ray is True else ray.strip()
+
+
 def _check_options(
-    sizes: list[int], sim_address: Any, gcs: Any, system_id: Any, timeout: Any, signing_key: Any
+    sizes: list[int], spawned_here: bool, gcs: Any, system_id: Any, timeout: Any, signing_key: Any
 ) -> None:
     """A clear ValueError at construction for any option the backend cannot use."""
     n = sum(sizes)
-    if sim_address is None:
+    if spawned_here:
         limit = max_spawned_simulators()
         if len(sizes) > limit:
             raise ValueError(
                 f"{n} envs would start {len(sizes)} simulator processes (about "
                 f"{SIM_PROCESS_BYTES // 2**20} MB each); this machine's free memory holds "
                 f"{limit}; put more vehicles in each (vehicles_per_sim), use fewer envs or "
-                "start simulators elsewhere (sim_address)"
+                "start simulators elsewhere (sim_address, or ray=True for a Ray cluster)"
             )
     if (
         isinstance(timeout, bool)
@@ -170,6 +186,11 @@ class MavlinkBackend:
         signing_key: 32-byte MAVLink 2 key (the spawned simulators require it too).
         vehicles_per_sim: vehicles in each simulator process (default 1).
         simulators: instead, the number of simulator processes (vehicles spread evenly).
+        ray: start the simulator processes as Ray actors spread over a cluster
+            (:mod:`quadsitl.envs.ray_simulators`): True (the Ray this process joined, or
+            a new local one, or RAY_ADDRESS) or a cluster address. Without a
+            ``signing_key`` a random one is made for the run: simulators on a network
+            accept only this env's commands.
     """
 
     def __init__(
@@ -184,6 +205,7 @@ class MavlinkBackend:
         signing_key: bytes | None = None,
         vehicles_per_sim: int | None = None,
         simulators: int | None = None,
+        ray: bool | str | None = None,
     ) -> None:
         if options.param_randomization:
             raise ValueError("param_randomization is not available with backend='mavlink'")
@@ -197,7 +219,13 @@ class MavlinkBackend:
         if addresses is not None and vehicles_per_sim is None and simulators is None:
             simulators = len(addresses)  # one address per process
         self.sizes = fleet_sizes(n, vehicles_per_sim, simulators)
-        _check_options(self.sizes, sim_address, gcs, system_id, timeout, signing_key)
+        self.ray = ray_address(ray, sim_address)
+        spawned_here = sim_address is None and self.ray is None
+        _check_options(self.sizes, spawned_here, gcs, system_id, timeout, signing_key)
+        if self.ray is not None:
+            join_ray(self.ray)
+            if signing_key is None:
+                signing_key = secrets.token_bytes(32)
         if addresses is not None and len(addresses) != len(self.sizes):
             raise ValueError(
                 f"got {len(addresses)} simulator addresses for {len(self.sizes)} simulators"
@@ -212,7 +240,7 @@ class MavlinkBackend:
         self.gcs = gcs
         self.system_id = system_id
         self.first_ids = [system_id + sum(self.sizes[:k]) for k in range(len(self.sizes))]
-        self.processes: list[SimProcess] = []
+        self.processes: list[SimProcess | RaySimulator] = []
         self.clients: list[FleetClient] = []
         self._connect()
 
@@ -236,15 +264,17 @@ class MavlinkBackend:
         ]
 
     def _connect(self) -> None:
-        if self.addresses is None:
-            key = {"QUADSITL_SIGNING_KEY": self.signing_key.hex()} if self.signing_key else {}
-            self.processes = [
-                SimProcess(self._sim_args(i), env=key) for i in range(len(self.sizes))
-            ]
-            addresses = [("127.0.0.1", p.port) for p in self.processes]
-        else:
-            addresses = self.addresses
         try:
+            if self.addresses is None:
+                key = {"QUADSITL_SIGNING_KEY": self.signing_key.hex()} if self.signing_key else {}
+                commands = [self._sim_args(i) for i in range(len(self.sizes))]
+                if self.ray is None:
+                    self.processes = [SimProcess(args, env=key) for args in commands]
+                else:
+                    self.processes = place_simulators(commands, key)
+                addresses = [p.address for p in self.processes]
+            else:
+                addresses = self.addresses
             for k, (host, port) in enumerate(addresses):
                 client = FleetClient(
                     host, port, self.sizes[k], self.first_ids[k], self.timeout, self.signing_key

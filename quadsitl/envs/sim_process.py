@@ -77,12 +77,18 @@ def _terminate(process: subprocess.Popen[bytes]) -> None:
 
 class SimProcess:
     """The simulator as a child process. ``args``: extra ``quadsitl sim`` options;
-    ``env``: extra environment variables (e.g. QUADSITL_SIGNING_KEY)."""
+    ``env``: extra environment variables (e.g. QUADSITL_SIGNING_KEY); ``host``: the
+    address its lockstep link listens on (loopback unless the envs are elsewhere)."""
 
     def __init__(
-        self, args: list[str], port: int | None = None, env: dict[str, str] | None = None
+        self,
+        args: list[str],
+        port: int | None = None,
+        env: dict[str, str] | None = None,
+        host: str = "127.0.0.1",
     ) -> None:
-        self.port = port if port is not None else free_udp_port()
+        self.host = host
+        self.port = port if port is not None else free_udp_port(host)
         self.command = [
             sys.executable,
             "-m",
@@ -91,7 +97,7 @@ class SimProcess:
             "--lockstep",
             "--quiet",
             "--hil",
-            f"udpin:127.0.0.1:{self.port}",
+            f"udpin:{host}:{self.port}",
             "--logs",
             "none",
             *args,
@@ -106,6 +112,11 @@ class SimProcess:
         )
         self._finalizer = weakref.finalize(self, _terminate, self.process)
         atexit.register(self._finalizer)
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """(host, port) of its lockstep link."""
+        return self.host, self.port
 
     @property
     def alive(self) -> bool:

@@ -32,10 +32,10 @@ PEER_TIMEOUT = 10.0  # s without a packet before a learned UDP peer is dropped
 MAX_DATAGRAM = 65535
 
 
-def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that nothing uses right now."""
+def free_udp_port(host: str = "127.0.0.1") -> int:
+    """A UDP port on ``host`` that nothing uses right now."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
+        probe.bind((host, 0))
         return int(probe.getsockname()[1])
 
 

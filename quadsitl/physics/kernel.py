@@ -25,6 +25,131 @@ THRUST, ROLL_MOMENT, PITCH_MOMENT, YAW_SUM = 0, 1, 2, 3  # rows of the rotor sum
 # FMA contraction and reciprocal division only: no fast-math NaN/inf assumptions, so
 # the finiteness check stays exact.
 _OPTIONS = dict(cache=True, error_model="numpy", fastmath={"contract", "arcp", "nsz"})
+# The helpers are inlined into ``step`` (numba IR), where B is a compile-time constant.
+_inline = numba.njit(inline="always", **_OPTIONS)
+
+
+@_inline
+def _derivative(s, p, cmd, out, m, sums, B):  # pragma: no cover - compiled
+    """ṡ of the first m vehicles of a block: s, p and cmd hold rows of B values; ``sums``
+    (4 rows) is scratch for the rotor sums. Each loop runs over vehicles, innermost, so
+    that it is vectorised."""
+    for j in range(m):
+        for k in range(4):
+            sums[k * B + j] = 0.0
+    for i in range(L.N_ROTORS):  # rotor i: thrust, its moments, and its motor lag
+        for j in range(m):
+            rotor = s[(L.I_ROTOR0 + i) * B + j]
+            rotor_sq = rotor * rotor
+            thrust = p[L.P_KT * B + j] * rotor_sq
+            sums[THRUST * B + j] += thrust
+            sums[ROLL_MOMENT * B + j] += p[(L.P_ROTOR_Y0 + i) * B + j] * thrust
+            sums[PITCH_MOMENT * B + j] += p[(L.P_ROTOR_X0 + i) * B + j] * thrust
+            sums[YAW_SUM * B + j] += p[(L.P_ROTOR_YAW_SIGN0 + i) * B + j] * rotor_sq
+            c = min(max(cmd[i * B + j], 0.0), p[L.P_OMEGA_MAX * B + j])
+            out[(L.I_ROTOR0 + i) * B + j] = p[L.P_MOTOR_RATE * B + j] * (c - rotor)
+    for j in range(m):
+        vx, vy, vz = s[L.I_VX * B + j], s[L.I_VY * B + j], s[L.I_VZ * B + j]
+        qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
+        qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
+        wx, wy, wz = s[L.I_WX * B + j], s[L.I_WY * B + j], s[L.I_WZ * B + j]
+        total_thrust = sums[THRUST * B + j]
+        mx = sums[ROLL_MOMENT * B + j]
+        my = sums[PITCH_MOMENT * B + j]
+        yaw_sum = sums[YAW_SUM * B + j]
+
+        mass = p[L.P_MASS * B + j]
+        drag = p[L.P_KD * B + j] * math.sqrt(vx * vx + vy * vy + vz * vz)
+        out[L.I_PX * B + j] = vx
+        out[L.I_PY * B + j] = vy
+        out[L.I_PZ * B + j] = vz
+        out[L.I_VX * B + j] = (total_thrust * (2 * (qx * qz + qw * qy)) - drag * vx) / mass
+        out[L.I_VY * B + j] = (total_thrust * (2 * (qy * qz - qw * qx)) - drag * vy) / mass
+        gravity = p[L.P_GRAVITY * B + j]
+        out[L.I_VZ * B + j] = (
+            total_thrust * (1 - 2 * (qx * qx + qy * qy)) - drag * vz
+        ) / mass - gravity
+
+        out[L.I_QW * B + j] = 0.5 * (-qx * wx - qy * wy - qz * wz)
+        out[L.I_QX * B + j] = 0.5 * (qw * wx + qy * wz - qz * wy)
+        out[L.I_QY * B + j] = 0.5 * (qw * wy - qx * wz + qz * wx)
+        out[L.I_QZ * B + j] = 0.5 * (qw * wz + qx * wy - qy * wx)
+
+        jxx, jyy, jzz = p[L.P_JXX * B + j], p[L.P_JYY * B + j], p[L.P_JZZ * B + j]
+        km_rate = p[L.P_KM * B + j] * math.sqrt(wx * wx + wy * wy + wz * wz)
+        mx = mx - km_rate * wx - (wy * (jzz * wz) - wz * (jyy * wy))
+        my = -my - km_rate * wy - (wz * (jxx * wx) - wx * (jzz * wz))
+        mz = p[L.P_KQ * B + j] * yaw_sum - km_rate * wz - (wx * (jyy * wy) - wy * (jxx * wx))
+        out[L.I_WX * B + j] = mx / jxx
+        out[L.I_WY * B + j] = my / jyy
+        out[L.I_WZ * B + j] = mz / jzz
+
+
+@_inline
+def _ground_contact(prev, s, p, j, contact, touchdown_speed, n, B):  # pragma: no cover - compiled
+    """Contact resolution of block column j (vehicle n), as reference.ground_contact."""
+    if contact[n] == L.CRASHED:
+        for k in range(L.I_ROTOR0):
+            s[k * B + j] = prev[k * B + j]
+        return
+    ground_z = p[L.P_GROUND_Z * B + j]
+    if ground_z == -math.inf:  # no ground: nothing to touch
+        contact[n] = L.AIRBORNE
+        return
+    qw, qx, qy, qz = s[L.I_QW * B + j], s[L.I_QX * B + j], s[L.I_QY * B + j], s[L.I_QZ * B + j]
+    pz = s[L.I_PZ * B + j]
+    cos_tilt = 1 - 2 * (qx * qx + qy * qy)
+    sin_tilt = math.sqrt(max(0.0, 1.0 - cos_tilt * cos_tilt))
+    r_zx = 2 * (qx * qz - qw * qy)
+    r_zy = 2 * (qy * qz + qw * qx)
+    strike = False
+    for i in range(L.N_ROTORS):
+        hub_z = pz + r_zx * p[(L.P_ROTOR_X0 + i) * B + j] + r_zy * p[(L.P_ROTOR_Y0 + i) * B + j]
+        if hub_z - p[L.P_ROTOR_RADIUS * B + j] * sin_tilt < ground_z:
+            strike = True
+    rest_z = ground_z + p[L.P_GEAR_HEIGHT * B + j]
+    below = pz < rest_z and not strike
+    if not (strike or below):
+        contact[n] = L.AIRBORNE
+        return
+    touching = below and contact[n] != L.ON_GROUND
+    speed = -s[L.I_VZ * B + j]
+    too_hard = touching and (
+        speed > p[L.P_MAX_TOUCHDOWN_SPEED * B + j] or cos_tilt < p[L.P_COS_MAX_TILT * B + j]
+    )
+    if touching:
+        touchdown_speed[n] = max(speed, 0.0)
+    resting = below and not too_hard
+    s[L.I_PZ * B + j] = max(pz, rest_z)
+    for k in range(3):
+        s[(L.I_VX + k) * B + j] = 0.0
+        s[(L.I_WX + k) * B + j] = 0.0
+    if resting:
+        yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+        s[L.I_QW * B + j] = math.cos(0.5 * yaw)
+        s[L.I_QX * B + j] = 0.0
+        s[L.I_QY * B + j] = 0.0
+        s[L.I_QZ * B + j] = math.sin(0.5 * yaw)
+        contact[n] = L.ON_GROUND
+    else:
+        contact[n] = L.CRASHED
+
+
+@_inline
+def first_invalid_command(commands):  # pragma: no cover - compiled
+    """Index of the first vehicle whose command holds NaN or inf, or -1."""
+    for i in range(commands.size):
+        if not math.isfinite(commands[i]):
+            return i // L.N_ROTORS
+    return -1
+
+
+@_inline
+def _axpy(out, x, a, y, m, B):  # pragma: no cover - compiled
+    """out = x + a·y over the state rows of the first m columns."""
+    for k in range(L.STATE_SIZE):
+        for j in range(m):
+            out[k * B + j] = x[k * B + j] + a * y[k * B + j]
 
 
 def compile_step(B: int, release_gil: bool):
@@ -35,128 +160,8 @@ def compile_step(B: int, release_gil: bool):
     since releasing it would cost more than the step. Same source, same arithmetic.
     """
     jit = numba.njit(nogil=release_gil, **_OPTIONS)
-    inline = numba.njit(inline="always", **_OPTIONS)
     # Block scratch: state, previous state, RK4 temp, k1..k4, parameters, commands, sums.
     scratch_size = (7 * L.STATE_SIZE + L.N_PARAMS + L.N_ROTORS + 4) * B
-
-    @inline
-    def _derivative(s, p, cmd, out, m, sums):  # pragma: no cover - compiled
-        """ṡ of the first m vehicles of a block: s, p and cmd hold rows of B values; ``sums``
-        (4 rows) is scratch for the rotor sums. Each loop runs over vehicles, innermost, so
-        that it is vectorised."""
-        for j in range(m):
-            for k in range(4):
-                sums[k * B + j] = 0.0
-        for i in range(L.N_ROTORS):  # rotor i: thrust, its moments, and its motor lag
-            for j in range(m):
-                rotor = s[(L.I_ROTOR0 + i) * B + j]
-                rotor_sq = rotor * rotor
-                thrust = p[L.P_KT * B + j] * rotor_sq
-                sums[THRUST * B + j] += thrust
-                sums[ROLL_MOMENT * B + j] += p[(L.P_ROTOR_Y0 + i) * B + j] * thrust
-                sums[PITCH_MOMENT * B + j] += p[(L.P_ROTOR_X0 + i) * B + j] * thrust
-                sums[YAW_SUM * B + j] += p[(L.P_ROTOR_YAW_SIGN0 + i) * B + j] * rotor_sq
-                c = min(max(cmd[i * B + j], 0.0), p[L.P_OMEGA_MAX * B + j])
-                out[(L.I_ROTOR0 + i) * B + j] = p[L.P_MOTOR_RATE * B + j] * (c - rotor)
-        for j in range(m):
-            vx, vy, vz = s[L.I_VX * B + j], s[L.I_VY * B + j], s[L.I_VZ * B + j]
-            qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
-            qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
-            wx, wy, wz = s[L.I_WX * B + j], s[L.I_WY * B + j], s[L.I_WZ * B + j]
-            total_thrust = sums[THRUST * B + j]
-            mx = sums[ROLL_MOMENT * B + j]
-            my = sums[PITCH_MOMENT * B + j]
-            yaw_sum = sums[YAW_SUM * B + j]
-
-            mass = p[L.P_MASS * B + j]
-            drag = p[L.P_KD * B + j] * math.sqrt(vx * vx + vy * vy + vz * vz)
-            out[L.I_PX * B + j] = vx
-            out[L.I_PY * B + j] = vy
-            out[L.I_PZ * B + j] = vz
-            out[L.I_VX * B + j] = (total_thrust * (2 * (qx * qz + qw * qy)) - drag * vx) / mass
-            out[L.I_VY * B + j] = (total_thrust * (2 * (qy * qz - qw * qx)) - drag * vy) / mass
-            gravity = p[L.P_GRAVITY * B + j]
-            out[L.I_VZ * B + j] = (
-                total_thrust * (1 - 2 * (qx * qx + qy * qy)) - drag * vz
-            ) / mass - gravity
-
-            out[L.I_QW * B + j] = 0.5 * (-qx * wx - qy * wy - qz * wz)
-            out[L.I_QX * B + j] = 0.5 * (qw * wx + qy * wz - qz * wy)
-            out[L.I_QY * B + j] = 0.5 * (qw * wy - qx * wz + qz * wx)
-            out[L.I_QZ * B + j] = 0.5 * (qw * wz + qx * wy - qy * wx)
-
-            jxx, jyy, jzz = p[L.P_JXX * B + j], p[L.P_JYY * B + j], p[L.P_JZZ * B + j]
-            km_rate = p[L.P_KM * B + j] * math.sqrt(wx * wx + wy * wy + wz * wz)
-            mx = mx - km_rate * wx - (wy * (jzz * wz) - wz * (jyy * wy))
-            my = -my - km_rate * wy - (wz * (jxx * wx) - wx * (jzz * wz))
-            mz = p[L.P_KQ * B + j] * yaw_sum - km_rate * wz - (wx * (jyy * wy) - wy * (jxx * wx))
-            out[L.I_WX * B + j] = mx / jxx
-            out[L.I_WY * B + j] = my / jyy
-            out[L.I_WZ * B + j] = mz / jzz
-
-    @inline
-    def _ground_contact(prev, s, p, j, contact, touchdown_speed, n):  # pragma: no cover - compiled
-        """Contact resolution of block column j (vehicle n), as reference.ground_contact."""
-        if contact[n] == L.CRASHED:
-            for k in range(L.I_ROTOR0):
-                s[k * B + j] = prev[k * B + j]
-            return
-        ground_z = p[L.P_GROUND_Z * B + j]
-        if ground_z == -math.inf:  # no ground: nothing to touch
-            contact[n] = L.AIRBORNE
-            return
-        qw, qx, qy, qz = s[L.I_QW * B + j], s[L.I_QX * B + j], s[L.I_QY * B + j], s[L.I_QZ * B + j]
-        pz = s[L.I_PZ * B + j]
-        cos_tilt = 1 - 2 * (qx * qx + qy * qy)
-        sin_tilt = math.sqrt(max(0.0, 1.0 - cos_tilt * cos_tilt))
-        r_zx = 2 * (qx * qz - qw * qy)
-        r_zy = 2 * (qy * qz + qw * qx)
-        strike = False
-        for i in range(L.N_ROTORS):
-            hub_z = pz + r_zx * p[(L.P_ROTOR_X0 + i) * B + j] + r_zy * p[(L.P_ROTOR_Y0 + i) * B + j]
-            if hub_z - p[L.P_ROTOR_RADIUS * B + j] * sin_tilt < ground_z:
-                strike = True
-        rest_z = ground_z + p[L.P_GEAR_HEIGHT * B + j]
-        below = pz < rest_z and not strike
-        if not (strike or below):
-            contact[n] = L.AIRBORNE
-            return
-        touching = below and contact[n] != L.ON_GROUND
-        speed = -s[L.I_VZ * B + j]
-        too_hard = touching and (
-            speed > p[L.P_MAX_TOUCHDOWN_SPEED * B + j] or cos_tilt < p[L.P_COS_MAX_TILT * B + j]
-        )
-        if touching:
-            touchdown_speed[n] = max(speed, 0.0)
-        resting = below and not too_hard
-        s[L.I_PZ * B + j] = max(pz, rest_z)
-        for k in range(3):
-            s[(L.I_VX + k) * B + j] = 0.0
-            s[(L.I_WX + k) * B + j] = 0.0
-        if resting:
-            yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
-            s[L.I_QW * B + j] = math.cos(0.5 * yaw)
-            s[L.I_QX * B + j] = 0.0
-            s[L.I_QY * B + j] = 0.0
-            s[L.I_QZ * B + j] = math.sin(0.5 * yaw)
-            contact[n] = L.ON_GROUND
-        else:
-            contact[n] = L.CRASHED
-
-    @inline
-    def first_invalid_command(commands):  # pragma: no cover - compiled
-        """Index of the first vehicle whose command holds NaN or inf, or -1."""
-        for i in range(commands.size):
-            if not math.isfinite(commands[i]):
-                return i // L.N_ROTORS
-        return -1
-
-    @inline
-    def _axpy(out, x, a, y, m):  # pragma: no cover - compiled
-        """out = x + a·y over the state rows of the first m columns."""
-        for k in range(L.STATE_SIZE):
-            for j in range(m):
-                out[k * B + j] = x[k * B + j] + a * y[k * B + j]
 
     @jit
     def step(
@@ -196,13 +201,13 @@ def compile_step(B: int, release_gil: bool):
                     if contact[first + j] == L.CRASHED:
                         for k in range(size):
                             prev[k * B + j] = s[k * B + j]
-                _derivative(s, p, cmd, k1, m, sums)
-                _axpy(tmp, s, 0.5 * dt, k1, m)
-                _derivative(tmp, p, cmd, k2, m, sums)
-                _axpy(tmp, s, 0.5 * dt, k2, m)
-                _derivative(tmp, p, cmd, k3, m, sums)
-                _axpy(tmp, s, dt, k3, m)
-                _derivative(tmp, p, cmd, k4, m, sums)
+                _derivative(s, p, cmd, k1, m, sums, B)
+                _axpy(tmp, s, 0.5 * dt, k1, m, B)
+                _derivative(tmp, p, cmd, k2, m, sums, B)
+                _axpy(tmp, s, 0.5 * dt, k2, m, B)
+                _derivative(tmp, p, cmd, k3, m, sums, B)
+                _axpy(tmp, s, dt, k3, m, B)
+                _derivative(tmp, p, cmd, k4, m, sums, B)
                 for k in range(size):
                     for j in range(m):
                         i = k * B + j
@@ -217,7 +222,7 @@ def compile_step(B: int, release_gil: bool):
                     for k in range(L.I_ROTOR0, size):
                         s[k * B + j] = min(max(s[k * B + j], 0.0), omega_max)
                 for j in range(m):
-                    _ground_contact(prev, s, p, j, contact, touchdown_speed, first + j)
+                    _ground_contact(prev, s, p, j, contact, touchdown_speed, first + j, B)
             for j in range(m):
                 for k in range(size):
                     state[first + j, k] = s[k * B + j]

@@ -1,0 +1,90 @@
+"""The algorithms compared on the tasks (the paper's Fig. 2–3 and its closing table).
+
+A run of the comparison is a training run whose best checkpoint is then tested on 100
+deterministic episodes (:func:`score_run`); :func:`comparison_table` turns the runs of a
+grid into the table the project reports: per task and algorithm, the test success over
+seeds, the task's own metric, how soon validation reached 90 % and the run's length.
+``quadsitl sweep --test-episodes 100`` and ``benchmarks/algorithms.py`` produce it.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from policies import checkpoint
+from policies.evaluate import TASK_METRICS, evaluate
+
+TARGET_SUCCESS = 0.9  # "reached": the first periodic validation at or above this
+# Steps per run of the fast-preset comparison: the PPO budget that learns each task,
+# shortened for the two long tasks so that 45 runs fit in about an hour on two cores.
+FAST_BUDGET = {
+    "hover": 800_000,
+    "static_waypoint": 2_000_000,
+    "random_waypoint": 4_000_000,
+    "land": 4_000_000,
+    "target_follow": 2_000_000,
+}
+
+
+def score_run(
+    run_dir: Path, episodes: int = 100, target: float = TARGET_SUCCESS
+) -> dict[str, float]:
+    """Test the run's best checkpoint (else its last) on ``episodes`` deterministic
+    episodes. ``reach_seconds``/``reach_steps``: wall clock (evaluations included) and
+    steps at the first periodic validation with success ≥ ``target``; NaN if none."""
+    folder = Path(run_dir) / "checkpoints"
+    best = folder / "best.pt" if (folder / "best.pt").is_file() else folder / "last.pt"
+    net, config, _ = checkpoint.load(best)
+    test = evaluate(net, config, episodes=episodes)
+    reach_seconds = reach_steps = math.nan
+    with open(Path(run_dir) / "metrics.csv") as f:
+        for row in csv.DictReader(f):
+            if float(row["eval_success"] or "nan") >= target:
+                reach_seconds, reach_steps = float(row["wall_seconds"]), float(row["env_steps"])
+                break
+    return {
+        "test_success": test.success_rate,
+        "test_metric": test.metric_mean,
+        "reach_seconds": reach_seconds,
+        "reach_steps": reach_steps,
+    }
+
+
+def comparison_table(runs: list[dict[str, Any]], target: float = TARGET_SUCCESS) -> str:
+    """Markdown, one row per task and algorithm (in the order met). Each run: ``task``,
+    ``algo``, ``test_success``, ``wall_seconds``, ``env_steps`` and, where defined,
+    ``test_metric``, ``reach_seconds``, ``reach_steps`` (missing or NaN: undefined)."""
+    cells: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for run in runs:
+        cells.setdefault((run["task"], run["algo"]), []).append(run)
+    lines = [
+        "| task | algorithm | test success (mean ± std; per seed) | task metric "
+        f"| validation ≥ {target:.0%} | run (mean), steps |",
+        "|---|---|---|---|---|---|",
+    ]
+    for (task, algo), rows in cells.items():
+        success = np.array([float(r["test_success"]) for r in rows])
+        reached = [r for r in rows if math.isfinite(float(r.get("reach_seconds", math.nan)))]
+        if reached:
+            seconds = np.median([float(r["reach_seconds"]) for r in reached])
+            steps = np.median([float(r["reach_steps"]) for r in reached]) / 1e6
+            reach = f"{len(reached)}/{len(rows)} seeds; median {seconds:.0f} s, {steps:.2f} M steps"
+        else:
+            reach = f"0/{len(rows)} seeds"
+        _, name, unit = TASK_METRICS[task]
+        metrics = [float(r.get("test_metric", math.nan)) for r in rows]
+        defined = [m for m in metrics if math.isfinite(m)]
+        metric = f"{np.mean(defined):.3g} {unit}" if defined else "—"
+        per_seed = ", ".join(f"{s:.0%}" for s in success)
+        wall = np.mean([float(r["wall_seconds"]) for r in rows])
+        steps_m = float(rows[0]["env_steps"]) / 1e6
+        lines.append(
+            f"| {task} | {algo.upper()} | {success.mean():.0%} ± {success.std():.0%} ({per_seed}) "
+            f"| {name} {metric} | {reach} | {wall:.0f} s, {steps_m:.2f} M |"
+        )
+    return "\n".join(lines) + "\n"

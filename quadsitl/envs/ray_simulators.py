@@ -1,0 +1,145 @@
+"""Simulator processes placed on a Ray cluster: one Ray actor owns one ``quadsitl sim``.
+
+With ``backend="mavlink", ray=...`` the envs' simulators are not started here but by
+actors that Ray spreads over the cluster's nodes (``scheduling_strategy="SPREAD"``, one
+CPU each). Each actor starts its simulator on its node, listening on the node's address,
+and reports where; the env then flies the vehicles over UDP exactly as it does with
+local processes. The actor is the simulator's lifetime: when the actor or its node is
+lost, the simulator goes with it, the env raises ``SimulatorError`` (saying so) and the
+next ``reset`` places new actors.
+
+Ray is an optional dependency (the ``sweep`` extra); nothing here imports it until a
+simulator is placed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+from typing import Any
+
+from quadsitl.envs.sim_process import SimProcess
+from quadsitl.mavlink.motor_client import SimulatorError
+
+PLACE_TIMEOUT = 60.0  # s for Ray to place an actor and its simulator to start
+CALL_TIMEOUT = 5.0  # s for an actor to answer a question about its simulator
+LOCAL = "local"  # ray=True: a Ray started here, or the cluster named by RAY_ADDRESS
+
+
+def check_ray_address(address: str) -> None:
+    """An unreachable cluster is an error now (``ray.init`` would wait a long time).
+    ``"local"`` and Ray's ``"auto"`` need no check."""
+    if address in (LOCAL, "auto"):
+        return
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    try:
+        with socket.create_connection((host or "127.0.0.1", int(port)), timeout=3):
+            return
+    except (OSError, ValueError) as error:
+        raise ValueError(f"no Ray cluster answers at {address!r} ({error})") from None
+
+
+def import_ray() -> Any:
+    try:
+        import ray
+    except ImportError:
+        raise ValueError(
+            "simulators on Ray need Ray: pip install 'quadsitl[sweep]' (ray[tune])"
+        ) from None
+    return ray
+
+
+def join_ray(address: str) -> None:
+    """Use the Ray this process already joined, or join ``address`` (``"local"``: start
+    one here unless RAY_ADDRESS names a cluster)."""
+    ray = import_ray()
+    if ray.is_initialized():
+        return
+    check_ray_address(address)
+    ray.init(
+        address=None if address == LOCAL else address,
+        include_dashboard=False,
+        log_to_driver=False,
+        configure_logging=False,
+    )
+
+
+class SimulatorHost:
+    """The actor: starts ``quadsitl sim`` on its node and answers for it."""
+
+    def __init__(self, args: list[str], env: dict[str, str]) -> None:
+        import ray
+
+        self.node_id = ray.get_runtime_context().get_node_id()
+        self.process = SimProcess(args, env=env, host=ray.util.get_node_ip_address())
+
+    def address(self) -> tuple[str, int, str]:
+        return self.process.host, self.process.port, self.node_id
+
+    def alive(self) -> bool:
+        return self.process.alive
+
+    def exit_message(self) -> str:
+        return self.process.exit_message()
+
+    def stop(self) -> None:
+        self.process.stop()
+
+
+def place_simulators(commands: list[list[str]], env: dict[str, str]) -> list[RaySimulator]:
+    """One simulator per list of ``quadsitl sim`` options, placed by Ray all at once
+    (they start in parallel); SimulatorError when Ray cannot place or start them."""
+    ray = import_ray()
+    actor_class = ray.remote(num_cpus=1, max_restarts=0)(SimulatorHost)
+    actors = [
+        actor_class.options(scheduling_strategy="SPREAD").remote(args, env) for args in commands
+    ]
+    try:
+        where = ray.get([actor.address.remote() for actor in actors], timeout=PLACE_TIMEOUT)
+    except ray.exceptions.GetTimeoutError:
+        free = ray.available_resources().get("CPU", 0)
+        error = SimulatorError(
+            f"Ray placed {len(actors)} simulators not within {PLACE_TIMEOUT:g} s (the "
+            f"cluster has {free:g} CPUs free; each simulator needs 1)"
+        )
+    except ray.exceptions.RayError as failure:
+        error = SimulatorError(f"a Ray simulator actor failed to start: {failure}")
+    else:
+        return [RaySimulator(actor, *address) for actor, address in zip(actors, where, strict=True)]
+    for actor in actors:
+        ray.kill(actor)
+    raise error
+
+
+class RaySimulator:
+    """A simulator placed by Ray (:func:`place_simulators`), with :class:`SimProcess`'s
+    face (``address``, ``alive``, ``exit_message``, ``stop``) for the backend."""
+
+    def __init__(self, actor: Any, host: str, port: int, node_id: str) -> None:
+        self.actor, self.host, self.port, self.node_id = actor, host, port, node_id
+
+    @property
+    def address(self) -> tuple[str, int]:
+        return self.host, self.port
+
+    @property
+    def alive(self) -> bool:
+        ray = import_ray()
+        try:
+            return bool(ray.get(self.actor.alive.remote(), timeout=CALL_TIMEOUT))
+        except ray.exceptions.RayError:  # the actor, its node or the call is lost
+            return False
+
+    def exit_message(self) -> str:
+        ray = import_ray()
+        where = f"on {self.host} (Ray node {self.node_id[:12]})"
+        try:
+            return f"{where} {ray.get(self.actor.exit_message.remote(), timeout=CALL_TIMEOUT)}"
+        except ray.exceptions.RayError as error:
+            return f"{where} was lost with its Ray actor ({type(error).__name__})"
+
+    def stop(self) -> None:
+        ray = import_ray()
+        with contextlib.suppress(ray.exceptions.RayError):  # already gone
+            ray.get(self.actor.stop.remote(), timeout=CALL_TIMEOUT)
+        ray.kill(self.actor)

@@ -1,0 +1,111 @@
+"""Simulators as Ray actors: a two-node Ray cluster on this machine (a head that takes no
+work and a second node), the envs' simulators placed on the second node, stepped over
+UDP with the same results as in-process; a killed actor gives a clear error and reset
+places a new one."""
+
+from __future__ import annotations
+
+import socket
+import time
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import quadsitl  # noqa: F401  (registers the envs)
+from quadsitl.mavlink.motor_client import SimulatorError
+
+ray = pytest.importorskip("ray")
+from ray.cluster_utils import Cluster  # noqa: E402
+
+OBS_TOLERANCE = 1e-4  # as the other wire-parity tests
+REWARD_TOLERANCE = 2e-3
+
+
+@pytest.fixture(scope="module")
+def two_nodes():
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 0})
+    worker = cluster.add_node(num_cpus=2)
+    ray.init(address=cluster.address, include_dashboard=False, log_to_driver=False)
+    try:
+        yield cluster, worker
+    finally:
+        ray.shutdown()
+        cluster.shutdown()
+
+
+def test_simulators_on_the_second_node_fly_as_in_process_and_survive_a_lost_actor(two_nodes):
+    _, worker = two_nodes
+    kwargs = {"init_position_noise": 0.3}
+    env_id = "QuadSITL/RandomWaypoint-v0"
+    local = gym.make_vec(env_id, 4, "vector_entry_point", **kwargs)
+    wire = {"backend": "mavlink", "vehicles_per_sim": 2, "ray": True, "timeout": 1.0}
+    remote = gym.make_vec(env_id, 4, "vector_entry_point", **wire, **kwargs)
+    backend = remote.unwrapped.backend
+    addresses = []
+    try:
+        assert len(backend.processes) == 2
+        assert {sim.node_id for sim in backend.processes} == {worker.node_id}
+        assert backend.signing_key is not None  # a network-facing simulator is signed
+        a, _ = local.reset(seed=4)
+        b, _ = remote.reset(seed=4)
+        np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
+        rng = np.random.default_rng(1)
+        for _ in range(40):
+            actions = rng.normal(0, 0.05, (4, 4)).astype(np.float32)
+            a, ra, ta, ua, _ = local.step(actions)
+            b, rb, tb, ub, _ = remote.step(actions)
+            np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
+            np.testing.assert_allclose(rb, ra, atol=REWARD_TOLERANCE)
+            assert (ta == tb).all() and (ua == ub).all()
+
+        lost = backend.processes[0]
+        ray.kill(lost.actor)
+        started = time.monotonic()
+        with pytest.raises(SimulatorError, match="lost with its Ray actor"):
+            remote.step(np.zeros((4, 4), np.float32))
+        assert time.monotonic() - started < 5.0  # the env's timeout, not a hang
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            a, _ = local.reset(seed=5)
+            b, _ = remote.reset(seed=5)
+        assert any("starting new ones" in str(w.message) for w in caught)
+        assert lost not in backend.processes
+        assert {sim.node_id for sim in backend.processes} == {worker.node_id}
+        np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
+        for _ in range(10):
+            actions = rng.normal(0, 0.05, (4, 4)).astype(np.float32)
+            a, *_ = local.step(actions)
+            b, *_ = remote.step(actions)
+            np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
+        addresses = [sim.address for sim in backend.processes]
+    finally:
+        local.close()
+        remote.close()
+    assert addresses and all(_released(address) for address in addresses)  # close stopped them
+
+
+def _released(address: tuple[str, int], wait: float = 10.0) -> bool:
+    """Whether the UDP port a simulator listened on is free again within ``wait`` s."""
+    deadline = time.monotonic() + wait
+    while True:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            try:
+                probe.bind(address)
+                return True
+            except OSError:
+                if time.monotonic() > deadline:
+                    return False
+        time.sleep(0.1)
+
+
+def test_ray_options_are_checked(two_nodes):
+    for bad, match in (
+        ({"ray": ""}, "ray must be True or a Ray cluster address"),
+        ({"ray": 3}, "ray must be True or a Ray cluster address"),
+        ({"ray": True, "sim_address": ["127.0.0.1:9"]}, "not both"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            gym.make_vec("QuadSITL/Hover-v0", 1, "vector_entry_point", backend="mavlink", **bad)
