@@ -92,4 +92,5 @@ def test_yaw_gives_way_when_the_motors_cannot_give_everything():
     sp = Setpoint(attitude=quat_from_euler(0.0, 0.0, 0.0), thrust=1.0, body_rates=np.r_[0, 0, 9])
     thrust, mx, my, mz = _thrust_and_moments(controller.rotor_command(state, sp, DT))
     assert mz == pytest.approx(0.0, abs=1e-12)  # full thrust: no room for the yaw moment
+    assert abs(mx) < 1e-12 and abs(my) < 1e-12  # nor was the attitude given up
     assert thrust == pytest.approx(controller.max_thrust, rel=1e-9)
