@@ -94,3 +94,13 @@ def test_yaw_gives_way_when_the_motors_cannot_give_everything():
     assert mz == pytest.approx(0.0, abs=1e-12)  # full thrust: no room for the yaw moment
     assert abs(mx) < 1e-12 and abs(my) < 1e-12  # nor was the attitude given up
     assert thrust == pytest.approx(controller.max_thrust, rel=1e-9)
+
+
+def test_a_changed_gain_takes_effect_at_the_next_call():
+    controller = _controller()
+    state = _hovering()
+    target = state[L.POS] + np.array([1.0, 0.0, 0.0])
+    before = _thrust_and_moments(controller.rotor_command(state, Setpoint(target), DT))
+    controller.gains.pos_xy = 0.0  # as MPC_XY_P = 0 would: no pull towards the position
+    after = _thrust_and_moments(controller.rotor_command(state, Setpoint(target), DT))
+    assert before[2] > 1e-4 and abs(after[2]) < 1e-12

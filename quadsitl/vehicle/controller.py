@@ -83,6 +83,17 @@ class ControllerGains:
         """Every gain at its parameter's default."""
         return cls(**{spec.gain: spec.default for spec in PARAMETERS if spec.gain})
 
+    def __setattr__(self, name: str, value: float) -> None:
+        object.__setattr__(self, name, value)
+        object.__setattr__(self, "_row", None)  # a gain changed: pack them again
+
+    def row(self) -> Vec:
+        """The gains in :data:`quadsitl.vehicle.cascade.GAIN_FIELDS` order (kept until a
+        gain changes)."""
+        if self._row is None:
+            object.__setattr__(self, "_row", np.array([getattr(self, f) for f in C.GAIN_FIELDS]))
+        return self._row
+
 
 class Autopilot(Protocol):
     """The seam for replacing the cascade (e.g. by a trained policy)."""
@@ -150,9 +161,8 @@ class CascadedController:
         self.vel_integral = np.zeros(3)  # m/s² contribution of the velocity I terms
 
     def rotor_command(self, state: Vec, setpoint: Setpoint, dt: float) -> Vec:
-        gains = np.array([getattr(self.gains, name) for name in C.GAIN_FIELDS])
         return C.rotor_command(
-            state, self._pack(setpoint), gains, self.model_row, self.vel_integral, dt
+            state, self._pack(setpoint), self.gains.row(), self.model_row, self.vel_integral, dt
         )
 
     def _pack(self, sp: Setpoint) -> Vec:
