@@ -32,7 +32,7 @@ from quadsitl.mavlink.links import Link
 from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.physics import Airframe, get_airframe
-from quadsitl.vehicle.controller import Autopilot
+from quadsitl.vehicle.controller import Autopilot, Setpoint
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.results import Severity
@@ -91,6 +91,15 @@ class SimConfig:
             raise ValueError(f"speed factor must be 0.01..100, got {self.speed}")
         if not [u for u in (self.gcs_url, self.api_url, self.hil_url, *self.extra_urls) if u]:
             raise ValueError("at least one link is needed")
+
+
+def _compile(vehicles: int, airframe: str) -> None:
+    """Load (or compile) the physics and the controller before the clock starts: their
+    first calls take milliseconds to seconds, which real time cannot absorb."""
+    group = VehicleGroup(vehicles, airframe)
+    group.step()
+    vehicle = group.vehicles[0]
+    vehicle.cascade.rotor_command(vehicle.state, Setpoint(position=np.zeros(3)), 0.004)
 
 
 class View(Protocol):
@@ -160,7 +169,7 @@ class Simulator:
             make_autopilot=(lambda: make_autopilot(airframe)) if make_autopilot else None,
         )
         self.vehicle = self.group.vehicles[0]
-        VehicleGroup(config.vehicles, config.airframe).step()  # compile before the clock starts
+        _compile(config.vehicles, config.airframe)
         for vehicle in self.group.vehicles:
             for name, value in config.params.items():
                 vehicle.set_param(name, value)
