@@ -61,7 +61,8 @@ def test_simulators_on_the_second_node_fly_as_in_process_and_survive_a_lost_acto
             assert (ta == tb).all() and (ua == ub).all()
 
         lost = backend.processes[0]
-        ray.kill(lost.actor)
+        ray.kill(lost.actor)  # asynchronous: wait until its simulator has gone with it
+        assert _released(lost.address)
         started = time.monotonic()
         with pytest.raises(SimulatorError, match="lost with its Ray actor"):
             remote.step(np.zeros((4, 4), np.float32))
