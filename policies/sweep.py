@@ -190,7 +190,12 @@ def trial(params: dict[str, Any]) -> None:  # runs in a Ray worker
         last.update({k: float(row[k]) for k in (*REPORTED, "eval_success")})
         tune.report({k: v for k, v in last.items() if math.isfinite(v)})
 
-    mode = "resume" if holds_run(run_dir) else "new"  # a restarted trial continues
+    # A restarted trial continues from its last checkpoint; one stopped before its first
+    # checkpoint starts again (its folder holds no iteration to keep).
+    if (run_dir / "checkpoints" / "last.pt").is_file():
+        mode = "resume"
+    else:
+        mode = "overwrite" if holds_run(run_dir) else "new"
     try:
         train(config, run_dir, progress=False, mode=mode, on_iteration=report)
     except ValueError as error:
