@@ -111,6 +111,9 @@ def test_bad_fleet_options_are_refused_before_anything_starts(options, message):
     assert done.returncode == 2 and message in done.stderr
 
 
+SIM_LOCKSTEP = "quadsitl.cli sim --lockstep"
+
+
 def test_training_through_the_wire_flies_its_envs_as_fleets(tmp_path):
     """``quadsitl train --backend mavlink``: 8 envs as two simulator processes of 4
     vehicles; two PPO iterations, metrics written, no simulator left running."""
@@ -129,6 +132,10 @@ def test_training_through_the_wire_flies_its_envs_as_fleets(tmp_path):
     assert len(rows) == 3  # header and two iterations
     assert '"vehicles_per_sim": 4' in (run / "config.json").read_text()
     assert "2 iterations of 256 steps" in done.stdout + done.stderr
-    time.sleep(0.5)
-    leftovers = subprocess.run(["pgrep", "-f", "quadsitl.cli sim --lockstep"], capture_output=True)
+    deadline = time.monotonic() + 10.0  # they end on SIGTERM; a loaded machine takes a moment
+    while True:
+        leftovers = subprocess.run(["pgrep", "-f", SIM_LOCKSTEP], capture_output=True)
+        if leftovers.returncode == 1 or time.monotonic() > deadline:
+            break
+        time.sleep(0.2)
     assert leftovers.returncode == 1, leftovers.stdout  # the simulators went with the run
