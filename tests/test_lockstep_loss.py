@@ -3,6 +3,8 @@ once, matched by time, and the flight is the same as without loss."""
 
 from __future__ import annotations
 
+import time
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -10,9 +12,11 @@ import pytest
 import quadsitl  # noqa: F401  (registers the envs)
 from gcs_tools.relay import LossyRelay
 from quadsitl.envs.sim_process import SimProcess
+from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.fleet_client import FleetClient
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.mavlink.motor_client import SimulatorError
+from quadsitl.mavlink.motor_path import RESET_STATE
 from quadsitl.physics import PAPER
 
 OBS_TOLERANCE = 1e-4
@@ -74,6 +78,47 @@ def test_a_lost_answer_is_answered_from_the_cache_not_stepped_twice(fleet_sim):
     assert first == again.time_usec == 50_000 and client.late == 0
     client.time_usec = first
     assert client.step(hover).time_usec == 100_000  # and the next round steps once
+    client.close()
+
+
+def test_answers_keep_the_order_of_what_they_answer(fleet_sim):
+    """A repeat of the last round and a reset in one datagram (a resent round followed by
+    an autoreset, as a loaded learner sends them): the repeat's cached answer comes back
+    before the reset's acknowledgement, so the reset's answer is the one after it, and
+    the client takes that one: the vehicle where the reset put it."""
+    client = FleetClient("127.0.0.1", fleet_sim.port, 4, timeout=10.0)
+    _wait(client)
+    state = np.zeros((4, 17))
+    state[:, 2], state[:, 6], state[:, 13:] = 20.0, 1.0, PAPER.hover_rotor_speed
+    wire = WireState.from_physics(state, PAPER.gear_height, 0, None, None)
+    client.reset([0, 1, 2, 3], wire, np.zeros((4, 3)))
+    hover = np.full((4, 4), PAPER.hover_rotor_speed / PAPER.max_rotor_speed)
+    stamp = client.time_usec
+    client.step(hover)
+    repeat = [client._actuator_frame(stamp, i, row) for i, row in enumerate(hover.tolist())]
+    state[0, :3] = [3.0, -2.0, 25.0]  # vehicle 0 goes elsewhere
+    moved = WireState.from_physics(state[:1], PAPER.gear_height, 0, None, None)
+    client.sock.sendto(b"".join(repeat), client.address)
+    answer = client.reset([0], moved, np.zeros((1, 3)))
+    np.testing.assert_allclose(answer.position_ned[0], moved.position_ned[0], atol=1e-4)
+    # And on the wire: the repeat's answer, then the reset's ACK and the new state.
+    client.sock.sendto(b"".join(repeat[:1]), client.address)
+    client._send([client._command_frame(RESET_STATE, 0, *moved.position_ned[0], 1, 0, 0, 0)])
+    seen = []
+    deadline = time.monotonic() + 5
+    while len([f for f in seen if f.msgid == mav.MAVLINK_MSG_ID_ODOMETRY]) < 2:
+        assert time.monotonic() < deadline, seen
+        seen += [f for f in client._receive(deadline) if f.sysid == 1]
+    kinds = [
+        f.msgid
+        for f in seen
+        if f.msgid in (mav.MAVLINK_MSG_ID_ODOMETRY, mav.MAVLINK_MSG_ID_COMMAND_ACK)
+    ]
+    assert kinds == [
+        mav.MAVLINK_MSG_ID_ODOMETRY,  # the repeat, answered from the cache
+        mav.MAVLINK_MSG_ID_COMMAND_ACK,  # the reset
+        mav.MAVLINK_MSG_ID_ODOMETRY,  # its state
+    ]
     client.close()
 
 

@@ -24,6 +24,7 @@ CRC_SIZE = 2
 SIGNATURE_SIZE = 13
 SIGNED = 0x01  # incompat flag
 DATAGRAM_LIMIT = 60_000  # bytes of frames per datagram (UDP's limit is 65,507)
+TELEMETRY_DATAGRAM = 1_400  # bytes per telemetry datagram: within an Ethernet MTU
 
 
 class Frame:
@@ -102,6 +103,36 @@ def parse(data: bytes) -> Iterator[Frame]:
             payload = payload + bytes(full - length)
         yield Frame(msgid, data[i + 5], data[i + 6], payload[:full], data[i : i + size])
         i += size
+
+
+def pack_message(message: Any, seq: int, sysid: int, compid: int) -> bytes:
+    """An unsigned MAVLink 2 frame of a pymavlink message object: the same bytes as
+    pymavlink's own packing, in a fraction of its time."""
+    cls = type(message)
+    layout = _LAYOUTS.get(cls) or _LAYOUTS.setdefault(cls, _layout(cls))
+    values: list[Any] = []
+    for attribute, is_array in layout:
+        if is_array:
+            values.extend(getattr(message, attribute))
+        else:
+            values.append(getattr(message, attribute))
+    return pack(cls, tuple(values), seq, sysid, compid)
+
+
+_LAYOUTS: dict[type, list[tuple[str, bool]]] = {}  # message class: its fields in wire order
+
+
+def _layout(cls: Any) -> list[tuple[str, bool]]:
+    """(attribute, is a numeric array) of each field in wire order; a char field's bytes
+    are in pymavlink's ``_<name>_raw``."""
+    types = dict(zip(cls.fieldnames, cls.fieldtypes, strict=True))
+    out = []
+    for name, length in zip(cls.ordered_fieldnames, cls.array_lengths, strict=True):
+        if types[name] == "char":
+            out.append((f"_{name}_raw", False))
+        else:
+            out.append((name, bool(length)))
+    return out
 
 
 def message(message_class: Any, values: tuple[Any, ...]) -> Any:

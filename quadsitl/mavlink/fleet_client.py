@@ -273,6 +273,8 @@ class FleetClient:
         def done(i: int) -> bool:
             return answered[i] and (acks is None or len(acks[i]) == needed)
 
+        # A vehicle's answer is taken once: a later one is an older exchange's repeat.
+        fresh_once = lambda i, t: not answered[i] and fresh(i, t)  # noqa: E731
         # Silence is measured from the last progress (an answer completed): heartbeats
         # or refusals alone do not keep a stuck round alive.
         progress = sent_at = self._sent_at
@@ -292,7 +294,7 @@ class FleetClient:
             until = min(sent_at + wait, progress + self.timeout)
             for frame in self._receive(until):
                 i = self._index(frame.sysid)
-                if i in answered and self._take(i, frame, fresh, parts, acks):
+                if i in answered and self._take(i, frame, fresh_once, parts, acks):
                     answered[i] = True
                     progress = time.monotonic()
         self._store(rows)

@@ -21,24 +21,27 @@ from __future__ import annotations
 
 import math
 import time
+from functools import partial
 from typing import Any
 
 import numpy as np
 
 from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
+from quadsitl.mavlink import telemetry as T
 from quadsitl.mavlink.hil_state import ROW_BY_ROW, WireState
 from quadsitl.mavlink.links import Link
 from quadsitl.mavlink.motor_path import LOCKSTEP_IDLE, answer_parts, check_controls
 from quadsitl.mavlink.server import MOTOR_LINK, MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
-from quadsitl.physics.layout import P_OMEGA_MAX
+from quadsitl.physics.layout import P_GEAR_HEIGHT, P_OMEGA_MAX
 from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.results import Severity
 
 FAST_IDS = frozenset({mav.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET})
 WIRE_FIELDS = ("position_ned", "q_ned_frd", "velocity_frd", "rates_frd", "rotor_speeds")
-TICKS_PER_CALL = 8  # vehicles whose telemetry is looked at per tick in lockstep
+TICK_PERIOD = 0.005  # wall s between two ticks of one vehicle (events, telemetry)
+LOCKSTEP_TICK_PERIOD = 0.02  # the same in lockstep (telemetry capped on the wall clock)
 
 
 class FleetServer:
@@ -53,27 +56,34 @@ class FleetServer:
         self.previous_round: int | None = None  # µs, start of the last round stepped
         self.cached: list[list[bytes]] = [[] for _ in servers]  # its answers
         self.counters = {"unknown_system": 0, "duplicates": 0, "rounds": 0}
-        self._next_tick = 0
+        self._next_tick = 0  # the vehicle ticked next
+        self._last_tick = -math.inf  # wall time of the last tick
+        self._credit = 0.0  # vehicles owed a tick
+        self._batch: T.Kinematics | None = None  # every vehicle's, during a tick
+        self._ticking = False
+        for i, server in enumerate(servers):
+            server.kinematics = partial(self._kinematics, i)
         self._round_wall = -math.inf  # wall time of the last round command
 
     # --- the loop's hooks -------------------------------------------------------------
     def receive(self, link: Link, received_at: float | None = None) -> None:
-        """Dispatch what arrived on ``link``; step a round once it is complete."""
-        replies: list[bytes] = []
-        link.hold()  # every answer to this datagram goes back in one (or a few)
+        """Dispatch what arrived on ``link`` in order; step a round once it is complete.
+        The answers go back in the order of what they answer (a client matches a reset's
+        answer by what precedes it), together in one datagram or a few."""
+        link.hold()
         try:
-            self._receive(link, replies, received_at)
+            self._receive(link, received_at)
         finally:
             link.release()
 
-    def _receive(self, link: Link, replies: list[bytes], received_at: float | None) -> None:
+    def _receive(self, link: Link, received_at: float | None) -> None:
         signing = any(server.signing is not None for server in self.servers)
         fast = FAST_IDS if link.name == MOTOR_LINK and not signing else frozenset()
         for message, _peer in link.receive(fast):
             if isinstance(message, FC.Frame):  # an unsigned round command, parsed fast
                 # time_usec, controls[8], group_mlx, target_system, target_component
                 values = message.unpack()
-                self._round_command(values[10], values[0], values[1:5], link, replies)
+                self._round_command(values[10], values[0], values[1:5], link)
                 continue
             if self.tlog is not None and link.name != MOTOR_LINK:
                 self.tlog.record(bytes(message.get_msgbuf()), received_at)
@@ -84,29 +94,49 @@ class FleetServer:
                     message.time_usec,
                     message.controls[:4],
                     link,
-                    replies,
                     message,
                 )
             elif kind == "HIL_ACTUATOR_CONTROLS" and len(self.servers) > 1:
                 self._refuse_unaddressed()
             else:
                 self._dispatch(message, link)
-        if self.pending and len(self.pending) == len(self.servers):
-            replies += self._run_round(link)
-        for answer in replies:
-            link.send_bytes(answer)
 
     def tick(self, wall_now: float) -> None:
-        """Every vehicle's events, heartbeat and telemetry; in lockstep (ticked every
-        few milliseconds of wall time) a few vehicles per call in turn, so that a large
-        fleet's telemetry cannot slow the rounds down."""
-        if not self.in_lockstep(wall_now) or len(self.servers) <= TICKS_PER_CALL:
-            for server in self.servers:
-                server.tick(wall_now)
-            return
-        for _ in range(TICKS_PER_CALL):
-            self.servers[self._next_tick].tick(wall_now)
-            self._next_tick = (self._next_tick + 1) % len(self.servers)
+        """Every vehicle's events, heartbeat and telemetry, the vehicles in turn: each
+        is ticked about every TICK_PERIOD of wall time (LOCKSTEP_TICK_PERIOD in
+        lockstep, where telemetry is rate-limited on the wall clock anyway), at least
+        one vehicle per call, so that a large fleet's work is spread evenly over the
+        physics steps. What the vehicles ticked in one call send goes out together, in
+        datagrams of at most TELEMETRY_DATAGRAM bytes per link (as PX4 packs them)."""
+        n = len(self.servers)
+        period = LOCKSTEP_TICK_PERIOD if self.in_lockstep(wall_now) else TICK_PERIOD
+        elapsed = min(max(wall_now - self._last_tick, 0.0), period)
+        self._last_tick = wall_now
+        self._credit += n * elapsed / period
+        count = min(n, max(1, int(self._credit)))
+        self._credit = max(0.0, self._credit - count)
+        links = self.servers[0].links
+        for link in links:
+            link.hold(FC.TELEMETRY_DATAGRAM)
+        self._ticking = True
+        try:
+            for _ in range(count):
+                self.servers[self._next_tick].tick(wall_now)
+                self._next_tick = (self._next_tick + 1) % n
+        finally:
+            self._ticking, self._batch = False, None
+            for link in links:
+                link.release()
+
+    def _kinematics(self, index: int) -> T.Kinematics | None:
+        """Vehicle ``index``'s state in wire frames: during a tick, from one conversion
+        of the whole fleet (the first vehicle to send telemetry makes it)."""
+        if not self._ticking:
+            return None
+        if self._batch is None:
+            physics = self.group.physics
+            self._batch = T.Kinematics.from_physics(physics.state, physics.params[:, P_GEAR_HEIGHT])
+        return self._batch.row(index)
 
     def in_lockstep(self, wall_now: float) -> bool:
         """Whether simulated time moves only with motor commands: always with
@@ -163,11 +193,10 @@ class FleetServer:
         stamp: int,
         controls: Any,
         link: Link,
-        replies: list[bytes],
         signed: Any = None,
     ) -> None:
         """One vehicle's command of a round (``signed``: the pymavlink message, whose
-        signature is checked when signing is on)."""
+        signature is checked when signing is on); the round runs once it is complete."""
         index = self.by_system.get(target)
         if index is None:
             self._unknown(target)
@@ -178,7 +207,8 @@ class FleetServer:
         now = self.round_start
         if stamp == self.previous_round and stamp != now:
             self.counters["duplicates"] += 1  # its answer was lost: the same answer again
-            replies += self.cached[index]
+            for frames in self.cached[index]:
+                link.send_bytes(frames)
             return
         controls = list(controls)
         problem = check_controls(controls)
@@ -191,10 +221,14 @@ class FleetServer:
             reason = server.motors.reject(*problem)
             if reason is not None:
                 server.statustext(Severity.WARNING, reason)
-            replies += self._answers(link, [index])
+            for frames in self._answers(link, [index]):
+                link.send_bytes(frames)
             return
         self.pending[index] = controls
         self._round_wall = time.monotonic()
+        if len(self.pending) == len(self.servers):
+            for frames in self._run_round(link):
+                link.send_bytes(frames)
 
     @property
     def round_start(self) -> int:
@@ -226,14 +260,16 @@ class FleetServer:
     def _answers(self, link: Link, rows: list[int]) -> list[bytes]:
         """The state answers of vehicles ``rows`` (cached as their last answer)."""
         physics = self.group.physics
-        vehicle = self.group.vehicles[0]
-        time_usec = round(vehicle.time * 1e6)
-        gear = vehicle.airframe.gear_height
+        time_usec = round(self.group.vehicles[0].time * 1e6)
+        gears = physics.params[rows, P_GEAR_HEIGHT]  # each vehicle's airframe's
         if len(rows) <= ROW_BY_ROW:  # a whole-array conversion costs more for a few
-            wires = [WireState.from_physics(physics.state[i], gear, 0, 0, 0.0) for i in rows]
+            wires = [
+                WireState.from_physics(physics.state[i], gear, 0, 0, 0.0)
+                for i, gear in zip(rows, gears.tolist(), strict=True)
+            ]
             columns = [[getattr(w, f).tolist() for w in wires] for f in WIRE_FIELDS]
         else:
-            batch = WireState.from_physics(physics.state[rows], gear, 0, None, None)
+            batch = WireState.from_physics(physics.state[rows], gears, 0, None, None)
             columns = [getattr(batch, f).tolist() for f in WIRE_FIELDS]
         contacts = physics.contact[rows].tolist()
         touchdowns = physics.touchdown_speed[rows].tolist()

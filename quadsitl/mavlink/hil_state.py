@@ -24,6 +24,7 @@ Vec = NDArray[np.float64]
 # Up to this many states, converting them one by one (the scalar fast paths of frames.py)
 # costs less than one whole-array conversion.
 ROW_BY_ROW = 4
+_UP = np.array([0.0, 0.0, 1.0])
 
 
 @dataclass
@@ -41,16 +42,22 @@ class WireState:
 
     @classmethod
     def from_physics(
-        cls, state: ArrayLike, gear_height: float, time_usec: int, contact: Any, touchdown: Any
+        cls,
+        state: ArrayLike,
+        gear_height: ArrayLike,
+        time_usec: int,
+        contact: Any,
+        touchdown: Any,
     ) -> WireState:
         """From a (17,) physics state, or from (N, 17) states (then every field but the
-        time holds N rows)."""
+        time holds N rows, and ``gear_height`` is one height or one per row)."""
         s = np.asarray(state, dtype=np.float64)
         q_enu_flu = s[..., L.QUAT]
         velocity_flu = frames.quat_rotate(frames.quat_conjugate(q_enu_flu), s[..., L.VEL])
+        gear = np.multiply.outer(gear_height, _UP)  # (3,) or (N, 3)
         return cls(
             time_usec=time_usec,
-            position_ned=frames.enu_to_ned(s[..., L.POS] - np.array([0.0, 0.0, gear_height])),
+            position_ned=frames.enu_to_ned(s[..., L.POS] - gear),
             q_ned_frd=frames.quat_enu_flu_to_ned_frd(q_enu_flu),
             velocity_frd=frames.flu_to_frd(velocity_flu),
             rates_frd=frames.flu_to_frd(s[..., L.RATES]),

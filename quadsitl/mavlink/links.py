@@ -98,6 +98,7 @@ class Link:
         self.system_id = system_id
         self._seq: dict[int, int] = {}  # next sequence number of each system sending here
         self._held: list[bytes] | None = None  # frames kept back by hold()
+        self._held_limit = FC.DATAGRAM_LIMIT  # bytes per datagram when released
         self.peers: dict[Any, Peer] = {}
         self.destination: tuple[str, int] | None = None
         self.bad_frames = 0
@@ -219,6 +220,8 @@ class Link:
         """Encode ``message`` as sent by ``system_id`` (default: the link's), with that
         system's sequence numbers on this link (and signing, if set)."""
         system = self.system_id if system_id is None else system_id
+        if not self.mav.signing.sign_outgoing:
+            return FC.pack_message(message, self.next_seq(system), system, self.mav.srcComponent)
         self.mav.srcSystem = system
         self.mav.seq = self._seq.get(system, 0)
         if self.mav.signing.sign_outgoing:
@@ -239,16 +242,18 @@ class Link:
         """Whether frames sent here must be signed."""
         return bool(self.mav.signing.sign_outgoing)
 
-    def hold(self) -> None:
-        """Collect what is sent from now on, until :meth:`release` sends it together."""
+    def hold(self, limit: int = FC.DATAGRAM_LIMIT) -> None:
+        """Collect what is sent from now on, until :meth:`release` sends it together in
+        datagrams of at most ``limit`` bytes."""
         if self._held is None:
             self._held = []
+            self._held_limit = limit
 
     def release(self) -> None:
         """Send what was held, in as few datagrams as fit (each unit given to
         :meth:`send_bytes` stays whole)."""
         held, self._held = self._held, None
-        for datagram in FC.datagrams(held or []):
+        for datagram in FC.datagrams(held or [], self._held_limit):
             self.send_bytes(datagram)
 
     def send_bytes(self, frame: bytes) -> None:

@@ -11,9 +11,11 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
@@ -29,6 +31,7 @@ from quadsitl.physics import layout as L
 from quadsitl.vehicle.modes import MAIN_AUTO, MAIN_OFFBOARD, MAIN_POSCTL, Mode
 from quadsitl.vehicle.vehicle import Vehicle
 
+Vec = NDArray[np.float64]
 _encoder = mav.MAVLink(None)
 
 # SYS_STATUS sensor bits reported present, enabled and healthy.
@@ -60,8 +63,41 @@ CAPABILITIES = (
 HEARTBEAT_PERIOD = 1.0  # s, wall clock
 
 
+@dataclass
+class Kinematics:
+    """A vehicle's state in wire frames, with what telemetry adds to the motor path's
+    (velocity NED, Euler angles): one vehicle's, or every vehicle's of a fleet converted
+    as one batch (``row`` then gives each its own)."""
+
+    wire: WireState
+    velocity_ned: Vec  # m/s
+    euler: Vec  # rad, roll, pitch, yaw of ``wire.q_ned_frd``
+
+    @classmethod
+    def from_physics(cls, state: Vec, gear_height: Any) -> Kinematics:
+        """From a (17,) state, or (N, 17) states with one gear height per row."""
+        wire = WireState.from_physics(state, gear_height, 0, 0, 0.0)
+        velocity_ned = frames.enu_to_ned(state[..., L.VEL])
+        return cls(wire, velocity_ned, frames.euler_from_quat(wire.q_ned_frd))
+
+    def row(self, k: int) -> Kinematics:
+        w = self.wire
+        wire = WireState(
+            0,
+            w.position_ned[k],
+            w.q_ned_frd[k],
+            w.velocity_frd[k],
+            w.rates_frd[k],
+            w.rotor_speeds[k],
+            0,
+            0.0,
+        )
+        return Kinematics(wire, self.velocity_ned[k], self.euler[k])
+
+
 class Snapshot:
-    """The vehicle's state in wire frames and units, computed once per telemetry tick."""
+    """The vehicle's state in wire frames and units, computed once per telemetry tick
+    (``kinematics``: already converted, e.g. with the rest of its fleet)."""
 
     def __init__(
         self,
@@ -69,23 +105,24 @@ class Snapshot:
         comm_errors: int = 0,
         error_counts: tuple[int, ...] = (0,) * 4,
         identity: Identity = IDENTITIES["px4"],
+        kinematics: Kinematics | None = None,
     ) -> None:
         self.vehicle = vehicle
         self.identity = identity
         self.comm_errors = min(comm_errors, 65535)  # malformed frames received
         self.error_counts = [min(n, 65535) for n in error_counts]  # signing, motor commands
-        s = vehicle.state
         self.time_boot_ms = int(vehicle.time * 1000) & 0xFFFFFFFF
         self.time_usec = int(vehicle.time * 1e6)
         # Local origin: the start position on the ground (the resting centre of mass is
         # gear height up); the conversion is WireState's, shared with the motor path.
-        wire = WireState.from_physics(s, vehicle.airframe.gear_height, self.time_usec, 0, 0.0)
+        k = kinematics or Kinematics.from_physics(vehicle.state, vehicle.airframe.gear_height)
+        wire = k.wire
         self.position_ned = wire.position_ned  # m
-        self.velocity_ned = frames.enu_to_ned(s[L.VEL])  # m/s
+        self.velocity_ned = k.velocity_ned  # m/s
         self.q_ned_frd = wire.q_ned_frd  # (w, x, y, z)
-        self.roll, self.pitch, self.yaw = (float(a) for a in frames.euler_from_quat(self.q_ned_frd))
+        self.roll, self.pitch, self.yaw = k.euler.tolist()
         self.rates_frd = wire.rates_frd  # rad/s
-        self.rotor_speeds = s[L.ROTORS]  # rad/s
+        self.rotor_speeds = wire.rotor_speeds  # rad/s
         self.lat, self.lon, self.alt_amsl = wire.global_position(vehicle.origin)
         up = -float(self.position_ned[2])
         self.relative_alt = up - float(vehicle.home_position[2])  # m above home
@@ -375,6 +412,8 @@ class Schedule:
         self.intervals: dict[int, float] = {m: 1.0 / hz for m, hz in rates.items()}
         self.next_due: dict[int, float] = {}
         self.last_wall: dict[int, float] = {}
+        self._earliest = -math.inf  # simulated s: nothing is due before it
+        self._last_now = math.inf  # simulated s of the last look
 
     def set_rate(self, message_id: int, hz: float | None) -> None:
         """Rate in Hz; 0 or negative stops the message; None restores the default."""
@@ -388,12 +427,16 @@ class Schedule:
         else:
             self.intervals[message_id] = 1.0 / hz
         self.next_due.pop(message_id, None)
+        self._earliest = -math.inf
 
     def due(self, now: float, wall_now: float | None = None) -> list[int]:
         """Message ids due at simulated time ``now``; advances their next due time.
 
         With ``wall_now`` (lockstep, possibly far faster than real time) a message is
         also held back until its interval has passed on the wall clock."""
+        if self._last_now <= now < self._earliest:
+            return []  # nothing due yet (most calls): no need to look at each message
+        self._last_now = now
         out = []
         for message_id, interval in self.intervals.items():
             due = self.next_due.get(message_id, now)
@@ -407,4 +450,7 @@ class Schedule:
                 out.append(message_id)
                 # Keep the phase, but never queue a backlog after a pause.
                 self.next_due[message_id] = max(due + interval, now + 0.5 * interval)
+        self._earliest = min(
+            (self.next_due.get(m, -math.inf) for m in self.intervals), default=math.inf
+        )
         return out

@@ -41,8 +41,11 @@ class Failsafes:
 
     def battery(self, remaining: float, params: dict[str, float]) -> Reaction | None:
         """``remaining``: fraction of charge left."""
-        thresholds = (params["BAT_LOW_THR"], params["BAT_CRIT_THR"], params["BAT_EMERGEN_THR"])
-        level = sum(remaining < t for t in thresholds)
+        level = (
+            (remaining < params["BAT_LOW_THR"])
+            + (remaining < params["BAT_CRIT_THR"])
+            + (remaining < params["BAT_EMERGEN_THR"])
+        )
         if level <= self.battery_level:
             return None
         self.battery_level = level
@@ -92,9 +95,10 @@ def check(v: Vehicle) -> None:
     """Each control tick: the battery and the geofence."""
     p = v.params.values
     react(v, v.failsafes.battery(v.battery.remaining, p))
-    offset = v.position - v.home_position
-    height = float(offset[2]) - v.airframe.gear_height
-    react(v, v.failsafes.geofence(math.hypot(offset[0], offset[1]), height, p))
+    x, y, z = v.position.tolist()
+    home_x, home_y, home_z = v.home_position.tolist()
+    height = z - home_z - v.airframe.gear_height
+    react(v, v.failsafes.geofence(math.hypot(x - home_x, y - home_y), height, p))
 
 
 def react(v: Vehicle, reaction: Reaction | None) -> None:

@@ -19,6 +19,7 @@ import numpy as np
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import FleetSlot
+from quadsitl.vehicle import ground_contact as GC
 from quadsitl.vehicle.battery import shaft_power
 from quadsitl.vehicle.controller import Autopilot
 from quadsitl.vehicle.geo import Home
@@ -77,28 +78,49 @@ class VehicleGroup:
             )
         self.substeps = self.vehicles[0].substeps
         self.control_period = self.vehicles[0].control_period
+        # The vehicles whose controller runs at each physics step of a control period.
+        self._due_at = [
+            [v for v in self.vehicles if (step + v.control_phase) % self.substeps == 0]
+            for step in range(self.substeps)
+        ]
+        self._steps = 0  # physics steps taken (advance takes a whole period)
+        self._energy = np.zeros(n)  # J of shaft work not yet drawn from the batteries
+        self._undrawn = 0.0  # s that ``_energy`` covers
 
     def __len__(self) -> int:
         return len(self.vehicles)
 
     def step(self) -> None:
-        """One physics step of every vehicle (each runs its controller when due)."""
-        contacts = [v.begin_step() for v in self.vehicles]
-        self.physics.step(self.rotor_cmd)
-        self._end(contacts, self.physics.dt)
+        """One physics step of every vehicle; the controllers whose turn it is run first
+        (each vehicle's once per control period)."""
+        for v in self._due_at[self._steps % self.substeps]:
+            v.control()
+        self._steps += 1
+        self._move(1, self.physics.dt)
 
     def advance(self) -> None:
         """One control period of every vehicle under external motor control (lockstep
         rounds), in one call of the physics."""
-        contacts = [v.begin_period() for v in self.vehicles]
-        self.physics.step(self.rotor_cmd, n_substeps=self.substeps)
-        self._end(contacts, self.control_period)
+        for v in self.vehicles:
+            v.control()
+        self._steps += self.substeps
+        self._move(self.substeps, self.control_period)
 
-    def _end(self, contacts: list[int], seconds: float) -> None:
-        """Each vehicle's part after the physics, with every shaft power (Q = k_Q·Ω²,
-        P = Q·Ω per rotor) computed in one array operation."""
+    def _move(self, substeps: int, seconds: float) -> None:
+        """The physics of all vehicles, then what each vehicle's flight software does
+        about it: contact events for the vehicles whose ground contact changed, and the
+        batteries (shaft work summed over arrays, drawn once per control period)."""
         physics = self.physics
+        before = physics.contact.copy()
+        physics.step(self.rotor_cmd, n_substeps=substeps)
+        if not np.array_equal(before, physics.contact):
+            for i in np.flatnonzero(before != physics.contact):
+                GC.watch_contact(self.vehicles[i], int(before[i]))
         rotors = physics.state[:, L.ROTORS]
-        powers = shaft_power(physics.params[:, L.P_KQ], rotors).tolist()
-        for v, before, power in zip(self.vehicles, contacts, powers, strict=True):
-            v.end_step(before, seconds, power)
+        self._energy += shaft_power(physics.params[:, L.P_KQ], rotors) * seconds
+        self._undrawn += seconds
+        if self._steps % self.substeps == 0:
+            seconds, self._undrawn = self._undrawn, 0.0
+            for v, energy in zip(self.vehicles, self._energy.tolist(), strict=True):
+                v.battery.drain(energy / seconds, seconds)
+            self._energy[:] = 0.0

@@ -84,12 +84,18 @@ class Leg:
         return 0.0 if math.isinf(speed) else speed
 
     def remaining(self, position: Vec) -> float:
-        return float(np.linalg.norm(self.end - position))
+        return math.dist(self.end.tolist(), np.asarray(position).tolist())
 
     def setpoint(self, position: Vec, velocity: Vec, t: float) -> Setpoint:
-        if self.remaining(position) <= self.radius:
+        # Scalar arithmetic: this runs at the controller rate for every vehicle flying a
+        # leg, and numpy's per-call cost on 3-vectors is most of a microsecond each.
+        px, py, pz = np.asarray(position).tolist()
+        sx, sy, sz = self.start.tolist()
+        dx, dy, dz = self.direction.tolist()
+        if math.dist(self.end.tolist(), (px, py, pz)) <= self.radius:
             self.done = True
-        along = float(np.clip((position - self.start) @ self.direction, 0.0, self.length))
+        along = (px - sx) * dx + (py - sy) * dy + (pz - sz) * dz
+        along = min(max(along, 0.0), self.length)
         to_go = self.length - along
         braking = math.sqrt(2.0 * self.limits.decel * to_go)
         # Ramp up as well (from a small start speed), so that all axes stay on the line.
@@ -100,9 +106,9 @@ class Leg:
         # While braking, feed the planned deceleration forward too.
         decel = self.limits.decel if braking < self.speed else 0.0
         return Setpoint(
-            position=self.start + along * self.direction,
-            velocity=speed * self.direction,
-            acceleration=-decel * self.direction,
+            position=np.array([sx + along * dx, sy + along * dy, sz + along * dz]),
+            velocity=np.array([speed * dx, speed * dy, speed * dz]),
+            acceleration=np.array([-decel * dx, -decel * dy, -decel * dz]),
             yaw=self.yaw,
             max_speed_xy=self.limits.cruise_xy,
             destination=self.end.copy(),
