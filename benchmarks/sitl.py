@@ -220,7 +220,7 @@ def _one_core() -> None:  # in the child, before exec
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
 
 
-def realtime_fleet(sizes: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64)) -> int:
+def realtime_fleet(sizes: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64, 96, 128)) -> int:
     """The largest fleet kept in real time on one core; prints the curve."""
     best = 0
     for vehicles in sizes:

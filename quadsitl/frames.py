@@ -17,6 +17,8 @@ the last axis, and returns new arrays.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -132,6 +134,15 @@ def euler_from_quat(q: ArrayLike) -> Array:
     Pitch is clamped to [-π/2, π/2]; yaw and roll are in (-π, π].
     """
     q = _as_vectors(q, 4, "quaternion")
+    if q.ndim == 1:  # one attitude (telemetry, mode changes): no array overhead
+        w, x, y, z = q.tolist()
+        return np.array(
+            [
+                math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)),
+                math.asin(min(1.0, max(-1.0, 2 * (w * y - z * x)))),
+                math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)),
+            ]
+        )
     w, x, y, z = np.moveaxis(q, -1, 0)
     roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
     pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))

@@ -3,13 +3,16 @@ flown one by one by an independent pymavlink ground station over real UDP."""
 
 from __future__ import annotations
 
+import socket
 import subprocess
 import time
+from collections import Counter
 
 import pytest
 
 from gcs_tools.client import VehicleClient, Waypoint, mav
 from gcs_tools.scripted_flight import mission_items
+from quadsitl.mavlink import fast_codec as FC
 from tests.conftest import cli, free_udp_port
 
 VEHICLES = 4
@@ -139,3 +142,48 @@ def test_training_through_the_wire_flies_its_envs_as_fleets(tmp_path):
             break
         time.sleep(0.2)
     assert leftovers.returncode == 1, leftovers.stdout  # the simulators went with the run
+
+
+def test_a_fleets_telemetry_comes_at_its_rates_in_datagrams_that_fit_a_network():
+    """16 vehicles in real time to one ground station: every vehicle's ATTITUDE at 50 Hz
+    and its heartbeat, the frames of several vehicles together in datagrams of at most
+    1,400 bytes (within an Ethernet MTU, as PX4 packs them)."""
+    listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    listener.bind(("127.0.0.1", 0))
+    listener.settimeout(30)
+    process = subprocess.Popen(
+        cli(
+            f"sim --vehicles 16 --gcs udpout:127.0.0.1:{listener.getsockname()[1]} "
+            "--api none --logs none --quiet"
+        ),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        listener.recv(65535)  # it is up (the first datagram may wait for numba's cache)
+        listener.settimeout(0.5)
+        attitudes: Counter[int] = Counter()
+        heartbeats: set[int] = set()
+        sizes, systems_per_datagram = [], []
+        start = time.monotonic()
+        while time.monotonic() - start < 3.0:
+            data = listener.recv(65535)
+            frames = list(FC.parse(data))
+            sizes.append(len(data))
+            systems_per_datagram.append(len({f.sysid for f in frames}))
+            for f in frames:
+                if f.msgid == mav.MAVLINK_MSG_ID_ATTITUDE:
+                    attitudes[f.sysid] += 1
+                elif f.msgid == mav.MAVLINK_MSG_ID_HEARTBEAT:
+                    heartbeats.add(f.sysid)
+        elapsed = time.monotonic() - start
+    finally:
+        process.terminate()
+        process.wait(10)
+        listener.close()
+    assert heartbeats == set(range(1, 17))
+    assert set(attitudes) == set(range(1, 17))
+    rates = [attitudes[s] / elapsed for s in range(1, 17)]
+    assert min(rates) > 40 and max(rates) < 60, rates
+    assert max(sizes) <= 1400
+    assert max(systems_per_datagram) > 1  # the vehicles' frames travel together

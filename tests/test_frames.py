@@ -93,3 +93,14 @@ def test_single_vector_rotation_equals_the_batched_one():
     batched = F.quat_rotate(q, v)
     single = np.array([F.quat_rotate(q[i], v[i]) for i in range(50)])
     np.testing.assert_allclose(single, batched, atol=1e-14)
+
+
+def test_single_euler_angles_equal_the_batched_ones_also_at_the_poles():
+    rng = np.random.default_rng(6)
+    q = F.quat_normalize(rng.normal(size=(50, 4)))
+    pole = F.quat_from_euler(0.3, math.pi / 2, -1.0)  # pitch ±90°: the clamp applies
+    q = np.vstack([q, pole, -pole])
+    batched = F.euler_from_quat(q)
+    single = np.array([F.euler_from_quat(row) for row in q])
+    np.testing.assert_allclose(single, batched, atol=1e-14)
+    assert abs(batched[50, 1] - math.pi / 2) < 1e-6

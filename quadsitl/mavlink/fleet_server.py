@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 import time
-from functools import partial
 from typing import Any
 
 import numpy as np
@@ -57,12 +56,11 @@ class FleetServer:
         self.cached: list[list[bytes]] = [[] for _ in servers]  # its answers
         self.counters = {"unknown_system": 0, "duplicates": 0, "rounds": 0}
         self._next_tick = 0  # the vehicle ticked next
-        self._last_tick = -math.inf  # wall time of the last tick
+        self._last_tick: float | None = None  # wall time of the last tick
         self._credit = 0.0  # vehicles owed a tick
-        self._batch: T.Kinematics | None = None  # every vehicle's, during a tick
-        self._ticking = False
         for i, server in enumerate(servers):
-            server.kinematics = partial(self._kinematics, i)
+            for schedule in server.schedules.values():  # the vehicles' telemetry takes turns
+                schedule.offset = i / len(servers) * T.FASTEST_INTERVAL
         self._round_wall = -math.inf  # wall time of the last round command
 
     # --- the loop's hooks -------------------------------------------------------------
@@ -110,7 +108,8 @@ class FleetServer:
         datagrams of at most TELEMETRY_DATAGRAM bytes per link (as PX4 packs them)."""
         n = len(self.servers)
         period = LOCKSTEP_TICK_PERIOD if self.in_lockstep(wall_now) else TICK_PERIOD
-        elapsed = min(max(wall_now - self._last_tick, 0.0), period)
+        last = wall_now if self._last_tick is None else self._last_tick
+        elapsed = min(max(wall_now - last, 0.0), period)
         self._last_tick = wall_now
         self._credit += n * elapsed / period
         count = min(n, max(1, int(self._credit)))
@@ -118,25 +117,13 @@ class FleetServer:
         links = self.servers[0].links
         for link in links:
             link.hold(FC.TELEMETRY_DATAGRAM)
-        self._ticking = True
         try:
             for _ in range(count):
                 self.servers[self._next_tick].tick(wall_now)
                 self._next_tick = (self._next_tick + 1) % n
         finally:
-            self._ticking, self._batch = False, None
             for link in links:
                 link.release()
-
-    def _kinematics(self, index: int) -> T.Kinematics | None:
-        """Vehicle ``index``'s state in wire frames: during a tick, from one conversion
-        of the whole fleet (the first vehicle to send telemetry makes it)."""
-        if not self._ticking:
-            return None
-        if self._batch is None:
-            physics = self.group.physics
-            self._batch = T.Kinematics.from_physics(physics.state, physics.params[:, P_GEAR_HEIGHT])
-        return self._batch.row(index)
 
     def in_lockstep(self, wall_now: float) -> bool:
         """Whether simulated time moves only with motor commands: always with

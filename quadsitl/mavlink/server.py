@@ -81,9 +81,6 @@ class MavlinkServer:
         self.after_ack: list[Any] = []
         self.commands = Commands(self)
         self.counters = {"ignored": 0, "bad_values": 0}
-        # The vehicle's state already in wire frames (its fleet converts them together
-        # while it ticks), or None: the snapshot converts it.
-        self.kinematics: Callable[[], T.Kinematics | None] | None = None
         self.handlers: dict[str, Callable[[Any, Link], None]] = {
             name[len("handle_") :].upper(): getattr(self, name)
             for name in dir(self)
@@ -206,10 +203,7 @@ class MavlinkServer:
                 self.send(T.BUILDERS[message_id](snapshot), link)
 
     def snapshot(self) -> T.Snapshot:
-        kinematics = self.kinematics() if self.kinematics is not None else None
-        return T.Snapshot(
-            self.vehicle, self.comm_errors, self.error_counts, self.identity, kinematics
-        )
+        return T.Snapshot(self.vehicle, self.comm_errors, self.error_counts, self.identity)
 
     # --- the ground station's heartbeat: link-loss failsafe (PX4's NAV_DLL_ACT) --------
     def handle_heartbeat(self, msg: Any, link: Link) -> None:

@@ -11,11 +11,9 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
@@ -31,7 +29,6 @@ from quadsitl.physics import layout as L
 from quadsitl.vehicle.modes import MAIN_AUTO, MAIN_OFFBOARD, MAIN_POSCTL, Mode
 from quadsitl.vehicle.vehicle import Vehicle
 
-Vec = NDArray[np.float64]
 _encoder = mav.MAVLink(None)
 
 # SYS_STATUS sensor bits reported present, enabled and healthy.
@@ -63,41 +60,8 @@ CAPABILITIES = (
 HEARTBEAT_PERIOD = 1.0  # s, wall clock
 
 
-@dataclass
-class Kinematics:
-    """A vehicle's state in wire frames, with what telemetry adds to the motor path's
-    (velocity NED, Euler angles): one vehicle's, or every vehicle's of a fleet converted
-    as one batch (``row`` then gives each its own)."""
-
-    wire: WireState
-    velocity_ned: Vec  # m/s
-    euler: Vec  # rad, roll, pitch, yaw of ``wire.q_ned_frd``
-
-    @classmethod
-    def from_physics(cls, state: Vec, gear_height: Any) -> Kinematics:
-        """From a (17,) state, or (N, 17) states with one gear height per row."""
-        wire = WireState.from_physics(state, gear_height, 0, 0, 0.0)
-        velocity_ned = frames.enu_to_ned(state[..., L.VEL])
-        return cls(wire, velocity_ned, frames.euler_from_quat(wire.q_ned_frd))
-
-    def row(self, k: int) -> Kinematics:
-        w = self.wire
-        wire = WireState(
-            0,
-            w.position_ned[k],
-            w.q_ned_frd[k],
-            w.velocity_frd[k],
-            w.rates_frd[k],
-            w.rotor_speeds[k],
-            0,
-            0.0,
-        )
-        return Kinematics(wire, self.velocity_ned[k], self.euler[k])
-
-
 class Snapshot:
-    """The vehicle's state in wire frames and units, computed once per telemetry tick
-    (``kinematics``: already converted, e.g. with the rest of its fleet)."""
+    """The vehicle's state in wire frames and units, computed once per telemetry tick."""
 
     def __init__(
         self,
@@ -105,22 +69,21 @@ class Snapshot:
         comm_errors: int = 0,
         error_counts: tuple[int, ...] = (0,) * 4,
         identity: Identity = IDENTITIES["px4"],
-        kinematics: Kinematics | None = None,
     ) -> None:
         self.vehicle = vehicle
         self.identity = identity
         self.comm_errors = min(comm_errors, 65535)  # malformed frames received
         self.error_counts = [min(n, 65535) for n in error_counts]  # signing, motor commands
+        s = vehicle.state
         self.time_boot_ms = int(vehicle.time * 1000) & 0xFFFFFFFF
         self.time_usec = int(vehicle.time * 1e6)
         # Local origin: the start position on the ground (the resting centre of mass is
         # gear height up); the conversion is WireState's, shared with the motor path.
-        k = kinematics or Kinematics.from_physics(vehicle.state, vehicle.airframe.gear_height)
-        wire = k.wire
+        wire = WireState.from_physics(s, vehicle.airframe.gear_height, self.time_usec, 0, 0.0)
         self.position_ned = wire.position_ned  # m
-        self.velocity_ned = k.velocity_ned  # m/s
+        self.velocity_ned = frames.enu_to_ned(s[L.VEL])  # m/s
         self.q_ned_frd = wire.q_ned_frd  # (w, x, y, z)
-        self.roll, self.pitch, self.yaw = k.euler.tolist()
+        self.roll, self.pitch, self.yaw = frames.euler_from_quat(self.q_ned_frd).tolist()
         self.rates_frd = wire.rates_frd  # rad/s
         self.rotor_speeds = wire.rotor_speeds  # rad/s
         self.lat, self.lon, self.alt_amsl = wire.global_position(vehicle.origin)
@@ -374,6 +337,8 @@ DEFAULT_RATES: dict[int, float] = {
     mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
 }
 
+FASTEST_INTERVAL = 1.0 / max(DEFAULT_RATES.values())  # s, of the fastest default stream
+
 # REQUEST_DATA_STREAM groups (ArduPilot/MAVProxy convention) -> message ids.
 DATA_STREAMS: dict[int, tuple[int, ...]] = {
     mav.MAV_DATA_STREAM_EXTENDED_STATUS: (
@@ -405,10 +370,13 @@ DATA_STREAMS[mav.MAV_DATA_STREAM_ALL] = tuple(m for ids in DATA_STREAMS.values()
 class Schedule:
     """Per-link message intervals (s of simulated time) and when each is next due.
 
-    ``streams=False`` starts with every stream off (the motor-command link)."""
+    ``streams=False`` starts with every stream off (the motor-command link). ``offset``
+    (s) delays each message's first time: a fleet spreads its vehicles' messages over
+    the fastest stream's interval instead of sending them all at once."""
 
-    def __init__(self, streams: bool = True) -> None:
+    def __init__(self, streams: bool = True, offset: float = 0.0) -> None:
         rates = DEFAULT_RATES if streams else {}
+        self.offset = offset
         self.intervals: dict[int, float] = {m: 1.0 / hz for m, hz in rates.items()}
         self.next_due: dict[int, float] = {}
         self.last_wall: dict[int, float] = {}
@@ -439,7 +407,9 @@ class Schedule:
         self._last_now = now
         out = []
         for message_id, interval in self.intervals.items():
-            due = self.next_due.get(message_id, now)
+            due = self.next_due.get(message_id)
+            if due is None:
+                due = self.next_due[message_id] = now + self.offset
             if due - now > interval:  # simulated time went back (reboot, reset)
                 due = now
             if now >= due and wall_now is not None:
