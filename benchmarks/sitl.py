@@ -243,6 +243,7 @@ def realtime_fleet(sizes: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64, 96, 128)) -
         _take_off(listener, counts, target=0)
         _, err = process.communicate(timeout=120)
         stop.set()
+        drain.join()  # before the socket it reads goes
         listener.close()
         match = re.search(r"p99 ([0-9.]+) ms", err)
         if match is None:

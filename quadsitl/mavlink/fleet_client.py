@@ -20,6 +20,7 @@ vehicle to reset in one datagram, resent for the vehicles whose answers are miss
 from __future__ import annotations
 
 import math
+import os
 import select
 import socket
 import time
@@ -34,7 +35,7 @@ from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.commands import FORCE_MAGIC
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.mavlink.links import MAX_DATAGRAM, is_loopback
-from quadsitl.mavlink.motor_client import SimulatorError
+from quadsitl.mavlink.motor_client import SPIN_SECONDS, SimulatorError
 from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_MOTION
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
@@ -119,14 +120,21 @@ class FleetClient:
 
     def _receive(self, until: float) -> list[FC.Frame]:
         """The frames of the datagrams that arrive before ``until`` (wall, monotonic);
-        returns as soon as one datagram has been read."""
+        returns as soon as one datagram has been read. Polls for the first SPIN_SECONDS
+        (an answer is usually tens of microseconds away, and waking from select() costs
+        about as much again), yielding the core to a simulator that shares it."""
+        started = time.monotonic()
         while True:
             try:
                 data = self.sock.recv(MAX_DATAGRAM)
             except BlockingIOError:
-                wait = until - time.monotonic()
+                now = time.monotonic()
+                wait = until - now
                 if wait <= 0:
                     return []
+                if now - started < SPIN_SECONDS:
+                    os.sched_yield()
+                    continue
                 select.select([self.sock], [], [], wait)
                 continue
             except ConnectionRefusedError:

@@ -84,8 +84,7 @@ class VehicleGroup:
             for step in range(self.substeps)
         ]
         self._steps = 0  # physics steps taken (advance takes a whole period)
-        self._energy = np.zeros(n)  # J of shaft work not yet drawn from the batteries
-        self._undrawn = 0.0  # s that ``_energy`` covers
+        self._undrawn = 0.0  # s of flight not yet drawn from the batteries
 
     def __len__(self) -> int:
         return len(self.vehicles)
@@ -108,19 +107,20 @@ class VehicleGroup:
 
     def _move(self, substeps: int, seconds: float) -> None:
         """The physics of all vehicles, then what each vehicle's flight software does
-        about it: contact events for the vehicles whose ground contact changed, and the
-        batteries (shaft work summed over arrays, drawn once per control period)."""
+        about it: contact events for the vehicles whose ground contact changed, and,
+        once per control period, the batteries (each drawing its rotors' shaft power of
+        that moment for the whole period: the power changes little in one)."""
         physics = self.physics
-        before = physics.contact.copy()
+        before = physics.contact.tolist()
         physics.step(self.rotor_cmd, n_substeps=substeps)
-        if not np.array_equal(before, physics.contact):
-            for i in np.flatnonzero(before != physics.contact):
-                GC.watch_contact(self.vehicles[i], int(before[i]))
-        rotors = physics.state[:, L.ROTORS]
-        self._energy += shaft_power(physics.params[:, L.P_KQ], rotors) * seconds
+        after = physics.contact.tolist()
+        if before != after:
+            for v, was, now in zip(self.vehicles, before, after, strict=True):
+                if was != now:
+                    GC.watch_contact(v, was)
         self._undrawn += seconds
         if self._steps % self.substeps == 0:
-            seconds, self._undrawn = self._undrawn, 0.0
-            for v, energy in zip(self.vehicles, self._energy.tolist(), strict=True):
-                v.battery.drain(energy / seconds, seconds)
-            self._energy[:] = 0.0
+            powers = shaft_power(physics.params[:, L.P_KQ], physics.state[:, L.ROTORS])
+            for v, power in zip(self.vehicles, powers.tolist(), strict=True):
+                v.battery.drain(power, self._undrawn)
+            self._undrawn = 0.0
