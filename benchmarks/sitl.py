@@ -39,6 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import report
 
 from gcs_tools.demo import free_udp_port
+from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
 from quadsitl.mavlink.signing import key_from_passphrase
 from quadsitl.physics import get_airframe
@@ -55,13 +56,15 @@ def _cpu_seconds(pid: int) -> float:
 
 
 def _drain(sock: socket.socket, counts: list, stop: threading.Event) -> None:
-    """Count datagrams; remember the simulator's address (counts[1])."""
+    """Count datagrams (counts[0]) and the MAVLink frames in them (counts[2]); remember
+    the simulator's address (counts[1])."""
     sock.settimeout(0.2)
     while not stop.is_set():
         try:
-            _, address = sock.recvfrom(65535)
+            data, address = sock.recvfrom(65535)
             counts[0] += 1
             counts[1] = address
+            counts[2] += sum(1 for _ in FC.parse(data))
         except TimeoutError:
             continue
 
@@ -90,7 +93,7 @@ def realtime() -> None:
         listeners.append(sock)
     gcs_port, api_port = (s.getsockname()[1] for s in listeners)
     stop = threading.Event()
-    counts: list[list] = [[0, None], [0, None]]
+    counts: list[list] = [[0, None, 0], [0, None, 0]]
     threads = [
         threading.Thread(target=_drain, args=(s, c, stop), daemon=True)
         for s, c in zip(listeners, counts, strict=False)
@@ -122,9 +125,9 @@ def realtime() -> None:
     start = time.monotonic()
     _take_off(listeners[0], counts[0])
     time.sleep(WINDOW[0] - (time.monotonic() - start))
-    cpu0, t0, msgs0 = _cpu_seconds(process.pid), time.monotonic(), counts[0][0] + counts[1][0]
+    cpu0, t0, msgs0 = _cpu_seconds(process.pid), time.monotonic(), counts[0][2] + counts[1][2]
     time.sleep(WINDOW[1] - WINDOW[0])
-    cpu1, t1, msgs1 = _cpu_seconds(process.pid), time.monotonic(), counts[0][0] + counts[1][0]
+    cpu1, t1, msgs1 = _cpu_seconds(process.pid), time.monotonic(), counts[0][2] + counts[1][2]
     _, err = process.communicate(timeout=DURATION + 30)
     stop.set()
     match = re.search(r"p99 ([0-9.]+) ms, max ([0-9.]+) ms, skipped (\d+)", err)
@@ -168,7 +171,7 @@ def lockstep(
     ``hil_state``: answers include HIL_STATE_QUATERNION (the default of the wire)."""
     listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     listener.bind(("127.0.0.1", 0))
-    counts: list = [0, None]
+    counts: list = [0, None, 0]
     stop = threading.Event()
     thread = threading.Thread(target=_drain, args=(listener, counts, stop), daemon=True)
     thread.start()
@@ -227,7 +230,7 @@ def realtime_fleet(sizes: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64, 96, 128)) -
         listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         listener.bind(("127.0.0.1", 0))
         stop = threading.Event()
-        counts: list = [0, None]
+        counts: list = [0, None, 0]
         drain = threading.Thread(target=_drain, args=(listener, counts, stop), daemon=True)
         drain.start()
         command = [sys.executable, "-m", "quadsitl.cli", "sim", "--vehicles", str(vehicles)]
