@@ -9,11 +9,33 @@ import sys
 import time
 from collections.abc import Iterator
 
+import numpy as np
 import pytest
 
 from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
 from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
+
+# In-process against through the wire: float32 on the wire, carried through episodes;
+# rewards weigh distance changes by up to 100.
+OBS_TOLERANCE = 1e-4
+REWARD_TOLERANCE = 2e-3
+
+
+def fly_both(local, remote, rng: np.random.Generator, steps: int, scale: float) -> int:  # type: ignore[no-untyped-def]
+    """Step the in-process and the wire vector envs with the same random rotor actions
+    (normal, ``scale``) for ``steps`` steps, asserting the same observations, rewards and
+    endings at each one (through autoresets); returns how many episodes ended."""
+    ended = 0
+    for _ in range(steps):
+        actions = rng.normal(0, scale, (local.num_envs, 4)).astype(np.float32)
+        a, ra, ta, ua, _ = local.step(actions)
+        b, rb, tb, ub, _ = remote.step(actions)
+        np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
+        np.testing.assert_allclose(rb, ra, atol=REWARD_TOLERANCE)
+        assert (ta == tb).all() and (ua == ub).all()
+        ended += int((ta | ua).sum())
+    return ended
 
 
 class RunningSim:

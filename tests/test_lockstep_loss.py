@@ -18,8 +18,8 @@ from quadsitl.mavlink.hil_state import WireState
 from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.mavlink.motor_path import RESET_STATE
 from quadsitl.physics import PAPER
+from tests.conftest import OBS_TOLERANCE, fly_both
 
-OBS_TOLERANCE = 1e-4
 RATES = ["--physics-rate", "100", "--control-rate", "20", "--gcs", "none", "--api", "none"]
 
 
@@ -47,14 +47,9 @@ def test_ten_percent_loss_both_ways_changes_nothing_but_the_resend_count(fleet_s
         try:
             a, _ = local.reset(seed=2)
             b, _ = remote.reset(seed=2)
+            np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
             rng = np.random.default_rng(0)
-            for _ in range(150):
-                actions = rng.normal(0, 0.3, (4, 4)).astype(np.float32)
-                a, ra, ta, ua, _ = local.step(actions)
-                b, rb, tb, ub, _ = remote.step(actions)
-                np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
-                np.testing.assert_allclose(rb, ra, atol=2e-3)
-                assert (ta == tb).all() and (ua == ub).all()
+            fly_both(local, remote, rng, 150, 0.3)
             client = remote.unwrapped.backend.clients[0]
             assert relay.dropped > 20  # the relay did lose datagrams ...
             assert client.resent > 10  # ... the client resent, and nothing went wrong
@@ -162,12 +157,9 @@ def test_a_signed_fleet_matches_in_process():
     try:
         a, _ = local.reset(seed=5)
         b, _ = remote.reset(seed=5)
+        np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
         rng = np.random.default_rng(2)
-        for _ in range(30):
-            actions = rng.normal(0, 0.1, (2, 4)).astype(np.float32)
-            a, *_ = local.step(actions)
-            b, *_ = remote.step(actions)
-            np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
+        fly_both(local, remote, rng, 30, 0.1)
         assert remote.unwrapped.backend.clients[0].signing
     finally:
         local.close()

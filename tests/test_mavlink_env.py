@@ -20,9 +20,7 @@ from quadsitl.envs.parallel import mavlink_vector_env
 from quadsitl.mavlink import mavlink
 from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.registration import ENV_IDS
-
-OBS_TOLERANCE = 1e-4  # float32 on the wire, carried through whole episodes
-REWARD_TOLERANCE = 2e-3  # rewards weigh distance changes by up to 100
+from tests.conftest import OBS_TOLERANCE, REWARD_TOLERANCE, fly_both
 
 
 def _episode(env: gym.Env, seed: int, actions: np.ndarray) -> tuple[list, list, list, dict]:
@@ -206,13 +204,7 @@ def test_native_vector_env_over_two_simulators_matches_in_process():
         b, _ = remote.reset(seed=4)
         np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
         rng = np.random.default_rng(1)
-        for _ in range(160):  # through episode ends and autoresets
-            actions = rng.normal(0, 0.05, (2, 4)).astype(np.float32)
-            a, ra, ta, ua, _ = local.step(actions)
-            b, rb, tb, ub, _ = remote.step(actions)
-            np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
-            np.testing.assert_allclose(rb, ra, atol=REWARD_TOLERANCE)
-            assert (ta == tb).all() and (ua == ub).all()
+        fly_both(local, remote, rng, 160, 0.05)  # through episode ends and autoresets
     finally:
         local.close()
         remote.close()
@@ -236,15 +228,7 @@ def test_fleets_in_one_process_match_in_process_through_autoresets(task, fleet):
         b, _ = remote.reset(seed=11)
         np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
         rng = np.random.default_rng(3)
-        ended = 0
-        for _ in range(150):
-            actions = rng.normal(0, 0.3, (5, 4)).astype(np.float32)
-            a, ra, ta, ua, _ = local.step(actions)
-            b, rb, tb, ub, _ = remote.step(actions)
-            np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
-            np.testing.assert_allclose(rb, ra, atol=REWARD_TOLERANCE)
-            assert (ta == tb).all() and (ua == ub).all()
-            ended += int((ta | ua).sum())
+        ended = fly_both(local, remote, rng, 150, 0.3)
         assert ended >= 5  # the comparison went through autoresets
     finally:
         local.close()

@@ -15,12 +15,10 @@ import pytest
 
 import quadsitl  # noqa: F401  (registers the envs)
 from quadsitl.mavlink.motor_client import SimulatorError
+from tests.conftest import OBS_TOLERANCE, fly_both
 
 ray = pytest.importorskip("ray")
 from ray.cluster_utils import Cluster  # noqa: E402
-
-OBS_TOLERANCE = 1e-4  # as the other wire-parity tests
-REWARD_TOLERANCE = 2e-3
 
 
 @pytest.fixture(scope="module")
@@ -52,13 +50,7 @@ def test_simulators_on_the_second_node_fly_as_in_process_and_survive_a_lost_acto
         b, _ = remote.reset(seed=4)
         np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
         rng = np.random.default_rng(1)
-        for _ in range(40):
-            actions = rng.normal(0, 0.05, (4, 4)).astype(np.float32)
-            a, ra, ta, ua, _ = local.step(actions)
-            b, rb, tb, ub, _ = remote.step(actions)
-            np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
-            np.testing.assert_allclose(rb, ra, atol=REWARD_TOLERANCE)
-            assert (ta == tb).all() and (ua == ub).all()
+        fly_both(local, remote, rng, 40, 0.05)
 
         lost = backend.processes[0]
         ray.kill(lost.actor)  # asynchronous: wait until its simulator has gone with it
@@ -76,11 +68,7 @@ def test_simulators_on_the_second_node_fly_as_in_process_and_survive_a_lost_acto
         assert lost not in backend.processes
         assert {sim.node_id for sim in backend.processes} == {worker.node_id}
         np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
-        for _ in range(10):
-            actions = rng.normal(0, 0.05, (4, 4)).astype(np.float32)
-            a, *_ = local.step(actions)
-            b, *_ = remote.step(actions)
-            np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
+        fly_both(local, remote, rng, 10, 0.05)
         addresses = [sim.address for sim in backend.processes]
     finally:
         local.close()

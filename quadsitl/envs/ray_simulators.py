@@ -117,6 +117,7 @@ class RaySimulator:
 
     def __init__(self, actor: Any, host: str, port: int, node_id: str) -> None:
         self.actor, self.host, self.port, self.node_id = actor, host, port, node_id
+        self.ray = import_ray()
 
     @property
     def address(self) -> tuple[str, int]:
@@ -124,14 +125,14 @@ class RaySimulator:
 
     @property
     def alive(self) -> bool:
-        ray = import_ray()
+        ray = self.ray
         try:
             return bool(ray.get(self.actor.alive.remote(), timeout=CALL_TIMEOUT))
         except ray.exceptions.RayError:  # the actor, its node or the call is lost
             return False
 
     def exit_message(self) -> str:
-        ray = import_ray()
+        ray = self.ray
         where = f"on {self.host} (Ray node {self.node_id[:12]})"
         try:
             return f"{where} {ray.get(self.actor.exit_message.remote(), timeout=CALL_TIMEOUT)}"
@@ -139,7 +140,7 @@ class RaySimulator:
             return f"{where} was lost with its Ray actor ({type(error).__name__})"
 
     def stop(self) -> None:
-        ray = import_ray()
+        ray = self.ray
         with contextlib.suppress(ray.exceptions.RayError):  # already gone
             ray.get(self.actor.stop.remote(), timeout=CALL_TIMEOUT)
         ray.kill(self.actor)
