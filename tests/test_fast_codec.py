@@ -45,18 +45,26 @@ def _random_message(cls, rng: random.Random):  # type: ignore[no-untyped-def]
     return cls(*(_value(rng, types[name], lengths[name]) for name in cls.fieldnames))
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_pack_message_gives_pymavlinks_bytes_for_every_message(seed: int) -> None:
+@pytest.mark.parametrize(("seed", "signed"), [(0, False), (1, False), (2, True)])
+def test_pack_message_gives_pymavlinks_bytes_for_every_message(seed: int, signed: bool) -> None:
+    """Unsigned and signed (same key, link id and timestamps as pymavlink's signer)."""
     rng = random.Random(seed)
     encoder = mav.MAVLink(None, srcSystem=42, srcComponent=1)
+    key, link_id, stamp = bytes(range(32)), 3, 123_456_789_000
+    signer = FC.Signer(key, link_id, stamp) if signed else None
+    if signed:
+        encoder.signing.secret_key, encoder.signing.link_id = key, link_id
+        encoder.signing.sign_outgoing, encoder.signing.timestamp = True, stamp
     for msgid, cls in sorted(mav.mavlink_map.items()):
         message = _random_message(cls, rng)
         seq = rng.randint(0, 255)
         encoder.seq = seq
         expected = message.pack(encoder)
-        assert FC.pack_message(message, seq, 42, 1) == expected, cls.msgname
+        assert FC.pack_message(message, seq, 42, 1, signer) == expected, cls.msgname
         (frame,) = FC.parse(expected)  # and the fast parser reads it back
         assert (frame.msgid, frame.sysid, frame.compid) == (msgid, 42, 1)
+    if signer is not None:
+        assert signer.timestamp == encoder.signing.timestamp  # one tick per frame, as there
 
 
 def test_datagrams_keep_units_whole_and_within_the_limit() -> None:

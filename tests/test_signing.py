@@ -153,14 +153,15 @@ def test_a_forged_frame_does_not_lock_out_the_real_sender():
 def test_signing_timestamps_follow_the_wall_clock():
     """After a minute of running, a new station must still accept the vehicle's stream."""
     from quadsitl.mavlink.links import Link
-    from quadsitl.mavlink.signing import now_timestamp, sign_outgoing
+    from quadsitl.mavlink.signing import now_timestamp
 
     key = key_from_passphrase(PASSPHRASE)
     link = Link("udpin:127.0.0.1:0", "gcs", 1, 1)
     try:
-        sign_outgoing(link.mav, key, 0)
-        link.mav.signing.timestamp -= 120 * 100_000  # as if started two minutes ago
-        frame = link.pack(link.mav.heartbeat_encode(2, 12, 0, 0, 3))
+        link.set_signing(key, 0)
+        assert link.signer is not None
+        link.signer.timestamp -= 120 * 100_000  # as if started two minutes ago
+        frame = link.pack(mav.MAVLink(None).heartbeat_encode(2, 12, 0, 0, 3))
         stamp = int.from_bytes(frame[-12:-6], "little")
         assert abs(stamp - now_timestamp()) < 100_000  # within a second of now
         station = mav.MAVLink(None)

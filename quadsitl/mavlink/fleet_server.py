@@ -284,11 +284,10 @@ class FleetServer:
         server = self.servers[i]
         sysid = server.system_id
         parts = answer_parts(time_usec, state, contact, touchdown, server.motors.resets, lean=True)
-        if link.signs:  # pymavlink signs; the rest is packed here
-            return [b"".join(link.pack(FC.message(cls, values), sysid) for cls, values in parts)]
+        signer = link.signing()
         return [
             b"".join(
-                FC.pack(cls, values, link.next_seq(sysid), sysid, server.component_id)
+                FC.pack(cls, values, link.next_seq(sysid), sysid, server.component_id, signer)
                 for cls, values in parts
             )
         ]

@@ -25,7 +25,7 @@ from typing import Any
 
 from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink
-from quadsitl.mavlink.signing import keep_signing_clock
+from quadsitl.mavlink.signing import now_timestamp
 
 LOOPBACK = "127.0.0.1"
 PEER_TIMEOUT = 10.0  # s without a packet before a learned UDP peer is dropped
@@ -63,16 +63,6 @@ def is_loopback(host: str) -> bool:
         return False
 
 
-class _Capture:
-    """File-like sink for pymavlink's encoder: keeps the last packed frame."""
-
-    def __init__(self) -> None:
-        self.frames: list[bytes] = []
-
-    def write(self, data: bytes) -> None:
-        self.frames.append(bytes(data))
-
-
 @dataclass
 class Peer:
     address: Any
@@ -93,9 +83,8 @@ class Link:
     def __init__(self, url: str, name: str, system_id: int, component_id: int) -> None:
         self.url, self.name = url, name
         self.kind, host, port = parse_url(url)
-        self._out = _Capture()
-        self.mav = mavlink.MAVLink(self._out, srcSystem=system_id, srcComponent=component_id)
-        self.system_id = system_id
+        self.system_id, self.component_id = system_id, component_id
+        self.signer: FC.Signer | None = None  # signs every frame sent here (set_signing)
         self._seq: dict[int, int] = {}  # next sequence number of each system sending here
         self._held: list[bytes] | None = None  # frames kept back by hold()
         self._held_limit = FC.DATAGRAM_LIMIT  # bytes per datagram when released
@@ -218,17 +207,21 @@ class Link:
     # --- sending ----------------------------------------------------------------------
     def pack(self, message: Any, system_id: int | None = None) -> bytes:
         """Encode ``message`` as sent by ``system_id`` (default: the link's), with that
-        system's sequence numbers on this link (and signing, if set)."""
+        system's sequence numbers on this link (and signed, if set)."""
         system = self.system_id if system_id is None else system_id
-        if not self.mav.signing.sign_outgoing:
-            return FC.pack_message(message, self.next_seq(system), system, self.mav.srcComponent)
-        self.mav.srcSystem = system
-        self.mav.seq = self._seq.get(system, 0)
-        if self.mav.signing.sign_outgoing:
-            keep_signing_clock(self.mav)
-        self.mav.send(message)
-        self._seq[system] = self.mav.seq
-        return self._out.frames.pop()
+        seq = self.next_seq(system)
+        return FC.pack_message(message, seq, system, self.component_id, self.signing())
+
+    def set_signing(self, key: bytes | None, link_id: int = 0) -> None:
+        """Sign every frame sent here with ``key`` (MAVLink 2 signing; None: stop)."""
+        self.signer = None if key is None else FC.Signer(key, link_id & 0xFF, now_timestamp())
+
+    def signing(self) -> FC.Signer | None:
+        """The signer for the next frames, its timestamp brought up to the wall clock (a
+        receiver refuses a stream more than a minute behind its own clock), or None."""
+        if self.signer is not None:
+            self.signer.timestamp = max(self.signer.timestamp, now_timestamp())
+        return self.signer
 
     def next_seq(self, system_id: int) -> int:
         """The sequence number of ``system_id``'s next frame here (for frames packed
@@ -239,8 +232,8 @@ class Link:
 
     @property
     def signs(self) -> bool:
-        """Whether frames sent here must be signed."""
-        return bool(self.mav.signing.sign_outgoing)
+        """Whether frames sent here are signed."""
+        return self.signer is not None
 
     def hold(self, limit: int = FC.DATAGRAM_LIMIT) -> None:
         """Collect what is sent from now on, until :meth:`release` sends it together in

@@ -26,7 +26,7 @@ from quadsitl.mavlink.links import Link
 from quadsitl.mavlink.mission_protocol import MissionProtocol
 from quadsitl.mavlink.motor_path import MotorPath
 from quadsitl.mavlink.param_protocol import ParamProtocol
-from quadsitl.mavlink.signing import SignatureCheck, sign_outgoing
+from quadsitl.mavlink.signing import SignatureCheck
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import Outcome, Severity
@@ -91,11 +91,7 @@ class MavlinkServer:
         """Require signed messages (and sign ours) with ``key``; None turns signing off."""
         self.signing = SignatureCheck(key) if key is not None else None
         for link_id, link in enumerate(self.links):
-            if key is None:
-                link.mav.signing.sign_outgoing = False
-                link.mav.signing.secret_key = None
-            else:
-                sign_outgoing(link.mav, key, link_id)
+            link.set_signing(key, link_id)
 
     # --- sending ----------------------------------------------------------------------
     def send(self, message: Any, link: Link | None = None) -> None:
