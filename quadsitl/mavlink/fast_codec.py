@@ -1,10 +1,13 @@
-"""MAVLink 2 frames of the lockstep path, packed and parsed with ``struct``.
+"""MAVLink 2 frames packed and parsed with ``struct``: every frame the simulator sends.
 
-pymavlink builds a Python object per frame (5–12 µs each); one lockstep round of a
-64-vehicle fleet is about 250 frames, so the hot path packs and parses its few message
-types directly. The definitions (field order on the wire, array lengths, CRC extra) are
-pymavlink's own, and so is the CRC (its ``fastcrc`` dependency); anything else, and any
-frame that must be signed, goes through pymavlink.
+pymavlink builds a Python object per frame and packs it in 4–12 µs; one lockstep round
+of a 64-vehicle fleet is about 250 frames and a fleet's telemetry thousands a second,
+so frames are packed here (about 1 µs), signed here when the link signs (as pymavlink
+signs: the same bytes), and the lockstep path parses its few message types here too.
+The definitions (field order on the wire, array lengths, CRC extra) are pymavlink's
+own, and so is the CRC (its ``fastcrc`` dependency); messages still come in as
+pymavlink objects wherever speed does not matter, and everything received outside the
+lockstep path is parsed and its signature checked by pymavlink.
 """
 
 from __future__ import annotations
