@@ -45,7 +45,7 @@ class WireState:
     def from_physics(
         cls,
         state: ArrayLike,
-        gear_height: ArrayLike,
+        gear_height: float | Vec,
         time_usec: int,
         contact: Any,
         touchdown: Any,

@@ -308,14 +308,16 @@ class Vehicle:
 
     # --- stepping ---------------------------------------------------------------------
     def step(self) -> None:
-        """Advance one physics step; the controller runs every ``substeps`` of them."""
+        """Advance one physics step; the controller runs every ``substeps`` of them. (A
+        vehicle of a group of several is stepped by its group, which does the same for
+        all of them at once: :mod:`quadsitl.vehicle.group`.)"""
         before = self.begin_step()
         self.fleet.step(self.rotor_cmd)
         self.end_step(before, self.fleet.dt)
 
     def begin_step(self) -> int:
-        """Before one physics step (this vehicle's, or its group's): run the controller
-        when due. Returns the ground contact before the step."""
+        """Before one physics step of this vehicle: run the controller when due.
+        Returns the ground contact before the step."""
         if (self.physics_steps + self.control_phase) % self.substeps == 0:
             self.control()
         self.physics_steps += 1
@@ -328,16 +330,11 @@ class Vehicle:
         self.physics_steps += self.substeps
         return int(self.fleet.contact[0])
 
-    def end_step(
-        self, contact_before: int, seconds: float, shaft_power: float | None = None
-    ) -> None:
-        """After the physics moved ``seconds``: touchdowns and crashes, battery
-        (``shaft_power``, W, when the caller has it for the whole group)."""
+    def end_step(self, contact_before: int, seconds: float) -> None:
+        """After the physics moved ``seconds``: touchdowns and crashes, battery."""
         GC.watch_contact(self, contact_before)
-        if shaft_power is None:
-            rotors = self.fleet.state[0, L.ROTORS]
-            shaft_power = float(battery_power(self.airframe.torque_coeff, rotors))
-        self.battery.drain(shaft_power, seconds)
+        rotors = self.fleet.state[0, L.ROTORS]
+        self.battery.drain(float(battery_power(self.airframe.torque_coeff, rotors)), seconds)
 
     def control(self) -> None:
         if self.motor_control and self.time - self.motor_command_time > MOTOR_TIMEOUT:
