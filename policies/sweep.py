@@ -281,15 +281,19 @@ def run_sweep(
         results = tuner.fit()
     finally:
         ray.shutdown()
-    return [
-        {
-            **r.config,
-            **(r.metrics or {}),
-            "run": str(Path(r.config["runs"]) / run_name(r.config)),
-            "error": str(r.error) if r.error else "",
-        }
-        for r in results
-    ]
+    rows = []
+    for i in range(len(results)):
+        result = results[i]
+        config = result.config or {}
+        rows.append(
+            {
+                **config,
+                **(result.metrics or {}),
+                "run": str(Path(config["runs"]) / run_name(config)),
+                "error": str(result.error) if result.error else "",
+            }
+        )
+    return rows
 
 
 def table(results: list[dict[str, Any]]) -> str:

@@ -271,7 +271,7 @@ class MavlinkBackend:
                 if self.ray is None:
                     self.processes = [SimProcess(args, env=key) for args in commands]
                 else:
-                    self.processes = place_simulators(commands, key)
+                    self.processes = list(place_simulators(commands, key))
                 addresses = [p.address for p in self.processes]
             else:
                 addresses = self.addresses

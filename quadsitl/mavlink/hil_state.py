@@ -38,8 +38,8 @@ class WireState:
     velocity_frd: Vec  # m/s, body FRD
     rates_frd: Vec  # rad/s, body FRD
     rotor_speeds: Vec  # rad/s, measured
-    contact: int  # physics.layout AIRBORNE / ON_GROUND / CRASHED
-    touchdown_speed: float  # m/s, downward speed at the last touchdown
+    contact: Any  # physics.layout AIRBORNE / ON_GROUND / CRASHED (an (N,) array in a batch)
+    touchdown_speed: Any  # m/s, downward speed at the last touchdown (likewise)
 
     @classmethod
     def from_physics(

@@ -14,6 +14,7 @@ Read the reference to understand the physics; read this only to change its speed
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numba
 import numpy as np
@@ -24,7 +25,9 @@ BLOCK = 32  # vehicles per vectorised block (measured best of 16..256)
 THRUST, ROLL_MOMENT, PITCH_MOMENT, YAW_SUM = 0, 1, 2, 3  # rows of the rotor sums
 # FMA contraction and reciprocal division only: no fast-math NaN/inf assumptions, so
 # the finiteness check stays exact.
-_OPTIONS = dict(cache=True, error_model="numpy", fastmath={"contract", "arcp", "nsz"})
+_OPTIONS: dict[str, Any] = dict(
+    cache=True, error_model="numpy", fastmath={"contract", "arcp", "nsz"}
+)
 # The helpers are inlined into ``step`` (numba IR), where B is a compile-time constant.
 _inline = numba.njit(inline="always", **_OPTIONS)
 

@@ -263,20 +263,19 @@ class TaskEngine:
             ],
             3,
         )
-        task = self.task
-        draws_start, draws_goal = callable(task.start), callable(task.goal)
+        start, goal = self.task.start, self.task.goal  # fixed, or drawn per episode
         starts = np.empty((rows.size, 3))
-        starts[:] = 0.0 if draws_start else task.start
+        starts[:] = 0.0 if callable(start) else start
         goals = np.empty((rows.size, 6))
-        goals[:] = 0.0 if draws_goal else task.goal
+        goals[:] = 0.0 if callable(goal) else goal
         draws = []
         for k, i in enumerate(rows):
             rng = self.rngs[i]
-            if draws_start:
-                starts[k] = task.start(rng)
+            if callable(start):
+                starts[k] = start(rng)
             draws.append(rng.random(12))
-            if draws_goal:
-                goals[k] = task.goal(rng)
+            if callable(goal):
+                goals[k] = goal(rng)
             if o.param_randomization:
                 params = self.base_params.copy()
                 for name, fraction in o.param_randomization.items():

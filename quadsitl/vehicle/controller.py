@@ -77,6 +77,7 @@ class ControllerGains:
     max_rate_rp_deg: float  # deg/s [MC_ROLLRATE_MAX]
     max_rate_yaw_deg: float  # deg/s [MC_YAWRATE_MAX]
     idle_fraction: float  # idle rotor speed / Ω_max when armed on ground [SIM_IDLE]
+    _row: Vec | None = field(default=None, init=False, repr=False, compare=False)
 
     @classmethod
     def defaults(cls) -> ControllerGains:
@@ -90,9 +91,11 @@ class ControllerGains:
     def row(self) -> Vec:
         """The gains in :data:`quadsitl.vehicle.cascade.GAIN_FIELDS` order (kept until a
         gain changes)."""
-        if self._row is None:
-            object.__setattr__(self, "_row", np.array([getattr(self, f) for f in C.GAIN_FIELDS]))
-        return self._row
+        row = self._row
+        if row is None:
+            row = np.array([getattr(self, f) for f in C.GAIN_FIELDS])
+            object.__setattr__(self, "_row", row)
+        return row
 
 
 class Autopilot(Protocol):
