@@ -227,10 +227,18 @@ class Simulator:
         self.stopping = True
 
     def run(self) -> None:
-        # What exists now lives until the end: keep it out of the garbage collector's
-        # full passes, whose scan of every object would stall the loop for milliseconds.
+        """Until stopped (a signal, ``duration``)."""
+        # What exists now lives while the loop runs: keep it out of the garbage
+        # collector's full passes, whose scan of every object would stall the loop for
+        # milliseconds (and hand it back afterwards).
         gc.collect()
         gc.freeze()
+        try:
+            self._loop()
+        finally:
+            gc.unfreeze()
+
+    def _loop(self) -> None:
         dt = self.group.physics.dt
         wall_per_step = dt / self.config.speed
         start = time.monotonic()
