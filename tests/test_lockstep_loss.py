@@ -59,13 +59,7 @@ def test_ten_percent_loss_both_ways_changes_nothing_but_the_resend_count(fleet_s
 
 
 def test_a_lost_answer_is_answered_from_the_cache_not_stepped_twice(fleet_sim):
-    client = FleetClient("127.0.0.1", fleet_sim.port, 4, timeout=10.0)
-    _wait(client)
-    state = np.zeros((4, 17))
-    state[:, 2], state[:, 6], state[:, 13:] = 20.0, 1.0, PAPER.hover_rotor_speed
-    wire = WireState.from_physics(state, PAPER.gear_height, 0, None, None)
-    client.reset([0, 1, 2, 3], wire, np.zeros((4, 3)))
-    hover = np.full((4, 4), PAPER.hover_rotor_speed / PAPER.max_rotor_speed)
+    client, _, hover = _hovering(fleet_sim)
     first = client.step(hover).time_usec
     # The same round again (as after a lost answer): the cached answer, same time.
     client.time_usec = 0
@@ -81,13 +75,7 @@ def test_answers_keep_the_order_of_what_they_answer(fleet_sim):
     an autoreset, as a loaded learner sends them): the repeat's cached answer comes back
     before the reset's acknowledgement, so the reset's answer is the one after it, and
     the client takes that one: the vehicle where the reset put it."""
-    client = FleetClient("127.0.0.1", fleet_sim.port, 4, timeout=10.0)
-    _wait(client)
-    state = np.zeros((4, 17))
-    state[:, 2], state[:, 6], state[:, 13:] = 20.0, 1.0, PAPER.hover_rotor_speed
-    wire = WireState.from_physics(state, PAPER.gear_height, 0, None, None)
-    client.reset([0, 1, 2, 3], wire, np.zeros((4, 3)))
-    hover = np.full((4, 4), PAPER.hover_rotor_speed / PAPER.max_rotor_speed)
+    client, state, hover = _hovering(fleet_sim)
     stamp = client.time_usec
     client.step(hover)
     repeat = [client._actuator_frame(stamp, i, row) for i, row in enumerate(hover.tolist())]
@@ -128,6 +116,19 @@ def test_a_round_for_another_time_is_refused_and_a_silent_simulator_is_an_error(
     with pytest.raises(SimulatorError, match=r"heartbeat of system\(s\) \[5\]"):
         gone.connect()
     gone.close()
+
+
+def _hovering(fleet_sim: SimProcess) -> tuple[FleetClient, np.ndarray, np.ndarray]:
+    """A client of the 4-vehicle fixture, its vehicles reset to hover 20 m up; their
+    states and the hover commands."""
+    client = FleetClient("127.0.0.1", fleet_sim.port, 4, timeout=10.0)
+    _wait(client)
+    state = np.zeros((4, 17))
+    state[:, 2], state[:, 6], state[:, 13:] = 20.0, 1.0, PAPER.hover_rotor_speed
+    wire = WireState.from_physics(state, PAPER.gear_height, 0, None, None)
+    client.reset([0, 1, 2, 3], wire, np.zeros((4, 3)))
+    hover = np.full((4, 4), PAPER.hover_rotor_speed / PAPER.max_rotor_speed)
+    return client, state, hover
 
 
 def _wait(client: FleetClient) -> None:

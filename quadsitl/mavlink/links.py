@@ -230,11 +230,6 @@ class Link:
         self._seq[system_id] = (seq + 1) & 0xFF
         return seq
 
-    @property
-    def signs(self) -> bool:
-        """Whether frames sent here are signed."""
-        return self.signer is not None
-
     def hold(self, limit: int = FC.DATAGRAM_LIMIT) -> None:
         """Collect what is sent from now on, until :meth:`release` sends it together in
         datagrams of at most ``limit`` bytes."""
