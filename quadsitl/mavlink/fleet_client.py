@@ -40,6 +40,7 @@ from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_MOTION
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
 
+HEARTBEAT_WAIT = 2.5  # s: the shortest wait for every vehicle's heartbeat (1 Hz each)
 RESEND_AFTER = 0.05  # s: the longest wait for an answer before the commands go again
 MIN_RESEND_AFTER = 0.001  # s: the shortest; in between, RESEND_ROUND_TRIPS usual round trips
 RESEND_ROUND_TRIPS = 2.5
@@ -176,10 +177,11 @@ class FleetClient:
     # --- connecting -------------------------------------------------------------------
     def connect(self) -> None:
         """Introduce ourselves (the udpin link learns its peer) and wait until every
-        vehicle's heartbeat has been heard."""
+        vehicle's heartbeat has been heard (for ``timeout``, and at least HEARTBEAT_WAIT:
+        each vehicle beats once a second, at its own time)."""
         heard: set[int] = set()
         hello = self.mav.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-        deadline = time.monotonic() + self.timeout
+        deadline = time.monotonic() + max(self.timeout, HEARTBEAT_WAIT)
         next_hello = 0.0
         while len(heard) < self.n:
             now = time.monotonic()
