@@ -197,7 +197,8 @@ def run(vehicles: int, seconds: float) -> None:
         _, err = sim.communicate(timeout=120)
         gcs.sock.close()
     match = re.search(
-        r"p99 ([0-9.]+) ms, max ([0-9.]+) ms, skipped (\d+), telemetry slowed ([0-9.]+) s", err
+        r"p99 ([0-9.]+) ms, max ([0-9.]+) ms, skipped (\d+)(?:, telemetry slowed ([0-9.]+) s)?",
+        err,
     )
     if match is None:
         sys.exit(f"{vehicles} vehicles: the simulator failed (rc {sim.returncode}):\n{err}")
@@ -206,7 +207,7 @@ def run(vehicles: int, seconds: float) -> None:
     print(f"{vehicles} vehicles, {elapsed:.1f} s under load:")
     print(
         f"  step lateness p99 {match[1]} ms, max {match[2]} ms, {match[3]} steps skipped; "
-        f"telemetry slowed {match[4]} s"
+        f"telemetry slowed {match[4] or 0} s"
     )
     print(
         f"  ATTITUDE per vehicle: min {rates[0]:.1f}, median {statistics.median(rates):.1f}, "
