@@ -6,10 +6,13 @@ from __future__ import annotations
 import socket
 import subprocess
 import time
+from collections import Counter
 
+import pytest
 from pymavlink.dialects.v20 import common as mav
 
 from quadsitl.mavlink import degrade as D
+from quadsitl.mavlink import telemetry as T
 from tests.conftest import cli
 
 
@@ -96,3 +99,27 @@ def test_the_governor_slows_down_level_by_level_and_recovers_with_one_text_each_
             assert text is None  # still slowed: nothing to tell
     assert changes == D.MAX_LEVEL and "full rates" in texts[-1]
     assert now >= warned_at + D.ANNOUNCE_GAP and texts.count(None) == len(texts) - 2
+
+
+def test_a_slowed_schedule_keeps_slow_streams_and_restores_the_rates_asked_for():
+    schedule = T.Schedule()
+    schedule.set_rate(mav.MAVLINK_MSG_ID_VFR_HUD, 20.0)  # asked for by a client
+
+    def counts(seconds: float, start: float) -> Counter[int]:
+        sent: Counter[int] = Counter()
+        for ms in range(round(seconds * 1000)):
+            sent.update(schedule.due(start + ms / 1000))
+        return sent
+
+    full = counts(10.0, 0.0)
+    schedule.slow_down(8)
+    slowed = counts(10.0, 10.0)
+    schedule.slow_down(1)
+    restored = counts(10.0, 20.0)
+    attitude, hud = mav.MAVLINK_MSG_ID_ATTITUDE, mav.MAVLINK_MSG_ID_VFR_HUD
+    assert full[attitude] == pytest.approx(500, abs=2) and full[hud] == pytest.approx(200, abs=2)
+    assert slowed[attitude] == pytest.approx(500 / 8, abs=2)  # 1/8 of 50 Hz
+    assert slowed[hud] == pytest.approx(200 / 8, abs=2)  # 1/8 of what was asked for
+    assert slowed[mav.MAVLINK_MSG_ID_SYS_STATUS] == pytest.approx(10, abs=1)  # 1 Hz: kept
+    assert slowed[mav.MAVLINK_MSG_ID_HOME_POSITION] == pytest.approx(5, abs=1)  # 0.5 Hz
+    assert all(abs(restored[m] - full[m]) <= 2 for m in full), (restored, full)
