@@ -206,7 +206,9 @@ def rotor_command(state, sp, g, m, integral, dt):  # pragma: no cover - compiled
                 rate_sp[k] = sp[SP_RATES + k]
         integral[:] = 0.0
     else:
-        # Position loop: velocity setpoint (m/s), limited to the speed limits.
+        # Position loop: velocity setpoint (m/s), limited to the speed limits; the
+        # horizontal part on the square-root law (approach_speed), so a far setpoint
+        # is reached at rest, braking within the acceleration limit.
         v = np.empty(3)
         accel_ff = np.empty(3)
         for k in range(3):
