@@ -15,7 +15,7 @@ STATUSTEXTs that said so, each vehicle's ATTITUDE rate (min / median / max over 
 vehicles, per wall second: 50 Hz at full rate), the parameter values and mission
 uploads answered, and the simulator's CPU use. Usage:
 
-    python benchmarks/sitl_load.py [--vehicles 16,64] [--seconds 15]
+    python benchmarks/sitl_load.py [--vehicles 16,64] [--duration 15]
 """
 
 from __future__ import annotations
@@ -227,13 +227,26 @@ def run(vehicles: int, seconds: float) -> None:
     print(f"realtime_load_{vehicles}_attitude_hz_min: {rates[0]:.1f}")
 
 
+def _sizes(text: str) -> list[int]:
+    """``16,64`` -> [16, 64] (each 1..254: MAVLink system ids)."""
+    try:
+        sizes = [int(n) for n in text.split(",")]
+    except ValueError:
+        sizes = []
+    if not sizes or not all(1 <= n <= 254 for n in sizes):
+        raise argparse.ArgumentTypeError(f"fleet sizes 1..254, comma-separated: {text!r}")
+    return sizes
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--vehicles", default="16,64", help="fleet sizes, comma-separated")
-    parser.add_argument("--seconds", type=float, default=15.0, help="wall s under load")
+    parser.add_argument("--vehicles", type=_sizes, default=[16, 64], help="fleet sizes, e.g. 16,64")
+    parser.add_argument("--duration", type=float, default=15.0, help="wall s under load")
     args = parser.parse_args()
-    for vehicles in (int(n) for n in args.vehicles.split(",")):
-        run(vehicles, args.seconds)
+    if not 1.0 <= args.duration <= 3600:
+        parser.error(f"--duration must be 1..3600 s, got {args.duration}")
+    for vehicles in args.vehicles:
+        run(vehicles, args.duration)
 
 
 if __name__ == "__main__":
