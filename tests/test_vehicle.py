@@ -10,7 +10,7 @@ import pytest
 
 from gcs_tools.scripted_flight import _segment_distance
 from quadsitl.vehicle import mission as M
-from quadsitl.vehicle.controller import ControllerGains
+from quadsitl.vehicle.controller import ControllerGains, Setpoint
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import Outcome
@@ -111,6 +111,50 @@ def test_return_to_launch_lands_at_home_and_disarms():
     track = _fly(v, 40.0)
     assert not v.armed and track[:, 3].max() > 9.9  # climbed to RTL_RETURN_ALT first
     assert np.linalg.norm(track[-1, 1:4]) < 0.1
+
+
+@pytest.mark.parametrize("altitude", [2.5, 7.0])
+def test_take_off_ends_holding_the_requested_altitude(altitude):
+    v = Vehicle()
+    v.arm()
+    v.takeoff(altitude)
+    climb = _fly(v, altitude / 1.5 + 4.0)
+    assert v.mode is Mode.LOITER  # take-off completed
+    held = _fly(v, 3.0)[:, 3]
+    assert abs(held - altitude).max() < 0.03  # the target, as PX4 holds it
+    assert climb[:, 3].max() < altitude + 0.1
+
+
+def _offboard_step(v: Vehicle, offset: tuple[float, float, float], seconds: float) -> np.ndarray:
+    """Hover, then stream one offboard position ``offset`` (m, ENU) away for ``seconds``;
+    returns the track (as :func:`_fly`) and the target above ground."""
+    target = v.position + offset
+    v.offboard_setpoint(Setpoint(position=target.copy()))
+    assert v.set_mode(Mode.OFFBOARD).ok
+    track = []
+    for _ in range(round(seconds / 0.05)):  # a client streaming at 20 Hz
+        v.offboard_setpoint(Setpoint(position=target.copy()))
+        track.append(_fly(v, 0.05)[-1])
+    return np.array(track), target - (0, 0, v.airframe.gear_height)
+
+
+@pytest.mark.parametrize(("offset", "acc_hor"), [((10.0, 0, 0), 3.0), ((-6.0, 8.0, 0), 1.5)])
+def test_an_offboard_position_step_stops_at_the_target(offset, acc_hor):
+    v = Vehicle()
+    v.set_param("MPC_ACC_HOR", acc_hor)
+    v.arm()
+    v.takeoff(5.0)
+    _fly(v, 7.0)
+    track, target = _offboard_step(v, offset, 12.0)
+    direction = np.array(offset) / np.linalg.norm(offset)
+    overshoot = ((track[:, 1:4] - target) @ direction).max()
+    error = np.linalg.norm(track[:, 1:4] - target, axis=1)
+    settled = track[np.flatnonzero(error > 0.1)[-1] + 1, 0] - track[0, 0] + 0.05
+    # Minimum time within MPC_ACC_HOR (from rest to rest at half of it), plus a second.
+    fastest = math.sqrt(2 * 10.0 * (1 / acc_hor + 2 / acc_hor))
+    assert overshoot <= 0.3 and settled < fastest + 1.5 and error[-1] < 0.05
+    speed = np.linalg.norm(track[:, 4:6], axis=1)
+    assert speed.max() <= v.params["MPC_XY_VEL_MAX"] + 0.1
 
 
 def test_armed_without_take_off_disarms_itself():

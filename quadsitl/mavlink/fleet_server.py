@@ -137,6 +137,13 @@ class FleetServer:
         single = self.servers[0].motors.last_lockstep_wall if len(self.servers) == 1 else -1.0
         return max(self._round_wall, single)
 
+    def slow_telemetry(self, factor: float) -> None:
+        """Every vehicle's telemetry streams ``factor`` times less often on every link
+        (1: their full rates), as :mod:`.degrade` decides under load."""
+        for server in self.servers:
+            for schedule in server.schedules.values():
+                schedule.slow_down(factor)
+
     def statustext(self, severity: int, text: str) -> None:
         """From every vehicle (e.g. the log stopped: it concerns them all)."""
         for server in self.servers:

@@ -3,7 +3,8 @@
 Each iteration steps the physics for every step that is due on the wall clock (times
 the speed factor), lets the server send what is due, then waits in select() on all
 sockets until the next step is due. The lateness of every step against its schedule
-is recorded: that is the timing jitter the benchmark reports.
+is recorded: that is the timing jitter the benchmark reports. When the loop is short of
+time, telemetry slows down before the physics falls behind (:mod:`.degrade`).
 
 In lockstep the wall clock does not move the physics: each motor command does (see
 :mod:`.motor_path`). The loop polls for 1 ms after each command (the next one is
@@ -27,6 +28,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from quadsitl.mavlink.degrade import TelemetryGovernor
 from quadsitl.mavlink.fleet_server import FleetServer
 from quadsitl.mavlink.identity import get_identity
 from quadsitl.mavlink.links import Link
@@ -124,6 +126,7 @@ class Timing:
         self._ring = np.zeros(capacity, dtype=np.float32)  # s
         self.steps = 0
         self.skipped_steps = 0
+        self.slowed_seconds = 0.0  # wall s with the telemetry slowed down under load
 
     def record(self, lateness: float) -> None:
         self._ring[self.steps % self._ring.size] = lateness
@@ -141,7 +144,7 @@ class Timing:
         return (
             f"timing: {late.size} steps, lateness p50 {np.percentile(late, 50):.3f} ms, "
             f"p99 {np.percentile(late, 99):.3f} ms, max {late.max():.3f} ms, "
-            f"skipped {self.skipped_steps}"
+            f"skipped {self.skipped_steps}, telemetry slowed {self.slowed_seconds:.1f} s"
         )
 
 
@@ -205,6 +208,7 @@ class Simulator:
         ]
         self.server = FleetServer(self.group, self.servers, self.tlog)
         self.timing = Timing()
+        self.governor = TelemetryGovernor()
         self._socket_map: dict[Any, Link] | None = None
         self.stopping = False
         if make_view is not None:
@@ -256,21 +260,37 @@ class Simulator:
                 busy = now - self.server.last_lockstep_wall < LOCKSTEP_SPIN
                 wait = 0.0 if busy else LOCKSTEP_WAIT
                 if now - last_tick >= LOCKSTEP_TICK:
+                    self._govern(now, lockstep=True)
                     self.server.tick(now)
                     last_tick = now
                     self._housekeeping(now)
             else:
                 steps = self._real_time_steps(start, steps, wall_per_step)
+                self._govern(now)
                 self.server.tick(now)
                 self._housekeeping(now)
                 wait = start + (steps + 1) * wall_per_step - time.monotonic()
             sockets = self._sockets()
+            asleep = time.monotonic()
             readable, _, _ = select.select(list(sockets), [], [], max(0.0, wait))
+            self.governor.waited(time.monotonic() - asleep)
             if not readable and wait == 0.0:
                 os.sched_yield()  # polling: let a client sharing this core run first
             received_at = time.time()
             for link in {sockets[s] for s in readable}:
                 self.server.receive(link, received_at)
+
+    def _govern(self, now: float, lockstep: bool = False) -> None:
+        """Slow the telemetry down while the real-time loop is short of time, restore
+        it when it has time to spare (at once in lockstep), and say so."""
+        governor = self.governor
+        changed, text = governor.reset(now) if lockstep else governor.update(now)
+        self.timing.slowed_seconds = governor.slowed_seconds
+        if changed:
+            self.server.slow_telemetry(governor.slowdown)
+        if text is not None:
+            severity = Severity.WARNING if governor.level else Severity.NOTICE
+            self.server.statustext(severity, text)
 
     def _housekeeping(self, now: float) -> None:
         """The log and the view (with the telemetry: not on every poll in lockstep)."""
@@ -311,7 +331,9 @@ class Simulator:
             due = 1
         for _ in range(due):
             scheduled = start + (steps + 1) * wall_per_step
-            self.timing.record(max(0.0, time.monotonic() - scheduled))
+            lateness = max(0.0, time.monotonic() - scheduled)
+            self.timing.record(lateness)
+            self.governor.step(lateness)
             self.group.step()
             steps += 1
         return steps

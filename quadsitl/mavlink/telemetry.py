@@ -17,6 +17,7 @@ import numpy as np
 
 from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
+from quadsitl.mavlink.degrade import SLOWEST_RATE
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.mavlink.identity import (
     AVAILABLE_MODES,
@@ -372,11 +373,14 @@ class Schedule:
 
     ``streams=False`` starts with every stream off (the motor-command link). ``offset``
     (s) delays each message's first time: a fleet spreads its vehicles' messages over
-    the fastest stream's interval instead of sending them all at once."""
+    the fastest stream's interval instead of sending them all at once. ``slowdown``
+    (set with :meth:`slow_down`) stretches every interval while the real-time loop is
+    short of time (:mod:`.degrade`); ``intervals`` keep the rates asked for."""
 
     def __init__(self, streams: bool = True, offset: float = 0.0) -> None:
         rates = DEFAULT_RATES if streams else {}
         self.offset = offset
+        self.slowdown = 1.0
         self.intervals: dict[int, float] = {m: 1.0 / hz for m, hz in rates.items()}
         self.next_due: dict[int, float] = {}
         self.last_wall: dict[int, float] = {}
@@ -397,6 +401,19 @@ class Schedule:
         self.next_due.pop(message_id, None)
         self._earliest = -math.inf
 
+    def slow_down(self, factor: float) -> None:
+        """Send every stream ``factor`` times less often, but none below SLOWEST_RATE
+        (nor below its own rate); 1 restores the rates asked for."""
+        if factor != self.slowdown:
+            self.slowdown = factor
+            self._earliest = -math.inf
+
+    def _interval(self, interval: float) -> float:
+        """``interval`` as slowed down now."""
+        if self.slowdown == 1.0:
+            return interval
+        return max(interval, min(interval * self.slowdown, 1.0 / SLOWEST_RATE))
+
     def due(self, now: float, wall_now: float | None = None) -> list[int]:
         """Message ids due at simulated time ``now``; advances their next due time.
 
@@ -406,7 +423,8 @@ class Schedule:
             return []  # nothing due yet (most calls): no need to look at each message
         self._last_now = now
         out = []
-        for message_id, interval in self.intervals.items():
+        for message_id, asked in self.intervals.items():
+            interval = self._interval(asked)
             due = self.next_due.get(message_id)
             if due is None:
                 due = self.next_due[message_id] = now + self.offset

@@ -81,6 +81,8 @@ M_MIXER = 8  # 16 values: the inverse allocation matrix, row-major
 M_SIZE = 24
 
 INTEGRAL_LIMIT = 3.0  # m/s², bound of each velocity-integral term
+BRAKE_FRACTION = 0.5  # of MPC_ACC_HOR: the deceleration that ends the approach to a
+# position setpoint (the rest is the velocity loop's margin; legs plan the same)
 
 _jit = numba.njit(cache=True, error_model="numpy")
 
@@ -88,6 +90,21 @@ _jit = numba.njit(cache=True, error_model="numpy")
 @_jit
 def _clamp(x, low, high):  # pragma: no cover - compiled
     return min(max(x, low), high)
+
+
+@_jit
+def approach_speed(distance, gain, decel):  # pragma: no cover - compiled
+    """Speed (m/s) at which the position loop closes ``distance`` (m): ``gain`` × distance
+    near the target, and far from it the speed from which ``decel`` (m/s²) stops the
+    vehicle exactly there (the square-root law), joined where both have the same value
+    and slope. A plain P loop at speed limits that its acceleration limit cannot brake
+    from overshoots a large step; this does not."""
+    if gain <= 0.0 or decel <= 0.0:
+        return gain * distance
+    linear = decel / (gain * gain)  # m: below it, the P loop already brakes within decel
+    if distance <= linear:
+        return gain * distance
+    return math.sqrt(2.0 * decel * (distance - 0.5 * linear))
 
 
 @_jit
@@ -189,13 +206,29 @@ def rotor_command(state, sp, g, m, integral, dt):  # pragma: no cover - compiled
                 rate_sp[k] = sp[SP_RATES + k]
         integral[:] = 0.0
     else:
-        # Position loop: velocity setpoint (m/s), limited to the speed limits.
+        # Position loop: velocity setpoint (m/s), limited to the speed limits; the
+        # horizontal part on the square-root law (approach_speed), so a far setpoint
+        # is reached at rest, braking within the acceleration limit.
         v = np.empty(3)
+        accel_ff = np.empty(3)
         for k in range(3):
             v[k] = sp[SP_VEL + k]
+            accel_ff[k] = sp[SP_ACC + k]
         if not math.isnan(sp[SP_POS]):
-            v[0] += g[G_POS_XY] * (sp[SP_POS] - state[L.I_PX])
-            v[1] += g[G_POS_XY] * (sp[SP_POS + 1] - state[L.I_PY])
+            ex, ey = sp[SP_POS] - state[L.I_PX], sp[SP_POS + 1] - state[L.I_PY]
+            distance = math.hypot(ex, ey)
+            if distance > 0.0:
+                decel = BRAKE_FRACTION * g[G_MAX_ACCEL_XY]
+                speed = approach_speed(distance, g[G_POS_XY], decel)
+                ux, uy = ex / distance, ey / distance
+                v[0] += speed * ux
+                v[1] += speed * uy
+                closing = state[L.I_VX] * ux + state[L.I_VY] * uy
+                if speed < g[G_POS_XY] * distance and closing > 0.0:
+                    # On the square-root curve: feed forward the deceleration that
+                    # following it takes (d speed/dt at the current closing speed).
+                    accel_ff[0] -= decel * closing / speed * ux
+                    accel_ff[1] -= decel * closing / speed * uy
             v[2] += g[G_POS_Z] * (sp[SP_POS + 2] - state[L.I_PZ])
         max_xy = g[G_MAX_SPEED_XY]
         if not math.isnan(sp[SP_MAX_XY]):
@@ -212,7 +245,7 @@ def rotor_command(state, sp, g, m, integral, dt):  # pragma: no cover - compiled
         for k in range(3):
             error[k] = v[k] - vel[k]
             gain = g[G_VEL_XY] if k < 2 else g[G_VEL_Z]
-            accel[k] = sp[SP_ACC + k] + gain * error[k] + integral[k]
+            accel[k] = accel_ff[k] + gain * error[k] + integral[k]
         accel_xy = math.hypot(accel[0], accel[1])
         if accel_xy > g[G_MAX_ACCEL_XY]:
             accel[0] *= g[G_MAX_ACCEL_XY] / accel_xy

@@ -32,10 +32,12 @@ class Setpoint:
     """What the vehicle should do now. World ENU, body FLU, SI units.
 
     Position, velocity and acceleration combine as in PX4: a position (if given) is
-    tracked with a P loop whose output adds to ``velocity`` (feed-forward); a ``None``
-    position means velocity control. ``attitude``/``body_rates`` with ``thrust``
-    override the outer loops (offboard attitude control); ``idle`` spins the rotors at
-    idle speed on the ground.
+    tracked with a P loop whose output adds to ``velocity`` (feed-forward); far from
+    the position the horizontal speed follows a square-root law instead, so that the
+    vehicle brakes to it within the acceleration limit (docs/mavlink.md, "How position
+    setpoints are flown"); a ``None`` position means velocity control.
+    ``attitude``/``body_rates`` with ``thrust`` override the outer loops (offboard
+    attitude control); ``idle`` spins the rotors at idle speed on the ground.
     """
 
     position: Vec | None = None  # (3,) m

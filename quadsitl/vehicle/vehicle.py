@@ -32,7 +32,7 @@ from quadsitl.vehicle.failsafe import Failsafes
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.mission_runner import MissionRunner
 from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
-from quadsitl.vehicle.navigator import Activity, Hold, Land, Limits, Sticks
+from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg, Limits, Sticks
 from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
 from quadsitl.vehicle.results import ACCEPTED, LandedState, Result, Severity, denied
 
@@ -371,7 +371,10 @@ class Vehicle:
             GC.on_ground_timers(self)
         if self.mode is Mode.TAKEOFF and self.activity.done:
             self.event(Severity.INFO, "take-off complete: holding")
+            climb = self.activity
             self.enter_mode(Mode.LOITER)
+            if isinstance(climb, Leg):  # hold the take-off target, not where it is now
+                self.activity = Hold(climb.end, climb.yaw)
         elif self.mode is Mode.RTL and self.activity.done and self.rtl_stages:
             self.activity = self.rtl_stages.pop(0)
         elif self.mode is Mode.MISSION:
