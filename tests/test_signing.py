@@ -51,14 +51,16 @@ def signed_sim():
 def test_signed_accepted_unsigned_bad_and_replayed_rejected_and_counted(signed_sim):
     key = key_from_passphrase(PASSPHRASE)
     good = _connection(signed_sim.gcs_port, 200, key)
-    plain = _connection(signed_sim.gcs_port, 201, None)
-    # A wrong key also rejects the vehicle's frames: nothing to wait for.
+    # Neither an unsigned station nor one with the wrong key is sent anything: a peer
+    # gets telemetry only once it has sent a validly signed frame.
+    plain = _connection(signed_sim.gcs_port, 201, None, wait=False)
     forged = _connection(signed_sim.gcs_port, 202, key_from_passphrase("wrong"), wait=False)
     try:
-        # Heartbeats are open: the unsigned station saw the (signed) vehicle in _connection.
-        beat = plain.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
+        beat = good.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
         assert beat is not None and beat.get_srcSystem() == 1
         assert beat.get_header().incompat_flags & 1  # signed by the vehicle
+        plain.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        assert plain.recv_match(blocking=True, timeout=1.5) is None
         for _attempt in range(3):  # UDP on a loaded machine: allow a lost datagram
             frame = _request_home(good)
             ack = _ack(good, 5)
@@ -98,9 +100,10 @@ def test_motor_commands_need_the_key(signed_sim):
     signed.reset([0.0, 0.0, -5.0])
     signed.arm()
     assert signed.step([0.7] * 4, lockstep=True).time_usec > 0
-    # Without the key: the heartbeat passes, its first command (in connect) does not.
+    # Without the key: the client is sent nothing, not even a heartbeat (its own
+    # heartbeat passes, unsigned, but only a signed frame makes a peer live).
     with MotorClient("127.0.0.1", signed_sim.hil_port, timeout=2.5) as unsigned:
-        with pytest.raises(SimulatorError, match="COMMAND_ACK"):
+        with pytest.raises(SimulatorError, match="heartbeat"):
             unsigned.connect()
         unsigned._send(unsigned.mav.hil_actuator_controls_encode(0, [0.7] * 16, 128, 1))
         with pytest.raises(SimulatorError, match="state answer"):
