@@ -42,7 +42,7 @@ MAX_RETRIES = 5
 UNSUPPORTED_LISTS = {
     mav.MAV_MISSION_TYPE_FENCE: "no geofence polygons or circles; the fence is a radius "
     "and a height from home (GF_MAX_HOR_DIST, GF_MAX_VER_DIST)",
-    mav.MAV_MISSION_TYPE_RALLY: "no rally points; return flies home",
+    mav.MAV_MISSION_TYPE_RALLY: "no rally points; return (RTL) flies home, at RTL_RETURN_ALT",
 }
 
 Reply = Callable[[Any], None]  # sends a message back on the link the request came from

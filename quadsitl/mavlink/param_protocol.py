@@ -145,7 +145,7 @@ class ParamProtocol:
         self.notify(
             Severity.WARNING,
             f"param set refused: {name} is {held}, the write was "
-            f"{type_name(msg.param_type)}; nothing changed",
+            f"{type_name(msg.param_type)} (wrong type); nothing changed",
         )
         reply(self.value_message(name))
 

@@ -217,7 +217,9 @@ class MavlinkServer:
                 self.send(T.BUILDERS[message_id](snapshot), link)
 
     def snapshot(self) -> T.Snapshot:
-        return T.Snapshot(self.vehicle, self.comm_errors, self.error_counts, self.identity)
+        return T.Snapshot(
+            self.vehicle, self.comm_errors, self.error_counts, self.identity, self.motors.resets
+        )
 
     # --- the ground station's heartbeat: link-loss failsafe (PX4's NAV_DLL_ACT) --------
     def handle_heartbeat(self, msg: Any, link: Link) -> None:

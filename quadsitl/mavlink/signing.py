@@ -27,7 +27,7 @@ import math
 import os
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 OPEN_MESSAGES = frozenset({"HEARTBEAT", "RADIO_STATUS"})
 SIGNED_FLAG = 0x01  # MAVLINK_IFLAG_SIGNED, in the incompat flags
@@ -128,7 +128,7 @@ class StreamTimestamps:
     holds (the larger timestamp wins), so simulators sharing a key share their floors.
     One object per key and process (:meth:`for_key`): a fleet's vehicles share it."""
 
-    _open: dict[Path, StreamTimestamps] = {}
+    _open: ClassVar[dict[Path, StreamTimestamps]] = {}
 
     def __init__(self, path: Path) -> None:
         self.path = path
