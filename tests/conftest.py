@@ -19,7 +19,9 @@ from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
 
 # The signing timestamps that simulators keep across restarts go to this session's own
 # folder (inherited by every simulator process), never to the user's state folder.
-os.environ.setdefault("QUADSITL_STATE_DIR", tempfile.mkdtemp(prefix="quadsitl-test-state-"))
+if "QUADSITL_STATE_DIR" not in os.environ:
+    _STATE = tempfile.TemporaryDirectory(prefix="quadsitl-test-state-")  # removed at exit
+    os.environ["QUADSITL_STATE_DIR"] = _STATE.name
 
 # In-process against through the wire: float32 on the wire, carried through episodes;
 # rewards weigh distance changes by up to 100.
