@@ -214,6 +214,11 @@ async def _streams_params_version_fence(port: int) -> None:
         await telemetry.set_rate_raw_imu(10.0)
         raw = await _first(telemetry.subscribe_raw_imu(), 10, "RAW_IMU")
         assert raw.acceleration_frd.down_m_s2 == pytest.approx(-1000, abs=5)  # mG, as sent
+        # The polling calls give the latest of each.
+        latest = await asyncio.wait_for(telemetry.odometry(), 5)
+        assert latest.time_usec >= odometry.time_usec > 0
+        assert (await asyncio.wait_for(telemetry.imu(), 5)).timestamp_us > 0
+        assert (await asyncio.wait_for(telemetry.raw_imu(), 5)).timestamp_us > 0
 
         # A write of the wrong type is an error, and changes nothing.
         param = ParamAsync(system)
