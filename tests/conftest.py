@@ -6,6 +6,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Iterator
 
@@ -15,6 +16,12 @@ import pytest
 from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
 from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
+
+# The signing timestamps that simulators keep across restarts go to this session's own
+# folder (inherited by every simulator process), never to the user's state folder.
+if "QUADSITL_STATE_DIR" not in os.environ:
+    _STATE = tempfile.TemporaryDirectory(prefix="quadsitl-test-state-")  # removed at exit
+    os.environ["QUADSITL_STATE_DIR"] = _STATE.name
 
 # In-process against through the wire: float32 on the wire, carried through episodes;
 # rewards weigh distance changes by up to 100.

@@ -8,7 +8,12 @@ import pytest
 from pymavlink import mavutil
 
 from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
-from quadsitl.mavlink.signing import SignatureCheck, key_from_file, key_from_passphrase
+from quadsitl.mavlink.signing import (
+    SignatureCheck,
+    key_from_file,
+    key_from_passphrase,
+    now_timestamp,
+)
 from tests.conftest import MotorSim
 
 mav = mavutil.mavlink
@@ -51,14 +56,16 @@ def signed_sim():
 def test_signed_accepted_unsigned_bad_and_replayed_rejected_and_counted(signed_sim):
     key = key_from_passphrase(PASSPHRASE)
     good = _connection(signed_sim.gcs_port, 200, key)
-    plain = _connection(signed_sim.gcs_port, 201, None)
-    # A wrong key also rejects the vehicle's frames: nothing to wait for.
+    # Neither an unsigned station nor one with the wrong key is sent anything: a peer
+    # gets telemetry only once it has sent a validly signed frame.
+    plain = _connection(signed_sim.gcs_port, 201, None, wait=False)
     forged = _connection(signed_sim.gcs_port, 202, key_from_passphrase("wrong"), wait=False)
     try:
-        # Heartbeats are open: the unsigned station saw the (signed) vehicle in _connection.
-        beat = plain.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
+        beat = good.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
         assert beat is not None and beat.get_srcSystem() == 1
         assert beat.get_header().incompat_flags & 1  # signed by the vehicle
+        plain.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        assert plain.recv_match(blocking=True, timeout=1.5) is None
         for _attempt in range(3):  # UDP on a loaded machine: allow a lost datagram
             frame = _request_home(good)
             ack = _ack(good, 5)
@@ -98,9 +105,10 @@ def test_motor_commands_need_the_key(signed_sim):
     signed.reset([0.0, 0.0, -5.0])
     signed.arm()
     assert signed.step([0.7] * 4, lockstep=True).time_usec > 0
-    # Without the key: the heartbeat passes, its first command (in connect) does not.
+    # Without the key: the client is sent nothing, not even a heartbeat (its own
+    # heartbeat passes, unsigned, but only a signed frame makes a peer live).
     with MotorClient("127.0.0.1", signed_sim.hil_port, timeout=2.5) as unsigned:
-        with pytest.raises(SimulatorError, match="COMMAND_ACK"):
+        with pytest.raises(SimulatorError, match="heartbeat"):
             unsigned.connect()
         unsigned._send(unsigned.mav.hil_actuator_controls_encode(0, [0.7] * 16, 128, 1))
         with pytest.raises(SimulatorError, match="state answer"):
@@ -170,3 +178,81 @@ def test_signing_timestamps_follow_the_wall_clock():
         assert station.parse_buffer(frame)[0].get_type() == "HEARTBEAT"
     finally:
         link.close()
+
+
+def _status_counts(conn: mavutil.mavfile, wanted: tuple[int, int, int], seconds: float):
+    """SYS_STATUS errors_count1..3 (unsigned, badly signed, replayed or ahead) once they
+    read ``wanted``, or the last seen."""
+    deadline = time.monotonic() + seconds
+    counts = None
+    while time.monotonic() < deadline and counts != wanted:
+        status = conn.recv_match(type="SYS_STATUS", blocking=True, timeout=2)
+        if status is not None:
+            counts = (status.errors_count1, status.errors_count2, status.errors_count3)
+    return counts
+
+
+def test_a_frame_stamped_a_year_ahead_does_not_lock_out_the_station(signed_sim):
+    """The right key, the station's own stream (system, component, link id), a timestamp
+    a year ahead: refused, and the station's own commands still pass."""
+    key = key_from_passphrase(PASSPHRASE)
+    station = _connection(signed_sim.gcs_port, 200, key)
+    try:
+        ahead = mav.MAVLink(None, srcSystem=200, srcComponent=station.mav.srcComponent)
+        ahead.signing.secret_key, ahead.signing.sign_outgoing = key, True
+        ahead.signing.link_id = station.mav.signing.link_id
+        ahead.signing.timestamp = now_timestamp() + 365 * 24 * 3600 * 100_000
+        forged = ahead.command_long_encode(1, 1, mav.MAV_CMD_GET_HOME_POSITION, 0, *[0] * 7)
+        station.write(forged.pack(ahead))
+        text = station.recv_match(  # said at the first rejection
+            type="STATUSTEXT",
+            blocking=True,
+            timeout=5,
+            condition="'ahead of the clock' in STATUSTEXT.text",
+        )
+        assert text is not None
+        assert _status_counts(station, (0, 0, 1), 10) == (0, 0, 1)
+        for _attempt in range(3):  # UDP on a loaded machine: allow a lost datagram
+            _request_home(station)
+            ack = _ack(station, 3)
+            if ack is not None:
+                break
+        assert ack is not None and ack.result == mav.MAV_RESULT_ACCEPTED
+    finally:
+        station.close()
+
+
+def _armed(conn: mavutil.mavfile) -> bool:
+    beat = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=3)
+    assert beat is not None
+    return bool(beat.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+
+
+def test_a_signed_arm_replayed_into_a_restarted_simulator_is_refused(tmp_path, monkeypatch):
+    """The last timestamp of each stream is kept across a restart (in the state folder):
+    a signed ARM captured before the restart does not arm the new process."""
+    monkeypatch.setenv("QUADSITL_STATE_DIR", str(tmp_path))  # the simulators inherit it
+    key = key_from_passphrase(PASSPHRASE)
+    first = MotorSim("--signing-passphrase", PASSPHRASE)
+    try:
+        station = _connection(first.gcs_port, 200, key)
+        arm = station.mav.command_long_encode(
+            1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, *[0] * 6
+        )
+        captured = bytes(arm.pack(station.mav))
+        station.write(captured)
+        ack = _ack(station, 5)
+        assert ack is not None and ack.result == mav.MAV_RESULT_ACCEPTED
+        station.close()
+    finally:
+        first.stop()  # SIGTERM: the timestamps are written as it stops
+    assert list(tmp_path.glob("signing-*.json")), list(tmp_path.iterdir())
+    second = MotorSim("--signing-passphrase", PASSPHRASE)
+    try:
+        listener = _connection(second.gcs_port, 201, key)
+        listener.write(captured)  # the same bytes, a few seconds old
+        assert _status_counts(listener, (0, 0, 1), 10) == (0, 0, 1)  # refused: replayed
+        assert not _armed(listener)
+        listener.close()
+    finally:
+        second.stop()

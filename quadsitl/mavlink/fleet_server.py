@@ -29,9 +29,10 @@ from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink import telemetry as T
 from quadsitl.mavlink.hil_state import ROW_BY_ROW, WireState
-from quadsitl.mavlink.links import Link
+from quadsitl.mavlink.links import Link, Peer
 from quadsitl.mavlink.motor_path import LOCKSTEP_IDLE, answer_parts, check_controls
 from quadsitl.mavlink.server import MOTOR_LINK, MavlinkServer
+from quadsitl.mavlink.signing import is_signed
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.physics.layout import P_GEAR_HEIGHT, P_OMEGA_MAX
 from quadsitl.vehicle.group import VehicleGroup
@@ -77,8 +78,9 @@ class FleetServer:
     def _receive(self, link: Link, received_at: float | None) -> None:
         signing = any(server.signing is not None for server in self.servers)
         fast = FAST_IDS if link.name == MOTOR_LINK and not signing else frozenset()
-        for message, _peer in link.receive(fast):
+        for message, peer in link.receive(fast):
             if isinstance(message, FC.Frame):  # an unsigned round command, parsed fast
+                link.accept(peer)  # (only when signing is off)
                 # time_usec, controls[8], group_mlx, target_system, target_component
                 values = message.unpack()
                 self._round_command(values[10], values[0], values[1:5], link)
@@ -93,11 +95,12 @@ class FleetServer:
                     message.controls[:4],
                     link,
                     message,
+                    peer,
                 )
             elif kind == "HIL_ACTUATOR_CONTROLS" and len(self.servers) > 1:
                 self._refuse_unaddressed()
             else:
-                self._dispatch(message, link)
+                self._dispatch(message, link, peer)
 
     def tick(self, wall_now: float) -> None:
         """Every vehicle's events, heartbeat and telemetry, the vehicles in turn: each
@@ -150,17 +153,17 @@ class FleetServer:
             server.statustext(severity, text)
 
     # --- routing ----------------------------------------------------------------------
-    def _dispatch(self, message: Any, link: Link) -> None:
+    def _dispatch(self, message: Any, link: Link, peer: Peer) -> None:
         target = getattr(message, "target_system", 0)
         if target == 0:
             for server in self.servers:
-                server.dispatch(message, link)
+                server.dispatch(message, link, peer)
             return
         index = self.by_system.get(target)
         if index is None:
             self._unknown(target)
             return
-        self.servers[index].dispatch(message, link)
+        self.servers[index].dispatch(message, link, peer)
 
     def _unknown(self, system_id: int) -> None:
         self.counters["unknown_system"] += 1
@@ -188,6 +191,7 @@ class FleetServer:
         controls: Any,
         link: Link,
         signed: Any = None,
+        peer: Peer | None = None,
     ) -> None:
         """One vehicle's command of a round (``signed``: the pymavlink message, whose
         signature is checked when signing is on); the round runs once it is complete."""
@@ -198,6 +202,8 @@ class FleetServer:
         server = self.servers[index]
         if server.signing is not None and (signed is None or server.signing.verdict(signed)):
             return
+        if peer is not None and (server.signing is None or is_signed(signed)):
+            link.accept(peer)
         now = self.round_start
         if stamp == self.previous_round and stamp != now:
             self.counters["duplicates"] += 1  # its answer was lost: the same answer again

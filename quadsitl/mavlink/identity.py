@@ -29,9 +29,23 @@ def software_version(major: int, minor: int, patch: int) -> int:
     return (major << 24) | (minor << 16) | (patch << 8) | 0xFF
 
 
-def _own_version() -> int:
+def _own_version_parts() -> tuple[int, int, int]:
+    """quadsitl's (major, minor, patch), each 0..255."""
     parts = [int(p) for p in __version__.split(".")[:3] if p.isdigit()] + [0, 0, 0]
-    return software_version(parts[0], parts[1], parts[2])
+    major, minor, patch = (min(p, 255) for p in parts[:3])
+    return major, minor, patch
+
+
+def _own_version() -> int:
+    return software_version(*_own_version_parts())
+
+
+def vendor_version(major: int, minor: int, patch: int) -> bytes:
+    """AUTOPILOT_VERSION flight_custom_version: the vendor's version in its first three
+    bytes, little endian (patch, minor, major), then the first bytes of a git hash (none
+    here: zeros). MAVSDK's ``info.get_version()`` reads it so
+    (src/mavsdk/plugins/info/info_impl.cpp)."""
+    return bytes([patch, minor, major]) + bytes(5)
 
 
 @dataclass(frozen=True)
@@ -50,7 +64,8 @@ IDENTITIES = {
         Identity("generic", mav.MAV_AUTOPILOT_GENERIC, _own_version(), False),
     )
 }
-CUSTOM_VERSION = b"quadsitl"  # AUTOPILOT_VERSION flight_custom_version (8 bytes)
+# AUTOPILOT_VERSION flight_custom_version (8 bytes): quadsitl's version as the vendor's.
+CUSTOM_VERSION = vendor_version(*_own_version_parts())
 MIDDLEWARE_VERSION = _own_version()  # quadsitl's own version, in every identity
 
 

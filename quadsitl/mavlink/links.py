@@ -12,6 +12,13 @@ loopback interface (nobody off this host can reach it), an empty HOST means
 other hosts. Each peer has its own parser, so a garbled datagram from one
 never corrupts another's frames. Sending packs a message once per link (one sequence
 number stream per link) and writes it to every live peer.
+
+A UDP peer is live only once the server has accepted a frame from it
+(:meth:`Link.accept`: a valid MAVLink frame, validly signed when signing is on), and
+stays live while such frames keep coming, for PEER_TIMEOUT. A datagram with a forged
+source address therefore never turns the link into a reflector that sends telemetry
+to someone who did not ask for it. (A ``udpout`` destination is chosen by the user
+and always gets everything; a TCP client has proved its address by connecting.)
 """
 
 from __future__ import annotations
@@ -28,7 +35,7 @@ from quadsitl.mavlink import mavlink
 from quadsitl.mavlink.signing import now_timestamp
 
 LOOPBACK = "127.0.0.1"
-PEER_TIMEOUT = 10.0  # s without a packet before a learned UDP peer is dropped
+PEER_TIMEOUT = 10.0  # s without an accepted frame before a learned UDP peer is dropped
 MAX_DATAGRAM = 65535
 
 
@@ -67,8 +74,9 @@ def is_loopback(host: str) -> bool:
 class Peer:
     address: Any
     parser: Any  # a pymavlink MAVLink object used only to parse this peer's bytes
-    last_seen: float = field(default_factory=time.monotonic)
+    last_seen: float = field(default_factory=time.monotonic)  # any datagram
     sock: socket.socket | None = None  # TCP only
+    heard: float | None = None  # monotonic s of the last accepted frame (UDP: live)
 
 
 def _new_parser() -> Any:
@@ -204,6 +212,10 @@ class Link:
         if used < len(data):  # bytes that were no frame of a message known here
             self.bad_frames += 1
 
+    def accept(self, peer: Peer) -> None:
+        """``peer`` sent a frame the server accepts: send it what this link sends."""
+        peer.heard = time.monotonic()
+
     # --- sending ----------------------------------------------------------------------
     def pack(self, message: Any, system_id: int | None = None) -> bytes:
         """Encode ``message`` as sent by ``system_id`` (default: the link's), with that
@@ -263,8 +275,9 @@ class Link:
                 except OSError:
                     peer.sock.close()
                     self.peers.pop(address, None)
-            elif now - peer.last_seen > PEER_TIMEOUT:
-                del self.peers[address]
+            elif peer.heard is None or now - peer.heard > PEER_TIMEOUT:
+                if now - peer.last_seen > PEER_TIMEOUT:
+                    del self.peers[address]  # silent: forgotten
             elif address != self.destination:
                 targets.append(address)
         for target in targets:

@@ -3,7 +3,13 @@
 Upload: MISSION_COUNT -> the vehicle requests each item (MISSION_REQUEST_INT) ->
 MISSION_ITEM_INT (or legacy MISSION_ITEM) -> MISSION_ACK. Download:
 MISSION_REQUEST_LIST -> MISSION_COUNT -> the client requests items -> MISSION_ACK.
-Only the mission type MISSION is stored; fence and rally lists are empty.
+Only the mission type MISSION is stored; fence and rally lists are empty, and an
+upload of one is refused with MAV_MISSION_UNSUPPORTED and a STATUSTEXT saying why.
+
+One upload at a time, as PX4 and ArduPilot do: a transaction belongs to the (system,
+component) that sent its MISSION_COUNT, only that pair's items count, and a MISSION_COUNT
+from anyone else while it runs is refused with MAV_MISSION_DENIED (busy). The same pair
+sending MISSION_COUNT again starts over.
 """
 
 from __future__ import annotations
@@ -32,6 +38,12 @@ RESULTS = {
     "z": mav.MAV_MISSION_INVALID_PARAM7,
 }
 MAX_RETRIES = 5
+# Why a list other than the mission cannot be uploaded (said in a STATUSTEXT).
+UNSUPPORTED_LISTS = {
+    mav.MAV_MISSION_TYPE_FENCE: "no geofence polygons or circles; the fence is a radius "
+    "and a height from home (GF_MAX_HOR_DIST, GF_MAX_VER_DIST)",
+    mav.MAV_MISSION_TYPE_RALLY: "no rally points; return (RTL) flies home, at RTL_RETURN_ALT",
+}
 
 Reply = Callable[[Any], None]  # sends a message back on the link the request came from
 
@@ -58,7 +70,18 @@ class MissionProtocol:
         peer = (msg.get_srcSystem(), msg.get_srcComponent())
         mission_type = getattr(msg, "mission_type", 0)
         if mission_type != mav.MAV_MISSION_TYPE_MISSION:
+            why = UNSUPPORTED_LISTS.get(mission_type, f"mission type {mission_type} unknown")
+            self.notify(Severity.WARNING, f"upload refused: {why}")
             self._ack(reply, peer, mav.MAV_MISSION_UNSUPPORTED, mission_type)
+            return
+        busy = self.upload
+        if busy is not None and busy.peer != peer:
+            self.notify(
+                Severity.WARNING,
+                f"mission upload from {peer[0]}/{peer[1]} refused: busy with the upload "
+                f"from {busy.peer[0]}/{busy.peer[1]}",
+            )
+            self._ack(reply, peer, mav.MAV_MISSION_DENIED)
             return
         if msg.count > M.MAX_ITEMS:
             self.notify(
@@ -77,6 +100,8 @@ class MissionProtocol:
         up = self.upload
         if up is None or getattr(msg, "mission_type", 0) != mav.MAV_MISSION_TYPE_MISSION:
             return
+        if (msg.get_srcSystem(), msg.get_srcComponent()) != up.peer:
+            return  # not part of this transaction: someone else's items never mix in
         if msg.seq != len(up.items):
             return  # a duplicate or out of order: the pending request will be repeated
         item = _item(msg)
@@ -177,6 +202,9 @@ class MissionProtocol:
         src = (msg.get_srcSystem(), msg.get_srcComponent())
         mission_type = getattr(msg, "mission_type", 0)
         if mission_type in (mav.MAV_MISSION_TYPE_MISSION, mav.MAV_MISSION_TYPE_ALL):
+            if self.upload is not None and self.upload.peer != src:
+                self._ack(reply, src, mav.MAV_MISSION_DENIED, mission_type)  # busy
+                return
             self.upload = None
             self.vehicle.set_mission([])
         self._ack(reply, src, mav.MAV_MISSION_ACCEPTED, mission_type)

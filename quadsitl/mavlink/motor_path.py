@@ -73,7 +73,16 @@ def answer_parts(
         parts.append((mav.MAVLink_named_value_int_message, (time_ms, contact, b"CONTACT")))
     if contact != L.AIRBORNE:
         parts.append((mav.MAVLink_named_value_float_message, (time_ms, touchdown, b"TD_SPEED")))
-    odometry = (
+    parts.append((mav.MAVLink_odometry_message, odometry_values(time_usec, p, q, v, r, resets)))
+    return parts
+
+
+def odometry_values(time_usec: int, p: Any, q: Any, v: Any, r: Any, resets: int) -> tuple[Any, ...]:
+    """ODOMETRY's fields in wire order, as PX4 sends it: pose in local NED (``p`` m,
+    ``q`` FRD -> NED), velocity ``v`` and rates ``r`` in body FRD (the child frame);
+    the truth, so quality 100 and covariances unknown (no estimator); ``resets`` counts
+    jumps of the pose (state resets)."""
+    return (
         time_usec,
         *p,
         *q,
@@ -87,8 +96,6 @@ def answer_parts(
         mav.MAV_ESTIMATOR_TYPE_UNKNOWN,
         100,
     )
-    parts.append((mav.MAVLink_odometry_message, odometry))
-    return parts
 
 
 def check_controls(controls: Any) -> tuple[str, str] | None:

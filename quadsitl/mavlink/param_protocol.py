@@ -5,7 +5,11 @@ field ("bytewise"), as PX4 sends them and as QGroundControl and MAVSDK decode th
 non-ArduPilot vehicle (the vehicle declares MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE);
 the others are REAL32.
 
-A write that is refused is answered with PARAM_ERROR naming the reason (QGroundControl
+A write must carry the parameter's own type (INT32 for an integer parameter, REAL32
+for the others), as PX4 requires: any other type changes nothing and is answered with
+the value still held (see :meth:`ParamProtocol._refuse_type`).
+
+Any other write that is refused is answered with PARAM_ERROR naming the reason (QGroundControl
 then reports it once instead of resending), plus a STATUSTEXT for people. A client
 speaking MAVLink 1, which has no PARAM_ERROR, gets the value still held echoed instead,
 as the protocol worked before PARAM_ERROR existed.
@@ -33,10 +37,21 @@ INTEGER_TYPES = {
 Reply = Callable[[Any], None]
 
 
+def param_type(integer: bool) -> int:
+    """The MAV_PARAM_TYPE of an integer or a real parameter (its only type on the wire)."""
+    return mav.MAV_PARAM_TYPE_INT32 if integer else mav.MAV_PARAM_TYPE_REAL32
+
+
+def type_name(mav_param_type: int) -> str:
+    """'INT32', 'REAL32', ... or the number when it names no type."""
+    entry = mav.enums["MAV_PARAM_TYPE"].get(mav_param_type)
+    return entry.name.removeprefix("MAV_PARAM_TYPE_") if entry else str(mav_param_type)
+
+
 def encode_value(value: float, integer: bool) -> tuple[float, int]:
     """(float field, MAV_PARAM_TYPE) of a parameter value."""
-    param_type = mav.MAV_PARAM_TYPE_INT32 if integer else mav.MAV_PARAM_TYPE_REAL32
-    return encode_raw(value, param_type), param_type
+    mav_type = param_type(integer)
+    return encode_raw(value, mav_type), mav_type
 
 
 def encode_raw(value: float, param_type: int) -> float:
@@ -75,9 +90,9 @@ class ParamProtocol:
         self.listing: list[tuple[str, Reply]] = []  # parameters still to send, paced
 
     def value_message(self, name: str) -> Any:
-        raw, param_type = encode_value(self.vehicle.params[name], SPECS[name].integer)
+        raw, mav_type = encode_value(self.vehicle.params[name], SPECS[name].integer)
         return self.encoder.param_value_encode(
-            name.encode(), raw, param_type, len(self.names), self.names.index(name)
+            name.encode(), raw, mav_type, len(self.names), self.names.index(name)
         )
 
     def on_request_list(self, msg: Any, reply: Reply) -> None:
@@ -110,12 +125,29 @@ class ParamProtocol:
         """Set; the new value goes to every link (the acknowledgement, and news for the
         other ground stations)."""
         name = param_name(msg.param_id)
+        spec = SPECS.get(name)
+        if spec is not None and msg.param_type != param_type(spec.integer):
+            self._refuse_type(msg, name, reply)
+            return
         try:
             self.vehicle.set_param(name, decode_value(msg.param_value, msg.param_type))
         except ParamError as error:
             self._refuse(msg, reply, f"param set refused: {error}", error.code, name)
             return
         broadcast(self.value_message(name))
+
+    def _refuse_type(self, msg: Any, name: str, reply: Reply) -> None:
+        """A write whose type is not the parameter's changes nothing (as PX4 refuses
+        it): the value still held goes back to the writer, whose client then reports
+        the type mismatch (MAVSDK: WRONG_TYPE). PARAM_ERROR would be the direct answer,
+        but pymavlink's dialect has no type-mismatch code to put in it."""
+        held = type_name(param_type(SPECS[name].integer))
+        self.notify(
+            Severity.WARNING,
+            f"param set refused: {name} is {held}, the write was "
+            f"{type_name(msg.param_type)} (wrong type); nothing changed",
+        )
+        reply(self.value_message(name))
 
     def _refuse(
         self, msg: Any, reply: Reply, text: str, code: int, name: str | None = None

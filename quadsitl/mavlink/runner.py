@@ -339,6 +339,8 @@ class Simulator:
         return steps
 
     def close(self) -> None:
+        for server in getattr(self, "servers", []):
+            server.close()  # keeps the signing timestamps
         for link in self.links:
             link.close()
         tlog = getattr(self, "tlog", None)

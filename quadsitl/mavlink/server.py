@@ -5,6 +5,8 @@ link they came from, and calls :meth:`MavlinkServer.tick` after stepping the phy
 Every frame sent or received goes to the telemetry log, except on the motor-command
 link (``hil``), whose thousands of round trips a second would swamp it. With a signing
 key, messages other than HEARTBEAT and RADIO_STATUS must be signed (:mod:`.signing`).
+Telemetry goes to a peer of a link only once a frame from it has been accepted here
+(validly signed, when signing is on; :meth:`.links.Link.accept`).
 What the vehicle presents itself as (PX4-compatible or generic) is :mod:`.identity`;
 parameters, missions and offboard setpoints have their own modules.
 """
@@ -22,11 +24,11 @@ from quadsitl.mavlink import offboard
 from quadsitl.mavlink import telemetry as T
 from quadsitl.mavlink.commands import Command, Commands
 from quadsitl.mavlink.identity import IDENTITIES, Identity
-from quadsitl.mavlink.links import Link
+from quadsitl.mavlink.links import Link, Peer
 from quadsitl.mavlink.mission_protocol import MissionProtocol
 from quadsitl.mavlink.motor_path import MotorPath
 from quadsitl.mavlink.param_protocol import ParamProtocol
-from quadsitl.mavlink.signing import SignatureCheck
+from quadsitl.mavlink.signing import SignatureCheck, StreamTimestamps, is_signed
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import Outcome, Severity
@@ -69,6 +71,8 @@ class MavlinkServer:
         self.without_hil_state: set[int] = set()  # links whose answers leave it out
         self.signing: SignatureCheck | None = None
         self._signing_reported: tuple[float, int] = (-math.inf, 0)
+        self._statustext_id = 0  # the id of this vehicle's last chunked STATUSTEXT
+        self._timestamps_reported = False  # said that signing timestamps cannot be kept
         if signing_key is not None:
             self.set_signing_key(signing_key)
         self.missions = MissionProtocol(vehicle, self.encoder, self.statustext)
@@ -88,8 +92,11 @@ class MavlinkServer:
         }
 
     def set_signing_key(self, key: bytes | None) -> None:
-        """Require signed messages (and sign ours) with ``key``; None turns signing off."""
-        self.signing = SignatureCheck(key) if key is not None else None
+        """Require signed messages (and sign ours) with ``key``; None turns signing off.
+        Streams start from the timestamps kept for this key (replays across restarts)."""
+        self.signing = None
+        if key is not None:
+            self.signing = SignatureCheck(key, StreamTimestamps.for_key(key))
         for link_id, link in enumerate(self.links):
             link.set_signing(key, link_id)
 
@@ -120,7 +127,10 @@ class MavlinkServer:
         chunks = [data[i : i + STATUSTEXT_LENGTH] for i in range(0, len(data), STATUSTEXT_LENGTH)]
         if len(chunks) > 1 and len(chunks[-1]) == STATUSTEXT_LENGTH:
             chunks.append(b"")
-        chunk_id = (int(time.monotonic() * 1000) % 65535) + 1 if len(chunks) > 1 else 0
+        chunk_id = 0
+        if len(chunks) > 1:  # a counter: two texts' chunks never share an id (1..65535)
+            self._statustext_id = self._statustext_id % 65535 + 1
+            chunk_id = self._statustext_id
         for seq, chunk in enumerate(chunks or [b""]):
             self.send(self.encoder.statustext_encode(severity, chunk, chunk_id, seq))
 
@@ -136,25 +146,31 @@ class MavlinkServer:
         return (
             r.get("unsigned", 0),
             r.get("bad_signature", 0),
-            r.get("replayed", 0),
+            r.get("replayed", 0) + r.get("ahead", 0),
             self.motors.counters["rejected"],
         )
 
     # --- the loop's hooks -------------------------------------------------------------
     def receive(self, link: Link, received_at: float | None = None) -> None:
-        for message, _peer in link.receive():
+        for message, peer in link.receive():
             if self.tlog is not None and link.name != MOTOR_LINK:
                 self.tlog.record(bytes(message.get_msgbuf()), received_at)
-            self.dispatch(message, link)
+            self.dispatch(message, link, peer)
 
-    def dispatch(self, message: Any, link: Link) -> None:
+    def dispatch(self, message: Any, link: Link, peer: Peer | None = None) -> None:
+        """Check and handle one message from ``peer`` of ``link``; a message that passes
+        (signed with the key, when signing is on) makes the peer live (telemetry)."""
         target = getattr(message, "target_system", 0)
         if target not in (0, self.system_id):
             self.counters["ignored"] += 1
+            if peer is not None and self.signing is None:
+                link.accept(peer)
             return
         if self.signing is not None and self.signing.verdict(message) is not None:
             self._report_signing()
             return
+        if peer is not None and (self.signing is None or is_signed(message)):
+            link.accept(peer)
         handler = self.handlers.get(message.get_type())
         if handler is None:
             return
@@ -185,8 +201,10 @@ class MavlinkServer:
             self.send(T.build_mission_current(self.snapshot()))
         self.missions.tick(wall_now)
         self.params.tick()
-        if self.signing is not None and wall_now - self._signing_reported[0] > 1.0:
-            self._report_signing(wall_now)
+        if self.signing is not None:
+            self._keep_signing_timestamps(wall_now)
+            if wall_now - self._signing_reported[0] > 1.0:
+                self._report_signing(wall_now)
         wall_cap = wall_now if self.motors.lockstep else None
         snapshot: T.Snapshot | None = None
         for link in self.links:
@@ -199,7 +217,9 @@ class MavlinkServer:
                 self.send(T.BUILDERS[message_id](snapshot), link)
 
     def snapshot(self) -> T.Snapshot:
-        return T.Snapshot(self.vehicle, self.comm_errors, self.error_counts, self.identity)
+        return T.Snapshot(
+            self.vehicle, self.comm_errors, self.error_counts, self.identity, self.motors.resets
+        )
 
     # --- the ground station's heartbeat: link-loss failsafe (PX4's NAV_DLL_ACT) --------
     def handle_heartbeat(self, msg: Any, link: Link) -> None:
@@ -219,6 +239,26 @@ class MavlinkServer:
         if silence > self.vehicle.params["COM_DL_LOSS_T"]:
             self.gcs_lost = True
             self.vehicle.datalink_lost(silence)
+
+    def _keep_signing_timestamps(self, wall_now: float) -> None:
+        """Save the streams' timestamps now and then; say once if they cannot be kept."""
+        assert self.signing is not None
+        kept = self.signing.timestamps
+        if kept is None:
+            return
+        kept.save_if_due(wall_now)
+        if kept.problem is not None and not self._timestamps_reported:
+            self._timestamps_reported = True
+            self.statustext(
+                Severity.WARNING,
+                f"signing timestamps not kept ({kept.problem}): a signed message sent "
+                "before a restart could be replayed after it",
+            )
+
+    def close(self) -> None:
+        """Keep the signing timestamps (the simulator is stopping)."""
+        if self.signing is not None and self.signing.timestamps is not None:
+            self.signing.timestamps.save()
 
     def _report_signing(self, wall_now: float | None = None) -> None:
         """STATUSTEXT at the first rejection, then a summary at most every 10 s."""

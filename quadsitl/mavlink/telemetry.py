@@ -1,8 +1,11 @@
 """Telemetry: what the vehicle reports, converted to MAVLink's frames and units here.
 
 One ``build_*`` function per message. World ENU -> local NED, body FLU -> FRD, through
-:mod:`quadsitl.frames` only. Rates are per link and per message (SET_MESSAGE_INTERVAL,
-REQUEST_DATA_STREAM), paced by simulated time; the heartbeat is paced by the wall
+:mod:`quadsitl.frames` only. The sensor messages (HIGHRES_IMU, SCALED_IMU, RAW_IMU) and
+ODOMETRY are streamed on request only and carry the truth: there is no sensor model yet
+(see :class:`Snapshot` for the accelerometer, magnetometer and barometer values).
+Rates are per link and per message (SET_MESSAGE_INTERVAL, REQUEST_DATA_STREAM), paced
+by simulated time; the heartbeat is paced by the wall
 clock so that ground stations keep the link even when simulated time stands still.
 """
 
@@ -11,11 +14,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 
 from quadsitl import frames
+from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.degrade import SLOWEST_RATE
 from quadsitl.mavlink.hil_state import WireState
@@ -26,6 +31,7 @@ from quadsitl.mavlink.identity import (
     MIDDLEWARE_VERSION,
     Identity,
 )
+from quadsitl.mavlink.motor_path import STANDARD_GRAVITY, odometry_values
 from quadsitl.physics import layout as L
 from quadsitl.vehicle.modes import MAIN_AUTO, MAIN_OFFBOARD, MAIN_POSCTL, Mode
 from quadsitl.vehicle.vehicle import Vehicle
@@ -59,6 +65,15 @@ CAPABILITIES = (
     | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
 )
 HEARTBEAT_PERIOD = 1.0  # s, wall clock
+# The simulated world's magnetic field, local NED, gauss: uniform, no declination, 60°
+# inclination, 0.5 G (a mid-latitude field).
+MAGNETIC_FIELD_NED = np.array([0.25, 0.0, 0.25 * math.sqrt(3.0)])
+# The International Standard Atmosphere (the barometer's truth; no wind).
+ISA_SEA_LEVEL = (1013.25, 288.15)  # hPa, K
+ISA_LAPSE = 0.0065  # K/m
+ISA_EXPONENT = 5.25588  # g M / (R L)
+AIR_GAS_CONSTANT = 287.053  # J/(kg K)
+HIGHRES_IMU_FIELDS = 0x1FFF  # HIGHRES_IMU_UPDATED_ALL: accel, gyro, mag, pressures, temperature
 
 
 class Snapshot:
@@ -70,9 +85,11 @@ class Snapshot:
         comm_errors: int = 0,
         error_counts: tuple[int, ...] = (0,) * 4,
         identity: Identity = IDENTITIES["px4"],
+        resets: int = 0,
     ) -> None:
         self.vehicle = vehicle
         self.identity = identity
+        self.resets = resets  # state resets through the motor path (ODOMETRY reset_counter)
         self.comm_errors = min(comm_errors, 65535)  # malformed frames received
         self.error_counts = [min(n, 65535) for n in error_counts]  # signing, motor commands
         s = vehicle.state
@@ -83,6 +100,7 @@ class Snapshot:
         wire = WireState.from_physics(s, vehicle.airframe.gear_height, self.time_usec, 0, 0.0)
         self.position_ned = wire.position_ned  # m
         self.velocity_ned = frames.enu_to_ned(s[L.VEL])  # m/s
+        self.velocity_frd = wire.velocity_frd  # m/s, body
         self.q_ned_frd = wire.q_ned_frd  # (w, x, y, z)
         self.roll, self.pitch, self.yaw = frames.euler_from_quat(self.q_ned_frd).tolist()
         self.rates_frd = wire.rates_frd  # rad/s
@@ -92,6 +110,39 @@ class Snapshot:
         self.relative_alt = up - float(vehicle.home_position[2])  # m above home
         self.heading_deg = math.degrees(self.yaw) % 360.0
         self.ground_speed = math.hypot(self.velocity_ned[0], self.velocity_ned[1])
+
+    # --- the sensors' truth (computed only when a sensor message is built) ------------
+    @cached_property
+    def specific_force_frd(self) -> np.ndarray:
+        """What an ideal accelerometer reads, m/s², body FRD: the rotor thrust and the
+        drag over the mass in the air (about (0, 0, −g) in a hover); on the ground, where
+        the ground holds it up, gravity's reaction (0, 0, −g) when level."""
+        v = self.vehicle
+        a = v.airframe
+        if int(v.fleet.contact[0]) != L.AIRBORNE:
+            up_world = np.array([0.0, 0.0, -a.gravity])  # NED: the reaction points up
+            return frames.quat_rotate(frames.quat_conjugate(self.q_ned_frd), up_world)
+        thrust = a.thrust_coeff * float(np.sum(self.rotor_speeds**2))  # N, along −z FRD
+        speed = float(np.linalg.norm(self.velocity_frd))
+        drag = -a.drag_coeff * speed * self.velocity_frd  # N, body FRD
+        return (np.array([0.0, 0.0, -thrust]) + drag) / a.mass
+
+    @cached_property
+    def magnetic_field_frd(self) -> np.ndarray:
+        """The world's field (MAGNETIC_FIELD_NED) in body FRD, gauss."""
+        return frames.quat_rotate(frames.quat_conjugate(self.q_ned_frd), MAGNETIC_FIELD_NED)
+
+    @cached_property
+    def air(self) -> tuple[float, float, float]:
+        """(static pressure hPa, differential pressure hPa, temperature °C) of the ISA
+        at the vehicle's altitude; the differential pressure of its speed through still
+        air."""
+        sea_pressure, sea_temperature = ISA_SEA_LEVEL
+        temperature = sea_temperature - ISA_LAPSE * self.alt_amsl  # K
+        pressure = sea_pressure * (temperature / sea_temperature) ** ISA_EXPONENT
+        density = pressure * 100 / (AIR_GAS_CONSTANT * temperature)  # kg/m³
+        dynamic = 0.5 * density * float(np.dot(self.velocity_ned, self.velocity_ned)) / 100
+        return pressure, dynamic, temperature - 273.15
 
 
 def build_heartbeat(v: Vehicle, autopilot: int = mav.MAV_AUTOPILOT_PX4) -> Any:
@@ -295,6 +346,53 @@ def build_autopilot_version(s: Snapshot) -> Any:
     )
 
 
+def build_odometry(s: Snapshot) -> Any:
+    """The motor path's ODOMETRY (local NED pose, body FRD velocity and rates)."""
+    values = odometry_values(
+        s.time_usec,
+        s.position_ned.tolist(),
+        s.q_ned_frd.tolist(),
+        s.velocity_frd.tolist(),
+        s.rates_frd.tolist(),
+        s.resets,
+    )
+    return FC.message(mav.MAVLink_odometry_message, values)
+
+
+def build_highres_imu(s: Snapshot) -> Any:
+    """SI units: m/s², rad/s, gauss, hPa, m, °C; body FRD."""
+    f, w, m = s.specific_force_frd, s.rates_frd, s.magnetic_field_frd
+    pressure, differential, temperature = s.air
+    return _encoder.highres_imu_encode(
+        s.time_usec,
+        *(float(x) for x in f),
+        *(float(x) for x in w),
+        *(float(x) for x in m),
+        pressure,
+        differential,
+        s.alt_amsl,  # the ISA pressure altitude is the true altitude
+        temperature,
+        HIGHRES_IMU_FIELDS,
+    )
+
+
+def _imu_integers(s: Snapshot) -> list[int]:
+    """Accelerometer mG, gyroscope mrad/s, magnetometer mgauss (body FRD), int16."""
+    mg = s.specific_force_frd / STANDARD_GRAVITY * 1000
+    values = [*mg, *(s.rates_frd * 1000), *(s.magnetic_field_frd * 1000)]
+    return [int(max(-32767, min(32767, round(float(x))))) for x in values]
+
+
+def build_scaled_imu(s: Snapshot) -> Any:
+    return _encoder.scaled_imu_encode(s.time_boot_ms, *_imu_integers(s), round(s.air[2] * 100))
+
+
+def build_raw_imu(s: Snapshot) -> Any:
+    """There are no sensor counts: the values of SCALED_IMU (mG, mrad/s, mgauss), as
+    ArduPilot fills RAW_IMU."""
+    return _encoder.raw_imu_encode(s.time_usec, *_imu_integers(s), 0, round(s.air[2] * 100))
+
+
 def build_current_mode(s: Snapshot) -> Any:
     v = s.vehicle
     standard = next((e.standard_mode for e in AVAILABLE_MODES if e.mode is v.mode), 0)
@@ -318,6 +416,11 @@ BUILDERS: dict[int, Callable[[Snapshot], Any]] = {
     mav.MAVLINK_MSG_ID_MISSION_CURRENT: build_mission_current,
     mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: build_autopilot_version,
     mav.MAVLINK_MSG_ID_CURRENT_MODE: build_current_mode,
+    # On request only (SET_MESSAGE_INTERVAL, REQUEST_MESSAGE): not in DEFAULT_RATES.
+    mav.MAVLINK_MSG_ID_ODOMETRY: build_odometry,
+    mav.MAVLINK_MSG_ID_HIGHRES_IMU: build_highres_imu,
+    mav.MAVLINK_MSG_ID_SCALED_IMU: build_scaled_imu,
+    mav.MAVLINK_MSG_ID_RAW_IMU: build_raw_imu,
 }
 
 # Default rates, Hz (the spec's typical rates; position and attitude at 50 Hz).
