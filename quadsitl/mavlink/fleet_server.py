@@ -148,9 +148,10 @@ class FleetServer:
                 schedule.slow_down(factor)
 
     def statustext(self, severity: int, text: str) -> None:
-        """From every vehicle (e.g. the log stopped: it concerns them all)."""
-        for server in self.servers:
-            server.statustext(severity, text)
+        """From every vehicle (e.g. the log stopped: it concerns them all), printed on
+        the console once."""
+        for index, server in enumerate(self.servers):
+            server.statustext(severity, text, echo=index == 0)
 
     # --- routing ----------------------------------------------------------------------
     def _dispatch(self, message: Any, link: Link, peer: Peer) -> None:

@@ -117,11 +117,12 @@ class MavlinkServer:
             for frame in frames:
                 self.tlog.record(frame)
 
-    def statustext(self, severity: int, text: str) -> None:
+    def statustext(self, severity: int, text: str, echo: bool = True) -> None:
         """STATUSTEXT on every link; long texts are split into chunks (MAVLink 2). A
         chunked text ends with a chunk shorter than 50 bytes, an empty one if need be
-        (QGroundControl waits for it, src/MAVLink/StatusTextHandler.cc)."""
-        if self.echo is not None:
+        (QGroundControl waits for it, src/MAVLink/StatusTextHandler.cc). ``echo``: also
+        print it on the console (a fleet prints a text that concerns all its vehicles once)."""
+        if echo and self.echo is not None:
             self.echo(f"[{self.vehicle.time:8.2f} s] {text}")
         data = text.encode("utf-8", "replace")
         chunks = [data[i : i + STATUSTEXT_LENGTH] for i in range(0, len(data), STATUSTEXT_LENGTH)]
