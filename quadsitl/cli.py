@@ -6,7 +6,7 @@ import argparse
 import math
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from quadsitl import __version__
@@ -289,9 +289,18 @@ def _sim_collaborators(args: argparse.Namespace) -> tuple[Any, Any]:
         from quadsitl.viz.sim_view import SimView
 
         def make_view(vehicle: Any) -> Any:
-            return SimView(vehicle, args.rerun_save)
+            return SimView(vehicle, args.rerun_save, notice=_say("sim"))
 
     return make_autopilot, make_view
+
+
+def _say(command: str) -> Callable[[str], None]:
+    """A one-line notice on stderr, prefixed as the command's errors are."""
+
+    def say(text: str) -> None:
+        print(f"quadsitl {command}: {text}", file=sys.stderr, flush=True)
+
+    return say
 
 
 def main(argv: Sequence[str] | None = None) -> int:
