@@ -104,3 +104,16 @@ def test_sim_rejects_bad_options():
     assert "unknown parameter" in _run("sim", "--param", "NOPE=1", "--logs", "none").stderr
     assert "LAT,LON,ALT" in _run("sim", "--home", "1,2", "--logs", "none").stderr
     assert "kind must be" in _run("sim", "--gcs", "serial:x:1", "--logs", "none").stderr
+
+
+def test_sim_banner_says_when_a_policy_flies_the_vehicle():
+    checkpoint = Path(__file__).resolve().parent.parent / "policies/checkpoints/hover.pt"
+    common = ("sim", "--gcs", "udpin:127.0.0.1:0", "--api", "none", "--logs", "none")
+    flown = _run(*common, "--duration", "1", "--autopilot", str(checkpoint))
+    assert flown.returncode == 0, flown.stderr
+    banner = flown.stdout.splitlines()[:2]
+    assert banner[1] == (
+        f"quadsitl sim: flown by the policy in {checkpoint}, not the cascaded controller"
+    )
+    plain = _run(*common, "--duration", "0.5")
+    assert plain.returncode == 0 and "flown by" not in plain.stdout
