@@ -28,6 +28,7 @@ import os
 import re
 import subprocess
 import sys
+import textwrap
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -52,6 +53,7 @@ FOREIGN = {
     "ruff",
     "mypy",
     "mavsdk_server",
+    "wsl",
 }
 OPTION = re.compile(r"(?<![\w-])--[a-z][a-z0-9]*(?:-[a-z0-9]+)*")
 
@@ -71,11 +73,11 @@ def fenced_blocks(doc: Path) -> list[Block]:
     blocks, lines = [], doc.read_text().splitlines()
     start = None
     for number, line in enumerate(lines, 1):
-        if line.startswith("```"):
+        if line.lstrip().startswith("```"):
             if start is None:
-                start, info, body = number, line[3:].strip(), []
+                start, info, body = number, line.lstrip()[3:].strip(), []
             else:
-                blocks.append(Block(doc, start, info, "\n".join(body)))
+                blocks.append(Block(doc, start, info, textwrap.dedent("\n".join(body))))
                 start = None
         elif start is not None:
             body.append(line)
@@ -219,8 +221,8 @@ def mentions(doc: Path) -> list[Mention]:
     prose: list[str] = []
     in_block, block_language, current = False, "", None
     for number, line in enumerate(lines, 1):
-        if line.startswith("```"):
-            in_block, block_language, current = not in_block, line[3:].strip(), None
+        if line.lstrip().startswith("```"):
+            in_block, block_language, current = not in_block, line.lstrip()[3:].strip(), None
             prose.append("")
             continue
         if in_block:
