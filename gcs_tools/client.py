@@ -74,10 +74,18 @@ class Track:
 class VehicleClient:
     """One connection to one vehicle (system id ``target``), e.g. ``udpin:0.0.0.0:14550``."""
 
-    def __init__(self, url: str, target: int = 1, source_system: int = 255) -> None:
+    def __init__(
+        self,
+        url: str,
+        target: int = 1,
+        source_system: int = 255,
+        signing_key: bytes | None = None,
+    ) -> None:
         self.conn = mavutil.mavlink_connection(
             url, source_system=source_system, source_component=190, autoreconnect=False
         )
+        if signing_key is not None:  # MAVLink 2 signing: sign all we send
+            self.conn.setup_signing(signing_key, sign_outgoing=True)
         self.target = target
         self.latest: dict[str, Any] = {}
         self.param_types: dict[str, int] = {}  # MAV_PARAM_TYPE of each parameter seen

@@ -11,11 +11,14 @@ from gcs_tools.mission_file import read_mission
 from gcs_tools.scripted_flight import fly_items, fly_mission
 
 
-def run_fly(path: str, url: str, system: int, timeout: float) -> int:
+def run_fly(
+    path: str, url: str, system: int, timeout: float, signing_key: bytes | None = None
+) -> int:
     """Returns an exit code: 0 flown (and landed, when the mission lands), 1 failed in
-    flight or refused by the vehicle; bad files raise ValueError before anything flies."""
+    flight or refused by the vehicle; bad files raise ValueError before anything flies.
+    With ``signing_key`` every message is signed (a vehicle with signing on needs it)."""
     mission = read_mission(path)
-    client = VehicleClient(url, target=system)
+    client = VehicleClient(url, target=system, signing_key=signing_key)
     started = time.monotonic()
     try:
         try:

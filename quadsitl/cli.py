@@ -223,7 +223,11 @@ def _add_fly_parser(commands: argparse._SubParsersAction) -> None:
         "sim's API link sends)",
     )
     fly.add_argument(
-        "--sysid", type=int, default=1, help="system id of the vehicle to fly (default: 1)"
+        "--sysid",
+        type=int,
+        default=1,
+        metavar="N",
+        help="system id of the vehicle to fly (default: 1)",
     )
     fly.add_argument(
         "--timeout",
@@ -231,6 +235,19 @@ def _add_fly_parser(commands: argparse._SubParsersAction) -> None:
         default=600.0,
         metavar="S",
         help="give up when the mission is not done after S seconds (default: 600)",
+    )
+    signing = fly.add_mutually_exclusive_group()
+    signing.add_argument(
+        "--signing-key",
+        metavar="FILE",
+        help="sign every message with the key in FILE, for a vehicle with signing on (64 "
+        "hex digits or 32 bytes; environment: QUADSITL_SIGNING_KEY=64 hex digits)",
+    )
+    signing.add_argument(
+        "--signing-passphrase",
+        metavar="TEXT",
+        help="sign with key SHA-256(TEXT), as quadsitl sim's --signing-passphrase "
+        "(environment: QUADSITL_SIGNING_PASSPHRASE)",
     )
 
 
@@ -374,7 +391,8 @@ def _main(argv: Sequence[str] | None = None) -> int:
         from gcs_tools.fly import run_fly
 
         try:
-            return run_fly(args.mission, args.connect, args.sysid, args.timeout)
+            key = _signing_key(args)
+            return run_fly(args.mission, args.connect, args.sysid, args.timeout, key)
         except ValueError as error:
             parser.exit(2, f"quadsitl fly: error: {error}\n")
     if args.command == "replay":

@@ -44,6 +44,33 @@ def test_a_qgroundcontrol_plan_flies_against_a_running_sim():
     assert "skipped (no payload)" in sim_output
 
 
+def test_fly_signs_for_a_vehicle_with_signing_on(tmp_path):
+    mission = tmp_path / "hop.txt"
+    mission.write_text("0 0 2\n2 0 2\n")
+    port = free_udp_port()
+    sim = subprocess.Popen(
+        cli(
+            f"sim --gcs none --api udpout:127.0.0.1:{port} --speed 8 --logs none "
+            "--signing-passphrase",
+            "correct horse",
+        ),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    connect = ("--connect", f"udpin:127.0.0.1:{port}", "--timeout", "60")
+    try:
+        unsigned = run_cli("fly", str(mission), *connect)
+        signed = run_cli("fly", str(mission), *connect, "--signing-passphrase", "correct horse")
+    finally:
+        sim.terminate()
+        sim_output = sim.communicate(timeout=15)[0]
+    assert unsigned.returncode == 1 and "quadsitl fly: failed:" in unsigned.stderr
+    assert "signing: rejected" in sim_output
+    assert signed.returncode == 0, signed.stdout + signed.stderr + sim_output
+    assert "landed: True" in signed.stdout
+
+
 def test_plan_items_are_read_as_qgroundcontrol_wrote_them():
     items = read_mission(MISSIONS / "square.plan")
     assert isinstance(items, list)
