@@ -353,3 +353,52 @@ def _number(text: str) -> float | None:
         return float(text)
     except ValueError:
         return None
+
+
+def test_telemetry_rates_of_mavlink_md_are_the_codes():
+    from quadsitl.mavlink.telemetry import DEFAULT_RATES, mav
+
+    doc = ROOT / "docs" / "mavlink.md"
+    text = doc.read_text()
+    section = text.index("## Telemetry (per link")
+    first = text.count("\n", 0, section) + 1
+    problems, checked = [], 0
+    for number, line in enumerate(text[section:].splitlines(), first):
+        if line.startswith("## ") and number > first:
+            break
+        match = re.match(r"\| ([A-Z_, ]+) \| ([\d.]+) \|", line)
+        if not match:
+            continue
+        rate = float(match.group(2))
+        for name in match.group(1).split(","):
+            code = DEFAULT_RATES.get(getattr(mav, f"MAVLINK_MSG_ID_{name.strip()}", -1))
+            checked += 1
+            if code != rate:
+                problems.append(
+                    f"docs/mavlink.md:{number}: {name.strip()} at {rate:g} Hz, code {code}"
+                )
+    assert checked >= 10, f"only {checked} telemetry rows found: has the table changed?"
+    assert not problems, "\n".join(problems)
+
+
+def test_airframe_table_of_the_readme_is_the_papers():
+    from quadsitl.physics import PAPER
+
+    row = next(
+        line
+        for line in (ROOT / "README.md").read_text().splitlines()
+        if line.startswith("| `paper`")
+    )
+    cells = [cell.strip() for cell in row.strip("|").split("|")]
+    numbers = [float(re.match(r"[\d.e-]+", cell).group()) for cell in cells[2:4] + cells[5:]]
+    expected = [
+        PAPER.mass,
+        PAPER.arm_length,
+        PAPER.thrust_coeff,
+        PAPER.torque_coeff,
+        round(PAPER.hover_rotor_speed, 1),
+        round(PAPER.max_rotor_speed, 1),
+    ]
+    assert numbers == expected, f"README.md airframe row {numbers}, code {expected}"
+    inertia = tuple(float(x.strip(",")) for x in cells[4].split()[:3])
+    assert inertia == PAPER.inertia, f"README.md inertia {inertia}, code {PAPER.inertia}"
