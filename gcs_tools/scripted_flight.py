@@ -91,7 +91,8 @@ def fly_items(
         complete = current is not None and current.mission_state == MISSION_STATE_COMPLETE
         return last in client.reached and complete and not (lands and client.armed)
 
-    client.wait(done, timeout, "the mission to finish" + (" and the vehicle to disarm" * lands))
+    what = "the mission to finish and the vehicle to disarm" if lands else "the mission to finish"
+    client.wait(done, timeout, what)
     return _report(client, planned_path(items, home))
 
 
@@ -122,7 +123,8 @@ class PlannedPath:
 def planned_path(items: list[MissionItem], home: Home) -> PlannedPath:
     """The targets and polyline of ``items``: a take-off climbs above the spot it starts
     from, a waypoint or loiter is flown to, a landing descends where it is (or, for RTL,
-    at home)."""
+    at home, reached in a straight line at the height flown: the climb to RTL_RETURN_ALT
+    is not drawn)."""
     here = np.zeros(3)
     targets, polyline = [], [here]
     for item in items:
@@ -162,9 +164,8 @@ def _report(client: VehicleClient, path: PlannedPath) -> FlightReport:
     airborne = enu[:, 2] > 0.05
     flown = enu[np.argmax(airborne) : len(airborne) - np.argmax(airborne[::-1])]
     errors = [float(np.min(np.linalg.norm(flown - p, axis=1))) for p in path.targets]
-    distances = np.min(
-        [_segment_distance(flown, a, b) for a, b in itertools.pairwise(path.polyline)], axis=0
-    )
+    segments = list(itertools.pairwise(path.polyline)) or [(path.polyline[0],) * 2]
+    distances = np.min([_segment_distance(flown, a, b) for a, b in segments], axis=0)
     times = samples[:, 0][airborne]
     return FlightReport(
         waypoint_errors=errors,

@@ -7,7 +7,6 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 from quadsitl import __version__
@@ -84,7 +83,9 @@ def test_sim_stops_cleanly_on_sigint_and_sigterm(tmp_path):
             stderr=subprocess.PIPE,
             text=True,
         )
-        time.sleep(2.0)
+        assert process.stdout is not None
+        banner = process.stdout.readline()  # printed once the signal handlers are in place
+        assert banner.startswith("quadsitl sim:"), banner
         process.send_signal(sig)
         _out, err = process.communicate(timeout=10)
         assert process.returncode == 0, err
