@@ -19,6 +19,7 @@ from pymavlink import mavutil
 from quadsitl.mavlink.commands import FORCE_MAGIC
 from quadsitl.mavlink.param_protocol import decode_value as decode_param
 from quadsitl.mavlink.param_protocol import encode_raw as encode_param
+from quadsitl.vehicle.geo import Home
 
 mav = mavutil.mavlink
 
@@ -49,6 +50,20 @@ class Waypoint:
     hold: float = 0.0  # s
 
 
+@dataclass(frozen=True)
+class MissionItem:
+    """One mission item as MISSION_ITEM_INT carries it: params 1-4, a position (degrees,
+    and metres in ``frame``; NaN degrees: not set), continue automatically or not."""
+
+    command: int
+    latitude: float = math.nan
+    longitude: float = math.nan
+    altitude: float = 0.0
+    params: tuple[float, float, float, float] = (0.0, 0.0, 0.0, math.nan)
+    frame: int = mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+    autocontinue: bool = True
+
+
 @dataclass
 class Track:
     """Positions received (LOCAL_POSITION_NED), as (time_boot s, north, east, down)."""
@@ -59,10 +74,18 @@ class Track:
 class VehicleClient:
     """One connection to one vehicle (system id ``target``), e.g. ``udpin:0.0.0.0:14550``."""
 
-    def __init__(self, url: str, target: int = 1, source_system: int = 255) -> None:
+    def __init__(
+        self,
+        url: str,
+        target: int = 1,
+        source_system: int = 255,
+        signing_key: bytes | None = None,
+    ) -> None:
         self.conn = mavutil.mavlink_connection(
             url, source_system=source_system, source_component=190, autoreconnect=False
         )
+        if signing_key is not None:  # MAVLink 2 signing: sign all we send
+            self.conn.setup_signing(signing_key, sign_outgoing=True)
         self.target = target
         self.latest: dict[str, Any] = {}
         self.param_types: dict[str, int] = {}  # MAV_PARAM_TYPE of each parameter seen
@@ -232,12 +255,14 @@ class VehicleClient:
         if ack.result != mav.MAV_RESULT_ACCEPTED:
             raise ClientError(f"goto refused: {self.texts[-1:]}")
 
-    def to_global(self, east: float, north: float) -> tuple[float, float]:
+    def home_position(self) -> Home:
+        """The vehicle's home (HOME_POSITION), for conversions between degrees and metres."""
         home = self.home or self.request_home()
-        lat0, lon0 = home.latitude * 1e-7, home.longitude * 1e-7
-        radius = 6_378_137.0
-        lat = lat0 + math.degrees(north / radius)
-        lon = lon0 + math.degrees(east / (radius * math.cos(math.radians(lat0))))
+        return Home(home.latitude * 1e-7, home.longitude * 1e-7, home.altitude * 1e-3)
+
+    def to_global(self, east: float, north: float) -> tuple[float, float]:
+        """(lat, lon) degrees of a point ``east``, ``north`` m from home."""
+        lat, lon, _ = self.home_position().to_global(east, north, 0.0)
         return lat, lon
 
     # --- parameters -------------------------------------------------------------------
@@ -273,29 +298,33 @@ class VehicleClient:
     # --- missions ---------------------------------------------------------------------
     def upload_mission(self, items: Iterable[tuple[int, float, float, float, float]]) -> int:
         """Upload (command, east, north, up, param1) items; returns the MISSION_ACK type."""
+        global_items = []
+        for command, east, north, up, param1 in items:
+            lat, lon = self.to_global(east, north)
+            global_items.append(MissionItem(command, lat, lon, up, (param1, 0.0, 0.0, math.nan)))
+        return self.upload_items(global_items)
+
+    def upload_items(self, items: Iterable[MissionItem]) -> int:
+        """Upload mission items as they are; returns the MISSION_ACK type."""
         items = list(items)
         self.conn.mav.mission_count_send(self.target, 1, len(items), 0)
         while True:
             msg = self.wait_message("MISSION_REQUEST_INT", 5.0) if items else None
             if msg is None:
                 break
-            command, east, north, up, param1 = items[msg.seq]
-            lat, lon = self.to_global(east, north)
+            item = items[msg.seq]
             self.conn.mav.mission_item_int_send(
                 self.target,
                 1,
                 msg.seq,
-                mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-                command,
+                item.frame,
+                item.command,
                 0,
-                1,
-                param1,
-                0,
-                0,
-                math.nan,
-                round(lat * 1e7),
-                round(lon * 1e7),
-                up,
+                int(item.autocontinue),
+                *item.params,
+                _degrees_e7(item.latitude),
+                _degrees_e7(item.longitude),
+                item.altitude,
                 0,
             )
             if msg.seq == len(items) - 1:
@@ -311,3 +340,8 @@ class VehicleClient:
             items.append(self.wait_message("MISSION_ITEM_INT", 3.0, lambda m, s=seq: m.seq == s))
         self.conn.mav.mission_ack_send(self.target, 1, mav.MAV_MISSION_ACCEPTED, 0)
         return items
+
+
+def _degrees_e7(degrees: float) -> int:
+    """MISSION_ITEM_INT's x/y: degrees x 1e7; not set (NaN) is 0."""
+    return 0 if math.isnan(degrees) else round(degrees * 1e7)

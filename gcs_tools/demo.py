@@ -15,6 +15,7 @@ from pathlib import Path
 from gcs_tools.client import ClientError, VehicleClient
 from gcs_tools.replay import convert
 from gcs_tools.scripted_flight import DEFAULT_WAYPOINTS, fly_mission
+from quadsitl.console import runnable
 from quadsitl.mavlink.links import free_udp_port
 
 
@@ -85,11 +86,14 @@ def run_demo(speed: float = 4.0, logs: str = "logs") -> int:
             f"  Rerun recording of the flight ({replay.stats.messages} messages, "
             f"{replay.seconds:.1f} s): {recording}"
         )
-        print(f"  open it with:    rerun {recording}")
-    print("connect a ground station: run `quadsitl sim` and open QGroundControl (it listens on")
+        print(f"  open it with:    {runnable('rerun', 'rerun')} {recording}")
+    quadsitl = runnable("quadsitl", "quadsitl.cli")
+    print(f"connect a ground station: run `{quadsitl} sim` and open QGroundControl (it listens")
     print(
-        "UDP 14550), or `mavproxy.py --master=udpin:0.0.0.0:14550`; MAVSDK: udpin://0.0.0.0:14540"
+        "on UDP 14550), or `mavproxy.py --master=udpin:0.0.0.0:14550`; MAVSDK: "
+        "udpin://0.0.0.0:14540;"
     )
+    print(f"fly your own mission: `{quadsitl} fly MISSION` (docs/connecting.md)")
     return 0 if report.landed else 1
 
 

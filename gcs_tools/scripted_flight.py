@@ -1,8 +1,12 @@
 """Fly a scripted mission through MAVLink and measure how well the vehicle tracked it.
 
-Tracking error, from the LOCAL_POSITION_NED stream the vehicle sends:
+A mission is either waypoints relative to home (:class:`Waypoint`: take-off to the first
+one's height, the others, land at home; :func:`fly_mission`) or mission items as a
+ground station plans them (a QGroundControl .plan, :func:`fly_items`). Tracking error,
+from the LOCAL_POSITION_NED stream the vehicle sends:
 
-* waypoint error: closest approach of the flown track to each waypoint, m;
+* waypoint error: closest approach of the flown track to each take-off target and
+  waypoint, m;
 * path error: distance of each sample to the planned polyline (take-off point, the
   waypoints, the landing point), RMS and maximum, m.
 """
@@ -15,7 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs_tools.client import ClientError, VehicleClient, Waypoint, mav
+from gcs_tools.client import ClientError, MissionItem, VehicleClient, Waypoint, mav
+from quadsitl.vehicle.geo import Home
 
 DEFAULT_WAYPOINTS = (
     Waypoint(0.0, 0.0, 5.0),
@@ -36,8 +41,9 @@ class FlightReport:
 
     def lines(self) -> list[str]:
         errors = ", ".join(f"{e:.3f}" for e in self.waypoint_errors)
+        worst = max(self.waypoint_errors, default=math.nan)
         return [
-            f"waypoint error (closest approach): {errors} m; max {max(self.waypoint_errors):.3f} m",
+            f"waypoint error (closest approach): {errors} m; max {worst:.3f} m",
             f"path tracking error: RMS {self.path_rms:.3f} m, max {self.path_max:.3f} m",
             f"flight time {self.flight_time:.1f} s (simulated), landed: {self.landed}, "
             f"touchdown {self.touchdown_offset:.2f} m from home",
@@ -56,34 +62,110 @@ def mission_items(waypoints: tuple[Waypoint, ...]) -> list[tuple[int, float, flo
 def fly_mission(
     client: VehicleClient, waypoints: tuple[Waypoint, ...] = DEFAULT_WAYPOINTS, timeout: float = 300
 ) -> FlightReport:
-    """Upload, arm, fly in MISSION mode until the vehicle lands and disarms."""
+    """Take off to the first waypoint's height, fly the others, land at home."""
     client.request_home()
-    items = mission_items(waypoints)
-    ack = client.upload_mission(items)
+    items = []
+    for command, east, north, up, param1 in mission_items(waypoints):
+        lat, lon = client.to_global(east, north)
+        items.append(MissionItem(command, lat, lon, up, (param1, 0.0, 0.0, math.nan)))
+    return fly_items(client, items, timeout)
+
+
+def fly_items(
+    client: VehicleClient, items: list[MissionItem], timeout: float = 600
+) -> FlightReport:
+    """Upload, arm, fly in MISSION mode until the last item is done (and, when the mission
+    ends with a landing, the vehicle has landed and disarmed)."""
+    home = client.home_position()
+    ack = client.upload_items(items)
     if ack != mav.MAV_MISSION_ACCEPTED:
         raise ClientError(f"mission upload refused (MISSION_ACK {ack}): {client.texts[-1:]}")
+    client.reached.clear()
     client.arm()
     client.set_mode("MISSION")
-    client.wait(
-        lambda: len(client.reached) >= len(items) and not client.armed,
-        timeout,
-        "the mission to finish and the vehicle to disarm",
-    )
-    return _report(client, waypoints)
+    last = len(items) - 1
+    lands = _ends_on_the_ground(items)
+
+    def done() -> bool:
+        current = client.latest.get("MISSION_CURRENT")
+        complete = current is not None and current.mission_state == MISSION_STATE_COMPLETE
+        return last in client.reached and complete and not (lands and client.armed)
+
+    what = "the mission to finish and the vehicle to disarm" if lands else "the mission to finish"
+    client.wait(done, timeout, what)
+    return _report(client, planned_path(items, home))
 
 
-def _report(client: VehicleClient, waypoints: tuple[Waypoint, ...]) -> FlightReport:
+MISSION_STATE_COMPLETE = 5  # MISSION_CURRENT.mission_state
+LANDINGS = (mav.MAV_CMD_NAV_LAND, mav.MAV_CMD_NAV_RETURN_TO_LAUNCH)
+POSITIONS = (
+    mav.MAV_CMD_NAV_WAYPOINT,
+    mav.MAV_CMD_NAV_LOITER_UNLIM,
+    mav.MAV_CMD_NAV_LOITER_TIME,
+    mav.MAV_CMD_NAV_LOITER_TURNS,
+)
+
+
+def _ends_on_the_ground(items: list[MissionItem]) -> bool:
+    navigation = [item for item in items if item.command < mav.MAV_CMD_NAV_LAST]
+    return bool(navigation) and navigation[-1].command in LANDINGS
+
+
+@dataclass
+class PlannedPath:
+    """What a mission should fly, in ENU m from home: the targets whose closest approach
+    is measured (take-off heights, waypoints) and the polyline through them."""
+
+    targets: np.ndarray  # (n, 3)
+    polyline: np.ndarray  # (m, 3)
+
+
+def planned_path(items: list[MissionItem], home: Home) -> PlannedPath:
+    """The targets and polyline of ``items``: a take-off climbs above the spot it starts
+    from, a waypoint or loiter is flown to, a landing descends where it is (or, for RTL,
+    at home, reached in a straight line at the height flown: the climb to RTL_RETURN_ALT
+    is not drawn)."""
+    here = np.zeros(3)
+    targets, polyline = [], [here]
+    for item in items:
+        if item.command == mav.MAV_CMD_NAV_TAKEOFF:
+            here = np.array([here[0], here[1], _height(item, home)])
+            targets.append(here)
+        elif item.command in POSITIONS:
+            east, north, _ = home.to_local(item.latitude, item.longitude, home.altitude)
+            here = np.array([east, north, _height(item, home)])
+            targets.append(here)
+        elif item.command == mav.MAV_CMD_NAV_LAND:
+            if not math.isnan(item.latitude):
+                east, north, _ = home.to_local(item.latitude, item.longitude, home.altitude)
+                polyline.append(np.array([east, north, here[2]]))
+                here = np.array([east, north, 0.0])
+            else:
+                here = np.array([here[0], here[1], 0.0])
+        elif item.command == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            polyline.append(np.array([0.0, 0.0, here[2]]))
+            here = np.zeros(3)
+        else:
+            continue
+        polyline.append(here)
+    return PlannedPath(np.array(targets).reshape(-1, 3), np.array(polyline))
+
+
+def _height(item: MissionItem, home: Home) -> float:
+    """m above home of an item's altitude, by its frame (AMSL or relative/terrain)."""
+    if item.frame in (mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_INT):
+        return item.altitude - home.altitude
+    return item.altitude
+
+
+def _report(client: VehicleClient, path: PlannedPath) -> FlightReport:
     samples = np.array(client.track.samples)  # (n, 4): t, north, east, down
     enu = np.column_stack([samples[:, 2], samples[:, 1], -samples[:, 3]])
     airborne = enu[:, 2] > 0.05
     flown = enu[np.argmax(airborne) : len(airborne) - np.argmax(airborne[::-1])]
-    points = np.array([[w.east, w.north, w.up] for w in waypoints])
-    errors = [float(np.min(np.linalg.norm(flown - p, axis=1))) for p in points]
-    start = np.array([points[0, 0], points[0, 1], 0.0])
-    path = np.vstack([start, points, [0.0, 0.0, points[-1, 2]], [0.0, 0.0, 0.0]])
-    distances = np.min(
-        [_segment_distance(flown, a, b) for a, b in itertools.pairwise(path)], axis=0
-    )
+    errors = [float(np.min(np.linalg.norm(flown - p, axis=1))) for p in path.targets]
+    segments = list(itertools.pairwise(path.polyline)) or [(path.polyline[0],) * 2]
+    distances = np.min([_segment_distance(flown, a, b) for a, b in segments], axis=0)
     times = samples[:, 0][airborne]
     return FlightReport(
         waypoint_errors=errors,

@@ -6,7 +6,7 @@ import argparse
 import math
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from quadsitl import __version__
@@ -40,6 +40,7 @@ def _build_parser() -> argparse.ArgumentParser:
         "--print-every", type=float, default=0.5, help="seconds between table rows (default: 0.5)"
     )
     _add_sim_parser(commands)
+    _add_fly_parser(commands)
     try:  # training needs torch; the simulator does not
         from policies.cli import add_parsers as add_policy_parsers
     except ImportError:
@@ -203,6 +204,53 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
     sim.add_argument("--quiet", action="store_true", help="do not print vehicle events")
 
 
+def _add_fly_parser(commands: argparse._SubParsersAction) -> None:
+    fly = commands.add_parser(
+        "fly",
+        help="fly a mission file (QGroundControl .plan or a waypoint list) against a running "
+        "quadsitl sim and print the tracking error",
+        description="Connect to a running vehicle as a ground station does, upload the "
+        "mission, arm, fly it in MISSION mode until it is done, and print the tracking error. "
+        "MISSION is a QGroundControl .plan (JSON) or a text file of waypoints, one "
+        "'EAST NORTH UP [HOLD]' line each, in m (and s) from home (docs/connecting.md).",
+    )
+    fly.add_argument("mission", metavar="MISSION", help="the .plan or waypoint file")
+    fly.add_argument(
+        "--connect",
+        default="udpin:127.0.0.1:14540",
+        metavar="URL",
+        help="where to meet the vehicle (default: udpin:127.0.0.1:14540, where quadsitl "
+        "sim's API link sends)",
+    )
+    fly.add_argument(
+        "--sysid",
+        type=int,
+        default=1,
+        metavar="N",
+        help="system id of the vehicle to fly (default: 1)",
+    )
+    fly.add_argument(
+        "--timeout",
+        type=float,
+        default=600.0,
+        metavar="S",
+        help="give up when the mission is not done after S seconds (default: 600)",
+    )
+    signing = fly.add_mutually_exclusive_group()
+    signing.add_argument(
+        "--signing-key",
+        metavar="FILE",
+        help="sign every message with the key in FILE, for a vehicle with signing on (64 "
+        "hex digits or 32 bytes; environment: QUADSITL_SIGNING_KEY=64 hex digits)",
+    )
+    signing.add_argument(
+        "--signing-passphrase",
+        metavar="TEXT",
+        help="sign with key SHA-256(TEXT), as quadsitl sim's --signing-passphrase "
+        "(environment: QUADSITL_SIGNING_PASSPHRASE)",
+    )
+
+
 def _signing_key(args: argparse.Namespace) -> bytes | None:
     """The key from the options or the environment; a variable that is set but empty is an
     error (an empty secret must never quietly mean "no signing")."""
@@ -268,6 +316,7 @@ def _sim_config(args: argparse.Namespace) -> object:
         duration=args.duration,
         params=params,
         quiet=args.quiet,
+        flown_by=f"the policy in {args.autopilot}" if args.autopilot else None,
     )
 
 
@@ -289,9 +338,18 @@ def _sim_collaborators(args: argparse.Namespace) -> tuple[Any, Any]:
         from quadsitl.viz.sim_view import SimView
 
         def make_view(vehicle: Any) -> Any:
-            return SimView(vehicle, args.rerun_save)
+            return SimView(vehicle, args.rerun_save, notice=_say("sim"))
 
     return make_autopilot, make_view
+
+
+def _say(command: str) -> Callable[[str], None]:
+    """A one-line notice on stderr, prefixed as the command's errors are."""
+
+    def say(text: str) -> None:
+        print(f"quadsitl {command}: {text}", file=sys.stderr, flush=True)
+
+    return say
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -329,6 +387,14 @@ def _main(argv: Sequence[str] | None = None) -> int:
             return run_policy_command(args)
         except ValueError as error:
             parser.exit(2, f"quadsitl {args.command}: error: {error}\n")
+    if args.command == "fly":
+        from gcs_tools.fly import run_fly
+
+        try:
+            key = _signing_key(args)
+            return run_fly(args.mission, args.connect, args.sysid, args.timeout, key)
+        except ValueError as error:
+            parser.exit(2, f"quadsitl fly: error: {error}\n")
     if args.command == "replay":
         from gcs_tools.replay import main as replay_main
 

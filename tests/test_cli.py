@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import socket
 import subprocess
 import sys
-import time
+from pathlib import Path
 
 from quadsitl import __version__
 
@@ -47,6 +48,31 @@ def test_mission_demo_flies_and_reports_tracking(tmp_path):
     assert result.returncode == 0, result.stdout + result.stderr
     assert "waypoint error" in result.stdout and "path tracking error" in result.stdout
     assert str(tmp_path) in result.stdout and "QGroundControl" in result.stdout
+    # the commands it prints run as typed in a shell whose venv is not activated
+    shell = {**os.environ, "PATH": _path_without_venv()}
+    opener = next(line for line in result.stdout.splitlines() if "open it with:" in line)
+    viewer = opener.split("open it with:")[1].split()[0]
+    quadsitl = result.stdout.split("run `")[1].split(" sim`")[0]
+    for command in (f"{viewer} --version", f"{quadsitl} sim --help"):
+        ran = subprocess.run(["bash", "-c", command], env=shell, capture_output=True, timeout=60)
+        assert ran.returncode == 0, f"{command!r} does not run as printed: {ran.stderr!r}"
+
+
+def _path_without_venv() -> str:
+    scripts = str(Path(sys.executable).parent)
+    return os.pathsep.join(p for p in os.environ["PATH"].split(os.pathsep) if p != scripts)
+
+
+def test_printed_commands_name_the_venv_script_unless_path_finds_it(monkeypatch):
+    from quadsitl.console import runnable
+
+    scripts = Path(sys.executable).parent
+    monkeypatch.setenv("PATH", _path_without_venv())
+    printed = runnable("quadsitl", "quadsitl.cli")
+    assert Path(printed).absolute() == (scripts / "quadsitl").absolute()
+    monkeypatch.setenv("PATH", f"{scripts}{os.pathsep}{_path_without_venv()}")
+    assert runnable("quadsitl", "quadsitl.cli") == "quadsitl"
+    assert runnable("no-such-script", "quadsitl.cli") == f"{sys.executable} -m quadsitl.cli"
 
 
 def test_sim_stops_cleanly_on_sigint_and_sigterm(tmp_path):
@@ -57,7 +83,9 @@ def test_sim_stops_cleanly_on_sigint_and_sigterm(tmp_path):
             stderr=subprocess.PIPE,
             text=True,
         )
-        time.sleep(2.0)
+        assert process.stdout is not None
+        banner = process.stdout.readline()  # printed once the signal handlers are in place
+        assert banner.startswith("quadsitl sim:"), banner
         process.send_signal(sig)
         _out, err = process.communicate(timeout=10)
         assert process.returncode == 0, err
@@ -77,3 +105,16 @@ def test_sim_rejects_bad_options():
     assert "unknown parameter" in _run("sim", "--param", "NOPE=1", "--logs", "none").stderr
     assert "LAT,LON,ALT" in _run("sim", "--home", "1,2", "--logs", "none").stderr
     assert "kind must be" in _run("sim", "--gcs", "serial:x:1", "--logs", "none").stderr
+
+
+def test_sim_banner_says_when_a_policy_flies_the_vehicle():
+    checkpoint = Path(__file__).resolve().parent.parent / "policies/checkpoints/hover.pt"
+    common = ("sim", "--gcs", "udpin:127.0.0.1:0", "--api", "none", "--logs", "none")
+    flown = _run(*common, "--duration", "1", "--autopilot", str(checkpoint))
+    assert flown.returncode == 0, flown.stderr
+    banner = flown.stdout.splitlines()[:2]
+    assert banner[1] == (
+        f"quadsitl sim: flown by the policy in {checkpoint}, not the cascaded controller"
+    )
+    plain = _run(*common, "--duration", "0.5")
+    assert plain.returncode == 0 and "flown by" not in plain.stdout

@@ -3,6 +3,7 @@ files that are not logs; the recording is read back with Rerun's own reader."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
@@ -152,6 +153,26 @@ def test_sim_streams_itself_to_a_recording(tmp_path):
     rows = rows_per_entity(out)
     assert rows["/world/vehicle"] >= 2 * 30  # pose at 30 Hz for 2 s
     assert rows["/plots/rotors/speed_1"] >= 30 and "/world/vehicle/rotors" in rows
+
+
+def test_sim_rerun_without_a_display_says_so_in_one_plain_line(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    env["QUADSITL_RERUN_DIR"] = str(tmp_path)
+    result = subprocess.run(
+        cli("sim --gcs udpin:127.0.0.1:0 --api none --logs none --duration 1 --rerun"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+    )
+    assert result.returncode == 0, result.stderr
+    notice = [line for line in result.stderr.splitlines() if "Rerun" in line]
+    assert len(notice) == 1, result.stderr
+    assert notice[0].startswith("quadsitl sim: no Rerun viewer can be shown: there is no display")
+    assert "Warning" not in result.stderr and "warnings.warn" not in result.stderr
+    recording = next(tmp_path.glob("quadsitl_sim-*.rrd"))
+    assert f"{recording} (open it with: " in notice[0]
+    assert rows_per_entity(recording)["/world/vehicle"] >= 10
 
 
 def test_live_viewer_watches_a_running_vehicle(sim, tmp_path):

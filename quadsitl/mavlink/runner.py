@@ -70,6 +70,7 @@ class SimConfig:
     duration: float | None = None  # wall seconds, None: until a signal
     params: dict[str, float] = field(default_factory=dict)
     quiet: bool = False
+    flown_by: str | None = None  # what flies instead of the cascaded controller (banner)
 
     def validate(self) -> None:
         get_identity(self.autopilot_id)
@@ -371,6 +372,8 @@ def run_simulator(
     sim._print(
         f"quadsitl sim: {systems} ({config.autopilot_id}), signing {signing}, links: {links}"
     )
+    if config.flown_by is not None:
+        sim._print(f"quadsitl sim: flown by {config.flown_by}, not the cascaded controller")
     exposed = [link for link in sim.links if link.exposed]
     if exposed and config.signing_key is None:
         names = ", ".join(f"{link.name} ({link.url})" for link in exposed)

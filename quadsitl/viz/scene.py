@@ -22,6 +22,7 @@ import sys
 import tempfile
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +31,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from quadsitl import frames
+from quadsitl.console import runnable
 
 ARM = 0.17  # m, drawn arm length (centre to rotor), about the paper's airframe
 ROTOR_RADIUS = 0.1  # m
@@ -158,12 +160,15 @@ def open_recording(
     save: str | Path | None = None,
     spawn: bool = False,
     default_blueprint: rrb.Blueprint | None = None,
+    notice: Callable[[str], None] | None = None,
 ) -> rr.RecordingStream:
     """A recording stream saved to ``save`` (an .rrd path) or sent to a spawned viewer.
 
     Where a viewer cannot be shown (no display, no viewer installed), the recording goes
     to a file instead (under QUADSITL_RERUN_DIR or the temporary folder) and a warning
-    says where: rendering never fails because of the machine it runs on.
+    says where: rendering never fails because of the machine it runs on. ``notice``
+    takes that message (a command line prints it as one plain line); without it, it is
+    a RuntimeWarning (library use).
     """
     rec = rr.RecordingStream(name)
     layout = blueprint() if default_blueprint is None else default_blueprint
@@ -174,12 +179,14 @@ def open_recording(
             rr.spawn(executable_path=executable, default_blueprint=layout, recording=rec)
         else:
             save = fallback_path(name)
-            warnings.warn(
+            message = (
                 f"no Rerun viewer can be shown: {reason}; recording to {save} "
-                f"(open it with: rerun {save})",
-                RuntimeWarning,
-                stacklevel=2,
+                f"(open it with: {runnable('rerun', 'rerun')} {save})"
             )
+            if notice is not None:
+                notice(message)
+            else:
+                warnings.warn(message, RuntimeWarning, stacklevel=2)
     if save is not None:
         rec.save(check_output_path(save), default_blueprint=layout)
     setup(rec)

@@ -7,6 +7,8 @@ telemetry and logged through :class:`LiveLogger`; vehicle events go to the text 
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from quadsitl.mavlink import telemetry as T
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.viz.live import LiveLogger
@@ -23,11 +25,17 @@ BUILDERS = (
 
 
 class SimView:
-    """Spawns a viewer, or saves to ``save`` (an .rrd path)."""
+    """Spawns a viewer, or saves to ``save`` (an .rrd path); ``notice`` takes the message
+    saying where the recording goes when no viewer can be shown."""
 
-    def __init__(self, vehicle: Vehicle, save: str | None = None) -> None:
+    def __init__(
+        self,
+        vehicle: Vehicle,
+        save: str | None = None,
+        notice: Callable[[str], None] | None = None,
+    ) -> None:
         self.vehicle = vehicle
-        self.rec = open_recording("quadsitl_sim", save, spawn=save is None)
+        self.rec = open_recording("quadsitl_sim", save, spawn=save is None, notice=notice)
         self.logger = LiveLogger(self.rec)
         self.next_due = 0.0
 
