@@ -105,6 +105,10 @@ def test_sim_rejects_bad_options():
     assert "unknown parameter" in _run("sim", "--param", "NOPE=1", "--logs", "none").stderr
     assert "LAT,LON,ALT" in _run("sim", "--home", "1,2", "--logs", "none").stderr
     assert "kind must be" in _run("sim", "--gcs", "serial:x:1", "--logs", "none").stderr
+    # 300 Hz physics cannot step a 250 Hz controller every whole number of steps
+    rates = _run("sim", "--physics-rate", "300", "--control-rate", "250", "--logs", "none")
+    assert rates.returncode == 2
+    assert "not a whole multiple of the control rate 250 Hz" in rates.stderr
 
 
 def test_sim_banner_says_when_a_policy_flies_the_vehicle():

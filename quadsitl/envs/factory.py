@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 from quadsitl.envs.mavlink_backend import MavlinkBackend, make_backend, split_backend_options
+from quadsitl.envs.memory import check_in_process_envs
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
 
 
@@ -21,4 +22,6 @@ def build_engine(
     spec, task_options = get_task(task), TaskOptions.from_kwargs(**options)
     backend = make_backend(spec, num_envs, task_options, backend_options)
     fleet = backend.fleet if backend is not None else None
+    if fleet is None:
+        check_in_process_envs(num_envs)
     return TaskEngine(spec, num_envs, task_options, fleet=fleet), backend

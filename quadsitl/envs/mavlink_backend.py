@@ -10,12 +10,12 @@ included); the next ``reset`` starts fresh processes and warns that it did.
 from __future__ import annotations
 
 import math
-import os
 import secrets
 import time
 import warnings
 from typing import Any
 
+from quadsitl.envs.memory import available_bytes
 from quadsitl.envs.ray_simulators import LOCAL, RaySimulator, join_ray, place_simulators
 from quadsitl.envs.remote_fleet import RemoteFleet
 from quadsitl.envs.sim_process import SimProcess
@@ -92,9 +92,8 @@ def parse_address(address: str) -> tuple[str, int]:
 
 def max_spawned_simulators() -> int:
     """How many simulator processes this machine's free memory holds."""
-    try:
-        available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):  # not on this platform: do not guess low
+    available = available_bytes()
+    if math.isinf(available):  # not known on this platform: do not guess low
         return MAX_SIMULATORS
     return max(1, min(MAX_SIMULATORS, int(available // SIM_PROCESS_BYTES)))
 

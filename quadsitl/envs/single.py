@@ -6,6 +6,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.error import ClosedEnvironmentError
 
 from quadsitl.envs import docs
 from quadsitl.envs.factory import build_engine
@@ -37,6 +38,12 @@ def check_no_render(render_mode: str | None) -> None:
         raise ValueError(f"render_mode {render_mode!r} is not supported (use None)")
 
 
+def check_open(closed: bool) -> None:
+    """After ``close()`` an env neither resets nor steps, whatever its backend."""
+    if closed:
+        raise ClosedEnvironmentError("env is closed: make a new one")
+
+
 RENDER_MODES = ("rerun",)
 
 
@@ -63,6 +70,7 @@ class QuadEnv(gym.Env):
         self.engine, self.backend = build_engine(self.task_name, 1, options)
         self.observation_space, self.action_space = make_spaces(self.engine)
         self._all = np.ones(1, bool)
+        self._closed = False
         self.view: EpisodeView | None = None
         if render_mode == "rerun":  # episodes logged as they are flown; see quadsitl.viz
             self.view = EpisodeView(f"{self.task_name}", rerun_save)
@@ -70,6 +78,7 @@ class QuadEnv(gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        check_open(self._closed)
         super().reset(seed=seed)
         if options:
             raise ValueError(f"reset options are not supported, got {sorted(options)}")
@@ -81,6 +90,7 @@ class QuadEnv(gym.Env):
         return self.engine.obs[0].copy(), {}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        check_open(self._closed)
         engine = self.engine
         try:
             reward, terminated, truncated = engine.step(action)
@@ -102,6 +112,7 @@ class QuadEnv(gym.Env):
         """Nothing to do: with ``render_mode="rerun"`` every reset and step is logged."""
 
     def close(self) -> None:
+        self._closed = True
         if self.backend is not None:
             self.backend.close()
         if self.view is not None:

@@ -25,7 +25,7 @@ from quadsitl.envs.factory import build_engine
 from quadsitl.envs.mavlink_backend import (
     reset_envs,
 )
-from quadsitl.envs.single import ENV_CLASSES, check_no_render, make_spaces
+from quadsitl.envs.single import ENV_CLASSES, check_no_render, check_open, make_spaces
 from quadsitl.mavlink.motor_client import SimulatorError
 
 
@@ -69,6 +69,7 @@ class QuadVectorEnv(VectorEnv):
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        check_open(self.closed)
         super().reset(seed=seed if isinstance(seed, (int, np.integer)) else None)
         if options:
             raise ValueError(f"reset options are not supported, got {sorted(options)}")
@@ -85,6 +86,7 @@ class QuadVectorEnv(VectorEnv):
     def step(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        check_open(self.closed)
         try:
             return self._step(actions)
         except SimulatorError as error:

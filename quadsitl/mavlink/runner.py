@@ -91,6 +91,12 @@ class SimConfig:
             raise ValueError(
                 f"control rate must be 10 Hz .. the physics rate, got {self.control_rate}"
             )
+        ratio = self.physics_rate / self.control_rate  # physics steps per control period
+        if abs(ratio - round(ratio)) > 1e-9 * ratio:
+            raise ValueError(
+                f"physics rate {self.physics_rate:g} Hz is not a whole multiple of the control "
+                f"rate {self.control_rate:g} Hz (the controller runs every N physics steps)"
+            )
         if not (math.isfinite(self.speed) and 0.01 <= self.speed <= 100):
             raise ValueError(f"speed factor must be 0.01..100, got {self.speed}")
         if not [u for u in (self.gcs_url, self.api_url, self.hil_url, *self.extra_urls) if u]:

@@ -42,6 +42,15 @@ RANDOMIZABLE = {
 # 50 ms is unstable for this airframe.
 LIMITS = {"physics_dt": (1e-4, 0.05), "control_period": (1e-4, 1.0)}
 MAX_EPISODE_SECONDS = 3600.0
+# Start-state noise a task can sensibly draw (half-widths): beyond these the vehicle starts
+# far outside every task's arena (waypoints lie within a few metres), faster than it can fly
+# (about 10 m/s) or tumbling beyond what its rotors can stop.
+NOISE_LIMITS = {
+    "init_position_noise": (100.0, "m"),
+    "init_attitude_noise": (math.pi / 2, "rad"),
+    "init_velocity_noise": (20.0, "m/s"),
+    "init_rate_noise": (20.0, "rad/s"),
+}
 
 
 def _is_real(value: object) -> bool:
@@ -112,27 +121,36 @@ class TaskOptions:
                 f"episode_seconds must be in [control_period, {MAX_EPISODE_SECONDS:g}] s, "
                 f"got {seconds!r}"
             )
-        for name in ("init_position_noise", "init_attitude_noise", "init_velocity_noise"):
+        for name, (limit, unit) in NOISE_LIMITS.items():
             value = getattr(self, name)
-            if not (_is_real(value) and math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be ≥ 0, got {value!r}")
-        rate = self.init_rate_noise
-        if not (_is_real(rate) and math.isfinite(rate) and rate >= 0):
-            raise ValueError(f"init_rate_noise must be ≥ 0, got {rate!r}")
-        if self.init_attitude_noise > math.pi / 2:
-            raise ValueError("init_attitude_noise must be at most π/2 rad")
-        for name, fraction in (self.param_randomization or {}).items():
+            if not (_is_real(value) and 0 <= value <= limit):
+                raise ValueError(f"{name} must be in [0, {limit:.4g}] {unit}, got {value!r}")
+        self._check_param_randomization()
+
+    def _check_param_randomization(self) -> None:
+        randomization = self.param_randomization
+        if randomization is None:
+            return
+        if not isinstance(randomization, dict):
+            raise ValueError(
+                "param_randomization must be a dict of parameter name to fraction, e.g. "
+                f"{{'mass': 0.1}}, got {randomization!r}"
+            )
+        for name, fraction in randomization.items():
             if name not in RANDOMIZABLE:
                 raise ValueError(f"cannot randomise {name!r}; randomisable: {sorted(RANDOMIZABLE)}")
-            if not 0 <= fraction < 1:
-                raise ValueError(f"param_randomization[{name!r}] must be in [0, 1), got {fraction}")
+            if not (_is_real(fraction) and 0 <= fraction < 1):
+                raise ValueError(
+                    f"param_randomization[{name!r}] must be a number in [0, 1), got {fraction!r}"
+                )
 
 
 @jit
-def take_action(raw, active, hover, beta, action, rotor_cmd, steps):  # pragma: no cover
-    """Start a step: ``action`` = the raw actions as float64 (0 where not ``active``),
-    rotor commands Ω_c = Ω_h + β·a (Eq. 19; the physics clips them), one more step
-    counted. Returns -1, or the first env whose action is not finite (nothing changed)."""
+def take_action(raw, active, hover, beta, low, high, action, rotor_cmd, steps):  # pragma: no cover
+    """Start a step: ``action`` = the raw actions clipped to [low, high] (0 where not
+    ``active``), rotor commands Ω_c = Ω_h + β·a (Eq. 19: the bounds are the rotor speeds
+    0 and Ω_max, which the physics clips to anyway), one more step counted. Returns -1, or
+    the first env whose action is not finite (nothing changed)."""
     for n in range(raw.shape[0]):
         if active[n]:
             for i in range(raw.shape[1]):
@@ -140,7 +158,7 @@ def take_action(raw, active, hover, beta, action, rotor_cmd, steps):  # pragma: 
                     return n
     for n in range(raw.shape[0]):
         for i in range(raw.shape[1]):
-            a = float(raw[n, i]) if active[n] else 0.0
+            a = min(max(raw[n, i], low), high) if active[n] else 0.0
             action[n, i] = a
             rotor_cmd[n, i] = hover + beta * a
         steps[n] += 1
@@ -320,8 +338,10 @@ class TaskEngine:
     ) -> tuple[NDArray, NDArray, NDArray]:
         """Advance all envs one control period.
 
-        ``action``: (N, 4) real numbers (or (4,) for one env); NaN/inf or a wrong shape
-        raise ValueError and change nothing. ``active`` (default all) marks envs whose
+        ``action``: (N, 4) real numbers of any dtype (or (4,) for one env), clipped to
+        the action space [action_low, action_high] (the rotor speeds 0 and Ω_max, as
+        Eq. 19's rotor speed is clipped); NaN/inf or a wrong shape raise ValueError and
+        change nothing. ``active`` (default all) marks envs whose
         episode goes on; the others are about to be reset: their actions are ignored and
         they must not draw from their generators.
 
@@ -332,6 +352,7 @@ class TaskEngine:
         raw = np.asarray(action)
         if raw.dtype.kind not in "fiu":  # float, signed or unsigned integer
             raise ValueError(f"action must hold real numbers, got dtype {raw.dtype}")
+        raw = raw.astype(np.float64, copy=False)  # float16, float32, integers: one kernel
         if raw.shape != self._action_shape:
             if self.n == 1 and raw.shape == (L.N_ROTORS,):
                 raw = raw.reshape(self._action_shape)
@@ -346,6 +367,8 @@ class TaskEngine:
             active,
             self.hover_speed,
             self.options.beta,
+            self.action_low,
+            self.action_high,
             self.action,
             self.rotor_cmd,
             self.steps,
