@@ -26,6 +26,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from policies.comparison import comparison_table, number
 from policies.config import TrainConfig, make_config
 from policies.config import run_name as base_run_name
 from policies.train import holds_run
@@ -439,8 +440,6 @@ def one_line(error: Any) -> str:
 def results_text(rows: list[dict[str, Any]]) -> str:
     """results.md: the table of the finished trials, the algorithms comparison of those
     that were tested, and a line per failed or unfinished trial."""
-    from policies.comparison import comparison_table
-
     finished = [r for r in rows if r["finished"]]
     text = table(finished)
     tested = [r for r in finished if "test_success" in r]
@@ -520,12 +519,3 @@ def table(results: list[dict[str, Any]]) -> str:
             f"| {stat('mean_return')} | {wall} |"
         )
     return "\n".join(lines) + "\n"
-
-
-def number(row: dict[str, Any], key: str) -> float:
-    """``row[key]`` as a float; NaN where it is missing or not a number (one bad row
-    must not cost the table)."""
-    try:
-        return float(row[key])
-    except (KeyError, TypeError, ValueError):
-        return math.nan
