@@ -282,7 +282,10 @@ def _train(args: argparse.Namespace) -> int:
     if config.ray:
         from quadsitl.envs.ray_simulators import ray_target
 
-        print(f"quadsitl train: simulators on {ray_target(config.ray)[1]}", file=sys.stderr)
+        where = ray_target(config.ray)[1]
+        print(
+            f"quadsitl train: simulators on {where} (--ray ADDR joins a cluster)", file=sys.stderr
+        )
     print(
         f"quadsitl train: {config.iterations} iterations of {config.batch_size} steps -> {run_dir}",
         file=sys.stderr,

@@ -339,12 +339,9 @@ def run_sweep(
     from ray.tune.schedulers import ASHAScheduler
 
     private = target == LOCAL
-    print(
-        f"quadsitl sweep: Ray: {where}"
-        + (f" with {cpus} CPUs" if private and cpus else " with all CPUs" if private else ""),
-        file=sys.stderr,
-        flush=True,
-    )
+    if private:
+        where += f" with {cpus or 'all'} CPUs (join a cluster with --address or RAY_ADDRESS)"
+    print(f"quadsitl sweep: Ray: {where}", file=sys.stderr, flush=True)
     ray.init(
         address=target,
         num_cpus=cpus if private else None,
@@ -357,14 +354,9 @@ def run_sweep(
         logging.getLogger(logger).addFilter(quiet)
     try:
         runnable = tune.with_resources(trial, {"cpu": 1})
-        progress = _progress_callback(folder)
         if resume:
-            tuner = tune.Tuner.restore(
-                str(folder),
-                runnable,
-                resume_unfinished=True,
-                resume_errored=True,
-                _callbacks=[progress],  # not in Tune's saved state: given again
+            tuner = tune.Tuner.restore(  # with its callback, kept in Tune's saved state
+                str(folder), runnable, resume_unfinished=True, resume_errored=True
             )
         else:
             space: dict[str, Any] = {"runs": str(Path(runs).resolve()), "sweep": str(folder)}
@@ -391,7 +383,10 @@ def run_sweep(
                     num_samples=samples, scheduler=scheduler, reuse_actors=True
                 ),
                 run_config=tune.RunConfig(
-                    storage_path=str(storage), name=name, verbose=1, callbacks=[progress]
+                    storage_path=str(storage),
+                    name=name,
+                    verbose=1,
+                    callbacks=[_progress_callback(folder)],
                 ),
             )
         results = tuner.fit()

@@ -37,7 +37,7 @@ def ray_target(address: str | None) -> tuple[str, str]:
     named = os.environ.get("RAY_ADDRESS", "").strip()
     if named:
         return named, f"the Ray cluster at {named} (from RAY_ADDRESS)"
-    return LOCAL, "a private local Ray (join a cluster with an address or RAY_ADDRESS)"
+    return LOCAL, "a private local Ray"
 
 
 def check_ray_address(address: str) -> None:
