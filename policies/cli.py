@@ -45,8 +45,8 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         const="local",
         metavar="ADDR",
         help="with --backend mavlink: start the simulators as Ray actors spread over a Ray "
-        "cluster (ADDR, e.g. 10.0.0.1:6379; without it: RAY_ADDRESS's cluster or a local "
-        "Ray); see docs/distributed.md",
+        "cluster (ADDR, e.g. 10.0.0.1:6379; without it: RAY_ADDRESS's cluster, else a "
+        "private local Ray); see docs/distributed.md",
     )
     train.add_argument(
         "--steps",
@@ -124,7 +124,8 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         nargs="+",
         default=[],
         metavar="KEY=VALUES",
-        help="grid axes: task=hover,land algo=ppo,trpo seed=0..2 learning_rate=1e-4,3e-4 ...",
+        help="grid axes: task=hover,land algo=ppo,trpo seed=0..2 learning_rate=1e-4,3e-4 ... "
+        "(each value once; at most 10,000 trials)",
     )
     sweep.add_argument(
         "--search",
@@ -141,9 +142,19 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         "--steps", type=_steps, help="environment steps of every trial (at most 1e10)"
     )
     sweep.add_argument("--runs", default="runs", help="folder of the trials' runs (default: runs)")
-    sweep.add_argument("--name", default="sweep", help="the sweep's name (default: sweep)")
-    sweep.add_argument("--cpus", type=_count(1), help="CPUs of the local Ray (default: all)")
-    sweep.add_argument("--address", help="join the Ray cluster at ADDRESS (ray start --head)")
+    sweep.add_argument(
+        "--name",
+        default="sweep",
+        help="the sweep's name, one folder name under RUNS/sweeps (default: sweep)",
+    )
+    sweep.add_argument(
+        "--cpus", type=_count(1), help="CPUs of the private local Ray (default: all)"
+    )
+    sweep.add_argument(
+        "--address",
+        help="join the Ray cluster at ADDRESS (ray start --head); default: the cluster in "
+        "RAY_ADDRESS, else a private local Ray",
+    )
     sweep.add_argument("--resume", action="store_true", help="finish an interrupted sweep")
     sweep.add_argument(
         "--test-episodes",
