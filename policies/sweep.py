@@ -29,7 +29,7 @@ from typing import Any
 from policies.comparison import comparison_table, number
 from policies.config import TrainConfig, make_config
 from policies.config import run_name as base_run_name
-from policies.train import holds_run
+from policies.train import check_writable, holds_run
 from quadsitl.envs.ray_simulators import LOCAL, check_ray_address, ray_target
 
 RUN_KEYS = ("task", "algo", "preset", "seed")  # make_config's own arguments
@@ -333,6 +333,7 @@ def run_sweep(
         raise SweepError(f"sweep {name!r} exists in {storage}: resume it with --resume")
     if not resume and not search:
         check_new_runs(trials, runs)
+    check_writable(storage)
 
     import ray
     from ray import tune
