@@ -110,7 +110,8 @@ def test_train_on_ray_starts_a_private_ray_despite_a_dead_clusters_address_file(
     # Ray's default ray.init() joins the cluster named in ray_current_cluster, even a
     # dead one (it hung); joining must be explicit: --ray ADDR or RAY_ADDRESS.
     folder = tempfile.mkdtemp(prefix="ray", dir="/tmp")  # short: Ray's sockets go here
-    Path(folder, "ray_current_cluster").write_text("127.0.0.1:9\n")  # nothing listens
+    Path(folder, "ray").mkdir()  # Ray's temporary folder is RAY_TMPDIR/ray
+    Path(folder, "ray", "ray_current_cluster").write_text("127.0.0.1:9\n")  # nothing listens
     env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"} | {"RAY_TMPDIR": folder}
     tiny = "--num-envs 2 --vehicles-per-sim 2 --steps 64 --quiet --runs"
     try:

@@ -32,7 +32,8 @@ def stale_cluster() -> Iterator[dict[str, str]]:
     (``ray_current_cluster``, which Ray's default ``ray.init()`` joins) behind. A short
     folder: Ray's sockets live under it."""
     folder = tempfile.mkdtemp(prefix="ray", dir="/tmp")
-    Path(folder, "ray_current_cluster").write_text("127.0.0.1:9\n")  # nothing listens
+    Path(folder, "ray").mkdir()  # Ray's temporary folder is RAY_TMPDIR/ray
+    Path(folder, "ray", "ray_current_cluster").write_text("127.0.0.1:9\n")  # nothing listens
     env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
     yield {**env, "RAY_TMPDIR": folder}
     shutil.rmtree(folder, ignore_errors=True)
