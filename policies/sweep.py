@@ -161,10 +161,10 @@ def check_trials(
     search = search or {}
     if not grid and not search:
         raise SweepError("the sweep is empty: give --grid (and/or --search)")
-    trials = math.prod(len(v) for v in grid.values()) * samples
-    if trials > MAX_TRIALS:
+    count = math.prod(len(v) for v in grid.values()) * samples
+    if count > MAX_TRIALS:
         raise SweepError(
-            f"the sweep has {trials:,} trials (grid points × --samples); at most {MAX_TRIALS:,}"
+            f"the sweep has {count:,} trials (grid points × --samples); at most {MAX_TRIALS:,}"
         )
     axes = {**grid, **{key: values for key, (_, values) in search.items()}}
     points: list[dict[str, Any]] = [{}]
