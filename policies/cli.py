@@ -293,10 +293,10 @@ def _train(args: argparse.Namespace) -> int:
     if config.ray:
         from quadsitl.envs.ray_simulators import ray_target
 
-        where = ray_target(config.ray)[1]
-        print(
-            f"quadsitl train: simulators on {where} (--ray ADDR joins a cluster)", file=sys.stderr
-        )
+        target, where = ray_target(config.ray)
+        if target == "local":
+            where += " (--ray ADDR or RAY_ADDRESS joins a cluster)"
+        print(f"quadsitl train: simulators on {where}", file=sys.stderr)
     print(
         f"quadsitl train: {config.iterations} iterations of {config.batch_size} steps -> {run_dir}",
         file=sys.stderr,
