@@ -5,8 +5,9 @@ folder under ``--runs`` (so ``quadsitl eval`` and ``quadsitl plot`` work on it),
 reports every iteration's metrics to Tune. Tune is the scheduler: its progress table,
 its ASHA early stopping for searches, its experiment state (``--resume`` finishes only
 the trials that had not finished; a trial cut short continues from its last
-checkpoint). Local by default (Ray starts here with ``--cpus``); ``--address`` joins a
-running Ray cluster. See docs/distributed.md.
+checkpoint). A private Ray starts here with ``--cpus`` unless ``--address`` (or
+RAY_ADDRESS) names a running Ray cluster to join. A new sweep never adopts a run
+folder it did not make; a grid has at most MAX_TRIALS trials. See docs/distributed.md.
 
 Grid values: ``KEY=V1,V2`` or, for integers, ``KEY=A..B`` (inclusive). Search spaces:
 ``KEY=loguniform:LOW:HIGH``, ``uniform:LOW:HIGH``, ``randint:LOW:HIGH`` (HIGH excluded)
