@@ -72,7 +72,8 @@ def main() -> None:
         cells.setdefault((r["task"], r["algo"]), []).append(float(r["test_success"]))
     for (task, algo), success in cells.items():
         print(f"{task}_{algo}_{args.preset}_success: {statistics.mean(success):.3f}")
-    for png in learning_curves([Path(r["run"]) for r in results], Path(args.images)):
+    runs = [Path(r["run"]) for r in results]
+    for png in learning_curves(runs, Path(args.images), overwrite=True):  # regenerated
         print(png)
     sys.stdout.flush()
 

@@ -29,7 +29,7 @@ def main() -> None:
         )
         print(png.relative_to(ROOT))
     runs = [Path(p) for p in sys.argv[1:]]
-    for png in learning_curves(runs, OUT) if runs else []:
+    for png in learning_curves(runs, OUT, overwrite=True) if runs else []:  # regenerated
         print(png.relative_to(ROOT))
 
 

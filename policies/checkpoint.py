@@ -10,6 +10,9 @@ names the field.
 
 from __future__ import annotations
 
+import pickle
+import re
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -47,11 +50,12 @@ def load(path: str | Path) -> tuple[ActorCritic, TrainConfig, dict[str, Any]]:
     if not path.is_file():
         raise ValueError(f"no checkpoint at {path}")
     try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():  # torch warns of pickle protocols: not for the user
+            warnings.simplefilter("ignore")
+            payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as error:  # torch raises several kinds for a file that is not one
-        first_line = str(error).strip().splitlines()[0] if str(error).strip() else repr(error)
         raise ValueError(
-            f"{path} is not a quadsitl checkpoint, or holds more than data ({first_line})"
+            f"{path} is not a quadsitl checkpoint, or holds more than data ({_why(error)})"
         ) from None
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise ValueError(f"{path} is not a quadsitl checkpoint (format {FORMAT} expected)")
@@ -60,6 +64,17 @@ def load(path: str | Path) -> tuple[ActorCritic, TrainConfig, dict[str, Any]]:
     except ValueError as error:
         raise ValueError(f"checkpoint {path}: {error}") from None
     return net, config, payload
+
+
+def _why(error: Exception) -> str:
+    """Why torch refused a file, in one line. Never torch's own advice (to load it with
+    ``weights_only=False``, which would run whatever code the file holds)."""
+    named = re.search(r"GLOBAL ([\w.]+)", str(error))
+    if named:
+        return f"it names the Python object {named.group(1)}; refused before anything in it ran"
+    if isinstance(error, pickle.UnpicklingError):
+        return "it holds something other than tensors, numbers, strings, lists and dicts"
+    return "not a file written by torch.save"
 
 
 def _build(payload: dict[str, Any]) -> tuple[ActorCritic, TrainConfig]:

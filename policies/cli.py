@@ -4,18 +4,20 @@
 from __future__ import annotations
 
 import argparse
+import math
+import shlex
 import sys
 from pathlib import Path
 
-from policies.config import ALGORITHMS, TASK_NAMES
+from policies.config import ALGORITHMS, MAX_TOTAL_STEPS, TASK_NAMES, TrainConfig
 
 
 def add_parsers(commands: argparse._SubParsersAction) -> None:
     train = commands.add_parser(
         "train",
         help="train a policy (GAE, PPO or TRPO) on a task",
-        description="Train a policy. Writes runs/TASK-ALGO-PRESET-seedN/ (config.json, "
-        "metrics.csv, checkpoints/).",
+        description="Train a policy. Writes runs/TASK-ALGO-PRESET-seedN/ (-mavlink appended "
+        "through the wire): config.json, metrics.csv, checkpoints/best.pt and last.pt.",
     )
     train.add_argument(
         "--task",
@@ -43,13 +45,14 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         const="local",
         metavar="ADDR",
         help="with --backend mavlink: start the simulators as Ray actors spread over a Ray "
-        "cluster (ADDR, e.g. 10.0.0.1:6379; without it: RAY_ADDRESS's cluster or a local "
-        "Ray); see docs/distributed.md",
+        "cluster (ADDR, e.g. 10.0.0.1:6379; without it: RAY_ADDRESS's cluster, else a "
+        "private local Ray); see docs/distributed.md",
     )
     train.add_argument(
         "--steps",
-        type=_count(1),
-        help="environment steps, at least one batch (default: the preset's)",
+        type=_steps,
+        help="environment steps, at least one batch and at most 1e10; 2000000 or 2e6 "
+        "(default: the preset's)",
     )
     train.add_argument("--num-envs", type=_count(1), help="parallel envs (default: the preset's)")
     train.add_argument("--runs", default="runs", help="folder of run folders (default: runs)")
@@ -79,7 +82,9 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         "metric, and a line `success_rate: X`.",
     )
     evaluate.add_argument("checkpoint", help="a .pt file written by quadsitl train")
-    evaluate.add_argument("--episodes", type=int, default=100, help="episodes (default: 100)")
+    evaluate.add_argument(
+        "--episodes", type=_count(1), default=100, help="episodes, ≥ 1 (default: 100)"
+    )
     evaluate.add_argument("--task", help="task to evaluate on (default: the trained one)")
     evaluate.add_argument(
         "--backend",
@@ -100,7 +105,12 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         help="learning curves (mean ± std over seeds) of run folders",
     )
     plot.add_argument("runs", nargs="+", help="run folders (any tasks, algorithms, seeds)")
-    plot.add_argument("-o", "--output", default="docs/images", help="folder for the PNGs")
+    plot.add_argument(
+        "-o", "--output", default="plots", help="folder for the PNGs (default: plots)"
+    )
+    plot.add_argument(
+        "--force", action="store_true", help="replace PNGs that already exist in the folder"
+    )
 
     sweep = commands.add_parser(
         "sweep",
@@ -114,7 +124,8 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         nargs="+",
         default=[],
         metavar="KEY=VALUES",
-        help="grid axes: task=hover,land algo=ppo,trpo seed=0..2 learning_rate=1e-4,3e-4 ...",
+        help="grid axes: task=hover,land algo=ppo,trpo seed=0..2 learning_rate=1e-4,3e-4 ... "
+        "(each value once; at most 10,000 trials)",
     )
     sweep.add_argument(
         "--search",
@@ -127,11 +138,23 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
     sweep.add_argument(
         "--samples", type=_count(1), default=1, help="samples of the search (default: 1)"
     )
-    sweep.add_argument("--steps", type=_count(1), help="environment steps of every trial")
+    sweep.add_argument(
+        "--steps", type=_steps, help="environment steps of every trial (at most 1e10)"
+    )
     sweep.add_argument("--runs", default="runs", help="folder of the trials' runs (default: runs)")
-    sweep.add_argument("--name", default="sweep", help="the sweep's name (default: sweep)")
-    sweep.add_argument("--cpus", type=_count(1), help="CPUs of the local Ray (default: all)")
-    sweep.add_argument("--address", help="join the Ray cluster at ADDRESS (ray start --head)")
+    sweep.add_argument(
+        "--name",
+        default="sweep",
+        help="the sweep's name, one folder name under RUNS/sweeps (default: sweep)",
+    )
+    sweep.add_argument(
+        "--cpus", type=_count(1), help="CPUs of the private local Ray (default: all)"
+    )
+    sweep.add_argument(
+        "--address",
+        help="join the Ray cluster at ADDRESS (ray start --head); default: the cluster in "
+        "RAY_ADDRESS, else a private local Ray",
+    )
     sweep.add_argument("--resume", action="store_true", help="finish an interrupted sweep")
     sweep.add_argument(
         "--test-episodes",
@@ -157,6 +180,23 @@ def _count(low: int):  # type: ignore[no-untyped-def]
     return parse
 
 
+def _steps(text: str) -> int:
+    """An argparse type: a step budget, 1..MAX_TOTAL_STEPS, as ``2000000`` or ``2e6``."""
+    try:
+        value = int(text)
+    except ValueError:
+        try:
+            number = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number of steps") from None
+        if not math.isfinite(number) or number != int(number):
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of steps") from None
+        value = int(number)
+    if not 1 <= value <= MAX_TOTAL_STEPS:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1 and at most {MAX_TOTAL_STEPS:,}, got {text}")
+    return value
+
+
 def run(args: argparse.Namespace) -> int:
     import torch
 
@@ -171,9 +211,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from policies.comparison import comparison_table
     from policies.plots import learning_curves
-    from policies.sweep import parse_grid, parse_search, run_sweep, table
+    from policies.sweep import parse_grid, parse_search, results_text, run_sweep
 
     grid, search = parse_grid(args.grid), parse_search(args.search)
     fixed = {"total_steps": args.steps} if args.steps else {}
@@ -181,35 +220,61 @@ def _sweep(args: argparse.Namespace) -> int:
         import ray  # noqa: F401
     except ImportError:
         raise ValueError("quadsitl sweep needs Ray Tune: pip install 'quadsitl[sweep]'") from None
-    results = run_sweep(
-        grid,
-        search,
-        fixed,
-        Path(args.runs),
-        args.name,
-        args.samples,
-        args.cpus,
-        args.address,
-        args.resume,
-        args.test_episodes,
-    )
     out = Path(args.runs) / "sweeps" / args.name
-    text = table(results)
-    tested = [r for r in results if "test_success" in r]
-    if tested:
-        text += "\n" + comparison_table(tested)
+    resume = f"resume with: {_resume_command(args)}"
+    try:
+        results = run_sweep(
+            grid,
+            search,
+            fixed,
+            Path(args.runs),
+            args.name,
+            args.samples,
+            args.cpus,
+            args.address,
+            args.resume,
+            args.test_episodes,
+        )
+    except KeyboardInterrupt:  # a second Ctrl-C, while Tune was saving its state
+        print(f"quadsitl sweep: interrupted; {resume}", file=sys.stderr)
+        return 130
+    text = results_text(results)
     (out / "results.md").write_text(text)
-    runs = [Path(r["run"]) for r in results]
-    curves = learning_curves([r for r in runs if (r / "metrics.csv").is_file()], out)
+    runs = [Path(r["run"]) for r in results if r["finished"]]
+    curves = learning_curves(
+        [r for r in runs if (r / "metrics.csv").is_file()], out, overwrite=True
+    )
     print(text, end="")
-    print(f"results: {out / 'results.md'}; curves: {', '.join(str(c) for c in curves)}")
-    failed = [r for r in results if r.get("error")]
-    return 1 if failed else 0
+    print(f"results: {out / 'results.md'}; curves: {', '.join(str(c) for c in curves) or '-'}")
+    if any(not r["finished"] and not r["error"] for r in results):
+        print(f"quadsitl sweep: interrupted; {resume}", file=sys.stderr)
+        return 130
+    return 1 if any(r["error"] for r in results) else 0
+
+
+def _resume_command(args: argparse.Namespace) -> str:
+    """The ``quadsitl sweep ... --resume`` command that finishes this sweep."""
+    words = ["quadsitl", "sweep"]
+    for option, values in (("--grid", args.grid), ("--search", args.search)):
+        if values:
+            words += [option, *values]
+    for option, value in (
+        ("--samples", args.samples if args.samples != 1 else None),
+        ("--steps", args.steps),
+        ("--runs", args.runs),
+        ("--name", args.name),
+        ("--cpus", args.cpus),
+        ("--address", args.address),
+        ("--test-episodes", args.test_episodes or None),
+    ):
+        if value is not None:
+            words += [option, str(value)]
+    return shlex.join([*words, "--resume"])
 
 
 def _train(args: argparse.Namespace) -> int:
     from policies.config import make_config
-    from policies.train import train
+    from policies.train import check_writable, train
 
     config = make_config(
         args.task,
@@ -222,9 +287,16 @@ def _train(args: argparse.Namespace) -> int:
         total_steps=args.steps,
         num_envs=args.num_envs,
     )
-    name = args.task.replace("/", "_")  # Gymnasium ids may have a namespace
-    run_dir = Path(args.runs) / f"{name}-{args.algo}-{args.preset}-seed{args.seed}"
+    run_dir = Path(args.runs) / config.run_name
     mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
+    check_writable(run_dir)  # before anything starts (train checks too, for other callers)
+    if config.ray:
+        from quadsitl.envs.ray_simulators import ray_target
+
+        target, where = ray_target(config.ray)
+        if target == "local":
+            where += " (--ray ADDR or RAY_ADDRESS joins a cluster)"
+        print(f"quadsitl train: simulators on {where}", file=sys.stderr)
     print(
         f"quadsitl train: {config.iterations} iterations of {config.batch_size} steps -> {run_dir}",
         file=sys.stderr,
@@ -245,8 +317,26 @@ def _train(args: argparse.Namespace) -> int:
         f"{result.env_steps:,} steps in {result.seconds:.1f} s; last 100 episodes: return "
         f"{result.final_return:.1f}, success {result.final_success:.0%}"
     )
-    print(f"checkpoint: {last}")
+    print("\n".join(_next_steps(config, run_dir, result.best_success)))
     return 1 if result.diverged else 0
+
+
+def _next_steps(config: TrainConfig, run_dir: Path, best_success: float) -> list[str]:
+    """Which checkpoint to use, and the command that evaluates it."""
+    folder = run_dir / "checkpoints"
+    best, last = folder / "best.pt", folder / "last.pt"
+    if not best.is_file():
+        lines = [f"checkpoint: {last} (the network at the end; no validation ran)"]
+        chosen = last
+    else:
+        lines = [
+            f"best checkpoint: {best} (validation success {best_success:.0%}; use this one)",
+            f"last checkpoint: {last} (the network at the end, to --resume from)",
+        ]
+        chosen = best
+    if config.task in TASK_NAMES and chosen.is_file():
+        lines.append(f"next: quadsitl eval {shlex.quote(str(chosen))}")
+    return lines
 
 
 def _eval(args: argparse.Namespace) -> int:
@@ -276,6 +366,7 @@ def _eval(args: argparse.Namespace) -> int:
 def _plot(args: argparse.Namespace) -> int:
     from policies.plots import learning_curves
 
-    for path in learning_curves([Path(r) for r in args.runs], Path(args.output)):
+    runs = [Path(r) for r in args.runs]
+    for path in learning_curves(runs, Path(args.output), overwrite=args.force):
         print(path)
     return 0

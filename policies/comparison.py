@@ -58,33 +58,49 @@ def score_run(
 def comparison_table(runs: list[dict[str, Any]], target: float = TARGET_SUCCESS) -> str:
     """Markdown, one row per task and algorithm (in the order met). Each run: ``task``,
     ``algo``, ``test_success``, ``wall_seconds``, ``env_steps`` and, where defined,
-    ``test_metric``, ``reach_seconds``, ``reach_steps`` (missing or NaN: undefined)."""
+    ``test_metric``, ``reach_seconds``, ``reach_steps`` (missing or NaN: undefined, shown
+    as such; one incomplete run never costs the others' rows)."""
     cells: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for run in runs:
-        cells.setdefault((run["task"], run["algo"]), []).append(run)
+        cells.setdefault((str(run.get("task", "?")), str(run.get("algo", "?"))), []).append(run)
     lines = [
         "| task | algorithm | test success (mean ± std; per seed) | task metric "
         f"| validation ≥ {target:.0%} | run (mean), steps |",
         "|---|---|---|---|---|---|",
     ]
     for (task, algo), rows in cells.items():
-        success = np.array([float(r["test_success"]) for r in rows])
-        reached = [r for r in rows if math.isfinite(float(r.get("reach_seconds", math.nan)))]
+        success = np.array([number(r, "test_success") for r in rows])
+        tested = success[np.isfinite(success)]
+        reached = [r for r in rows if math.isfinite(number(r, "reach_seconds"))]
         if reached:
-            seconds = np.median([float(r["reach_seconds"]) for r in reached])
-            steps = np.median([float(r["reach_steps"]) for r in reached]) / 1e6
+            seconds = np.median([number(r, "reach_seconds") for r in reached])
+            steps = np.median([number(r, "reach_steps") for r in reached]) / 1e6
             reach = f"{len(reached)}/{len(rows)} seeds; median {seconds:.0f} s, {steps:.2f} M steps"
         else:
             reach = f"0/{len(rows)} seeds"
-        _, name, unit = TASK_METRICS[task]
-        metrics = [float(r.get("test_metric", math.nan)) for r in rows]
+        _, name, unit = TASK_METRICS.get(task, ("", "task metric", ""))
+        metrics = [number(r, "test_metric") for r in rows]
         defined = [m for m in metrics if math.isfinite(m)]
         metric = f"{np.mean(defined):.3g} {unit}" if defined else "—"
-        per_seed = ", ".join(f"{s:.0%}" for s in success)
-        wall = np.mean([float(r["wall_seconds"]) for r in rows])
-        steps_m = float(rows[0]["env_steps"]) / 1e6
+        per_seed = ", ".join(f"{s:.0%}" if math.isfinite(s) else "–" for s in success)
+        score = f"{tested.mean():.0%} ± {tested.std():.0%}" if tested.size else "–"
+        wall, steps_m = _mean(rows, "wall_seconds"), _mean(rows, "env_steps") / 1e6
         lines.append(
-            f"| {task} | {algo.upper()} | {success.mean():.0%} ± {success.std():.0%} ({per_seed}) "
-            f"| {name} {metric} | {reach} | {wall:.0f} s, {steps_m:.2f} M |"
+            f"| {task} | {algo.upper()} | {score} ({per_seed}) | {name} {metric} | {reach} "
+            f"| {wall:.0f} s, {steps_m:.2f} M |"
         )
     return "\n".join(lines) + "\n"
+
+
+def number(row: dict[str, Any], key: str) -> float:
+    """``row[key]`` as a float; NaN where it is missing or not a number."""
+    try:
+        return float(row[key])
+    except (KeyError, TypeError, ValueError):
+        return math.nan
+
+
+def _mean(rows: list[dict[str, Any]], key: str) -> float:
+    """The mean of ``key`` over the rows that have it (NaN if none)."""
+    values = [v for v in (number(r, key) for r in rows) if math.isfinite(v)]
+    return float(np.mean(values)) if values else math.nan

@@ -20,6 +20,10 @@ from quadsitl.tasks import TASKS
 
 BACKENDS = ("inprocess", "mavlink")
 TASK_NAMES = tuple(TASKS)  # the tasks' registry, in its order
+# The largest step budget of a run: 10 billion steps, about 10 days at the fast preset's
+# 10,000-20,000 steps/s on two cores (the longest preset budget is 12 million). Beyond
+# it a budget is a typing slip, not a plan.
+MAX_TOTAL_STEPS = 10_000_000_000
 
 
 @dataclass(frozen=True)
@@ -71,6 +75,12 @@ class TrainConfig:
         return self.num_envs * self.steps_per_env
 
     @property
+    def run_name(self) -> str:
+        """The run folder's name: ``TASK-ALGO-PRESET-seedN``, and ``-mavlink`` for a run
+        through the wire (so it never meets the in-process run of the same seed)."""
+        return run_name(self.task, self.algo, self.preset, self.seed, self.backend)
+
+    @property
     def iterations(self) -> int:
         return max(1, self.total_steps // self.batch_size)
 
@@ -87,6 +97,12 @@ class TrainConfig:
         if unknown:
             raise ValueError(f"unknown config key(s) {unknown}")
         return cls(**values)
+
+
+def run_name(task: str, algo: str, preset: str, seed: int, backend: str = "inprocess") -> str:
+    """``TASK-ALGO-PRESET-seedN[-mavlink]``; a Gymnasium id's namespace slash becomes ``_``."""
+    suffix = "" if backend == "inprocess" else f"-{backend}"
+    return f"{task.replace('/', '_')}-{algo}-{preset}-seed{seed}{suffix}"
 
 
 _POSITIVE_INTS = (
@@ -140,6 +156,11 @@ def _check(config: TrainConfig) -> None:
         least = 1 if name in _POSITIVE_INTS else 0
         if isinstance(value, bool) or not isinstance(value, int) or value < least:
             raise ValueError(f"{name} must be an integer ≥ {least}, got {value!r}")
+    if config.total_steps > MAX_TOTAL_STEPS:
+        raise ValueError(
+            f"total_steps must be at most {MAX_TOTAL_STEPS:,} (10 billion), got "
+            f"{config.total_steps:,}"
+        )
     for name, (low, high) in _FLOATS.items():
         value = getattr(config, name)
         ok = isinstance(value, (int, float)) and not isinstance(value, bool)

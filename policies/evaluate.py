@@ -31,6 +31,28 @@ TASK_METRICS: dict[str, tuple[str, str, str]] = {
     "land": ("touchdown_speed", "touchdown speed", "m/s"),
     "target_follow": ("final_distance", "final range error", "m"),
 }
+# How an episode ended (the task engine's outcome names), in words.
+OUTCOME_MEANINGS = {
+    "timed_out": "flew until the episode's time limit",
+    "out_of_bounds": "left the flight area",
+    "flipped": "tilted over",
+    "landed": "touched down gently on the pad",
+    "landed_off_pad": "touched down off the pad",
+    "crashed": "hit the ground too hard",
+}
+# What counts as a success, per task (the others: timed_out within the success radius).
+SUCCESS_RULES = {
+    "land": "landed",
+    "target_follow": "timed_out, having kept the target within range 80 % of the time",
+}
+
+
+def success_rule(task: str) -> str:
+    """A task's success in terms of its outcome names (for the evaluation's output)."""
+    from quadsitl.tasks import get_task
+
+    radius = get_task(task).success_radius
+    return SUCCESS_RULES.get(task, f"timed_out within {radius:g} m of the goal at the end")
 
 
 @dataclass
@@ -50,13 +72,16 @@ class Evaluation:
 
     def lines(self) -> list[str]:
         outcomes = ", ".join(f"{k} {v}" for k, v in sorted(self.outcomes.items()))
+        meanings = "; ".join(
+            f"{k}: {OUTCOME_MEANINGS[k]}" for k in sorted(self.outcomes) if k in OUTCOME_MEANINGS
+        )
         return [
             f"{self.task}: {self.episodes} deterministic episodes",
             f"success rate {self.success_rate:.1%}; return {self.mean_return:.1f} ± "
             f"{self.std_return:.1f}",
             f"{self.metric_name}: {self.metric_mean:.3f} {self.metric_unit} (mean); goal "
             f"reached (within its radius at some time) in {self.reached_rate:.0%}",
-            f"outcomes: {outcomes}",
+            f"outcomes: {outcomes} ({meanings}); a success is {success_rule(self.task)}",
             f"success_rate: {self.success_rate:.4f}",
         ]
 
@@ -76,6 +101,8 @@ def evaluate(
     action, from the trained start distribution. ``on_step(engine, reward)`` is called
     after each reset (reward None) and step of env 0 (e.g. to record it)."""
     task = task or config.task
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise ValueError(f"episodes must be an integer ≥ 1, got {episodes!r}")
     num_envs = min(num_envs, episodes)
     if task not in TASK_METRICS:
         raise ValueError(f"evaluation needs a quadsitl task ({sorted(TASK_METRICS)}), got {task!r}")

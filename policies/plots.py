@@ -51,9 +51,15 @@ def _band(ax, curves: list[tuple[np.ndarray, np.ndarray]], algo: str) -> None:  
     ax.fill_between(grid, mean - std, mean + std, color=COLORS.get(algo), alpha=0.2)
 
 
-def learning_curves(runs: list[Path], out_dir: Path) -> list[Path]:
+def _curves_name(task: str, preset: str) -> str:
+    return f"learning_{task.replace('/', '_')}_{preset}.png"
+
+
+def learning_curves(runs: list[Path], out_dir: Path, overwrite: bool = False) -> list[Path]:
     """One PNG per (task, preset): a curve per algorithm, mean ± std over its seeds; with
-    a second panel of the periodic validation success where the runs evaluated."""
+    a second panel of the periodic validation success where the runs evaluated. A PNG
+    that already exists is replaced only with ``overwrite`` (else a ValueError naming
+    them, before anything is written)."""
     Curves = dict[str, list[tuple[np.ndarray, np.ndarray]]]
     returns: dict[tuple[str, str], Curves] = defaultdict(lambda: defaultdict(list))
     success: dict[tuple[str, str], Curves] = defaultdict(lambda: defaultdict(list))
@@ -64,6 +70,16 @@ def learning_curves(runs: list[Path], out_dir: Path) -> list[Path]:
             returns[key][config["algo"]].append((steps, ret))
         if eval_steps.size:
             success[key][config["algo"]].append((eval_steps, eval_success))
+    existing = [
+        str(out_dir / _curves_name(task, preset))
+        for task, preset in sorted(returns)
+        if (out_dir / _curves_name(task, preset)).exists()
+    ]
+    if existing and not overwrite:
+        raise ValueError(
+            f"{', '.join(existing)} already exist(s); give --force to replace, or another "
+            "-o folder (nothing was written)"
+        )
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for (task, preset), by_algo in sorted(returns.items()):
@@ -83,7 +99,7 @@ def learning_curves(runs: list[Path], out_dir: Path) -> list[Path]:
             ax.set_xlabel("environment steps")
             ax.grid(alpha=0.3)
             ax.legend()
-        path = out_dir / f"learning_{task}_{preset}.png"
+        path = out_dir / _curves_name(task, preset)
         fig.tight_layout()
         fig.savefig(path, dpi=110)
         plt.close(fig)

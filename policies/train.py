@@ -21,6 +21,7 @@ import math
 import random
 import shutil
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -72,6 +73,7 @@ class RunResult:
     final_return: float
     diverged: bool
     interrupted: bool = False
+    best_success: float = -1.0  # best.pt's validation success (-1: no evaluation ran)
 
 
 @dataclass
@@ -120,6 +122,7 @@ def train(
             f"{run_dir} has already run {start.iteration} of {config.iterations} iterations; "
             "give more --steps to train further"
         )
+    check_writable(run_dir)
     # Everything that can fail at start happens before the folder is touched.
     seed = _seed(config.seed, start.iteration)
     seed_everything(seed)
@@ -169,6 +172,23 @@ def train(
         env.close()
         log.close()
     return log.result()
+
+
+def check_writable(run_dir: Path) -> None:
+    """A ValueError now, before any env starts, if the run folder cannot be written: the
+    folder (or the nearest existing folder above it) is probed with a temporary file."""
+    folder = run_dir
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise ValueError(f"cannot write the run to {run_dir}: {folder} is not a folder")
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        raise ValueError(
+            f"cannot write the run to {run_dir}: {folder} is not writable ({error.strerror})"
+        ) from None
 
 
 def _seed(seed: int, iteration: int) -> int:
@@ -247,6 +267,7 @@ class _Log:
         self.writer.writerows(kept)
         self.file.flush()
         self.started = time.perf_counter() - start.wall_seconds
+        self.session_started = time.perf_counter()  # this process's start, for the ETA
         self.shown = 0.0
         self.returns: list[float] = []  # of the last 100 episodes
         self.success: list[bool] = []
@@ -277,7 +298,9 @@ class _Log:
             self.board.flush()
         if self.progress and (time.perf_counter() - self.shown > 0.5 or it == config.iterations):
             self.shown = time.perf_counter()
-            _progress(config, row)
+            done = it - self.first_iteration
+            seconds_left = (self.shown - self.session_started) / done * (config.iterations - it)
+            _progress(config, row, seconds_left)
         if it % config.checkpoint_every == 0 or it == config.iterations:
             self.save_last(algo)
 
@@ -327,6 +350,7 @@ class _Log:
             final_return=float(np.mean(self.returns)) if self.returns else math.nan,
             diverged=self.diverged,
             interrupted=self.interrupted,
+            best_success=self.best,
         )
 
 
@@ -354,13 +378,22 @@ def _row(config, it, started, rollout, stats) -> dict:  # type: ignore[no-untype
     }
 
 
-def _progress(config: TrainConfig, row: dict) -> None:  # type: ignore[type-arg]
+def clock(seconds: float) -> str:
+    """``m:ss``, or ``h:mm:ss`` from an hour on."""
+    minutes, secs = divmod(round(seconds), 60)
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours}:{minutes:02d}:{secs:02d}" if hours else f"{minutes}:{secs:02d}"
+
+
+def _progress(config: TrainConfig, row: dict, seconds_left: float) -> None:  # type: ignore[type-arg]
+    """The progress line; ``seconds_left``: the ETA, from this process's pace so far
+    (evaluations included)."""
     done = row["iteration"] / config.iterations
     bar = "#" * int(24 * done) + "-" * (24 - int(24 * done))
     print(
         f"\r{config.task}/{config.algo} [{bar}] {row['env_steps']:>10,} steps  "
         f"return {row['mean_return']:8.1f}  success {row['success_rate']:5.0%}  "
-        f"{row['steps_per_second']:>7,} steps/s",
+        f"{row['steps_per_second']:>7,} steps/s  ETA {clock(seconds_left)}",
         end="",
         file=sys.stderr,
         flush=True,

@@ -385,7 +385,7 @@ def _main(argv: Sequence[str] | None = None) -> int:
 
         try:
             return run_policy_command(args)
-        except ValueError as error:
+        except (ValueError, OSError) as error:  # OSError: a file or folder that cannot be used
             parser.exit(2, f"quadsitl {args.command}: error: {error}\n")
     if args.command == "fly":
         from gcs_tools.fly import run_fly

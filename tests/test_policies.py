@@ -6,8 +6,12 @@ from __future__ import annotations
 import csv
 import json
 import math
+import pickle
+import re
+import shlex
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +26,7 @@ from policies.evaluate import evaluate
 from policies.rollout import compute_gae
 from policies.train import train
 from quadsitl.physics import PAPER
-from tests.conftest import cli
+from tests.conftest import cli, run_cli
 
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "policies" / "checkpoints"
 
@@ -319,3 +323,182 @@ def test_ground_station_mission_flown_by_the_policy_autopilot(tmp_path):
         sim.communicate(timeout=15)
     assert report.landed
     assert max(report.waypoint_errors) < 0.3
+
+
+# --- the command line's small print -------------------------------------------------------
+def test_train_shows_an_eta_and_ends_naming_best_pt_and_the_command_to_run_next(tmp_path):
+    run = subprocess.run(
+        cli("train --task hover --algo ppo --preset fast --steps 8192 --runs", tmp_path),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 0, run.stderr
+    assert re.search(r"ETA \d+:\d\d", run.stderr), run.stderr  # the progress bar's
+    best = tmp_path / "hover-ppo-fast-seed0" / "checkpoints" / "best.pt"
+    assert f"best checkpoint: {best} (validation success" in run.stdout, run.stdout
+    assert "last checkpoint: " in run.stdout and "last.pt" in run.stdout
+    command = next(line for line in run.stdout.splitlines() if line.startswith("next: "))
+    words = shlex.split(command.removeprefix("next: "))
+    assert words[:2] == ["quadsitl", "eval"] and words[2] == str(best)
+    # the printed command runs as printed (five episodes, to be quick)
+    evaluated = subprocess.run(
+        [sys.executable, "-m", "quadsitl.cli", *words[1:], "--episodes", "5"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert evaluated.returncode == 0, evaluated.stderr
+    # hover's success is an outcome named timed_out: the output says so
+    outcomes = next(line for line in evaluated.stdout.splitlines() if line.startswith("outcomes"))
+    assert "a success is timed_out within 0.1 m of the goal at the end" in outcomes, outcomes
+
+
+def test_eval_explains_every_outcome_name_and_each_tasks_success():
+    from policies.evaluate import OUTCOME_MEANINGS, Evaluation, success_rule
+    from quadsitl.tasks import OUTCOME_NAMES
+
+    assert set(OUTCOME_NAMES.values()) - {"running"} == set(OUTCOME_MEANINGS)
+    assert success_rule("land") == "landed"
+    result = Evaluation("land", 3, 1 / 3, 0.0, 0.0, "touchdown speed", "m/s", 0.2, 1.0)
+    result.outcomes = {"landed": 1, "crashed": 2}
+    line = next(x for x in result.lines() if x.startswith("outcomes"))
+    assert line == (
+        "outcomes: crashed 2, landed 1 (crashed: hit the ground too hard; landed: touched "
+        "down gently on the pad); a success is landed"
+    )
+
+
+def test_eval_of_zero_episodes_is_a_message_about_episodes(tmp_path):
+    result = subprocess.run(
+        cli("eval", CHECKPOINTS / "hover.pt", "--episodes", "0"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 2 and "--episodes: must be ≥ 1" in result.stderr, result.stderr
+    assert "num_envs" not in result.stderr
+    with pytest.raises(ValueError, match="episodes must be an integer ≥ 1"):
+        net, config, _ = checkpoint.load(CHECKPOINTS / "hover.pt")
+        evaluate(net, config, episodes=0)
+
+
+def test_a_run_through_the_wire_has_its_own_folder_beside_the_in_process_one(tmp_path):
+    assert make_config("land", "ppo", "fast").run_name == "land-ppo-fast-seed0"  # unchanged
+    wire = make_config("land", "ppo", "fast", backend="mavlink")
+    assert wire.run_name == "land-ppo-fast-seed0-mavlink"
+    tiny = "train --task hover --algo ppo --preset fast --num-envs 2 --steps 64 --quiet --runs"
+    local = run_cli(*tiny.split(), str(tmp_path))
+    assert local.returncode == 0, local.stderr
+    wired = run_cli(*tiny.split(), str(tmp_path), "--backend", "mavlink", "--vehicles-per-sim", "2")
+    assert wired.returncode == 0, wired.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "hover-ppo-fast-seed0",
+        "hover-ppo-fast-seed0-mavlink",
+    ]
+    saved = json.loads((tmp_path / "hover-ppo-fast-seed0-mavlink" / "config.json").read_text())
+    assert saved["backend"] == "mavlink"
+
+
+def _unwritable_folder(tmp_path: Path) -> Path:
+    """A folder this process cannot create files in: a read-only folder, or (as root,
+    whom permissions do not stop) sysfs's root, which refuses new files to everyone."""
+    folder = tmp_path / "read-only"
+    folder.mkdir()
+    folder.chmod(0o555)
+    for candidate in (folder, Path("/sys")):
+        try:
+            (candidate / "probe").touch()
+        except OSError:
+            return candidate
+        (candidate / "probe").unlink()
+    pytest.skip("no folder here refuses this user's writes")
+
+
+def test_training_into_an_unwritable_folder_is_one_line_before_any_work(tmp_path):
+    runs = _unwritable_folder(tmp_path) / "runs"
+    started = time.monotonic()
+    result = subprocess.run(
+        cli("train --task hover --algo ppo --preset fast --steps 8192 --quiet --runs", runs),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith("quadsitl train: error: cannot write the run to "), (
+        result.stderr
+    )
+    assert "not writable" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+    assert time.monotonic() - started < 30
+
+
+@pytest.mark.parametrize(
+    ("steps", "message"),
+    [
+        ("1e19", "at most 10,000,000,000"),
+        ("10000000000000000000", "at most 10,000,000,000"),
+        ("2.5", "not a whole number of steps"),
+    ],
+)
+def test_step_budgets_beyond_the_maximum_are_refused(tmp_path, steps, message):
+    train = "train --task hover --algo ppo --preset fast --quiet --steps"
+    result = run_cli(*train.split(), steps, "--runs", str(tmp_path))
+    assert result.returncode == 2 and message in result.stderr, result.stderr
+    assert not any(tmp_path.iterdir())
+    with pytest.raises(ValueError, match="total_steps must be at most 10,000,000,000"):
+        make_config("hover", "ppo", "fast", total_steps=10**19)
+
+
+def test_steps_in_scientific_notation_are_whole_numbers_of_steps():
+    from policies.cli import _steps
+
+    assert _steps("2e6") == 2_000_000 and _steps("8192") == 8192
+
+
+@pytest.mark.parametrize(
+    ("kind", "reason"),
+    [
+        ("text", "not a file written by torch.save"),
+        ("pickle", "it holds something other than tensors"),  # a bare pickle, no torch file
+        ("numpy", "it names the Python object numpy."),  # torch's file, with an object
+    ],
+)
+def test_a_file_that_is_not_a_checkpoint_gets_one_line_without_torchs_advice(
+    tmp_path, kind, reason
+):
+    path = tmp_path / "not-a-checkpoint.pt"
+    if kind == "text":
+        path.write_text("hello\n")
+    elif kind == "pickle":
+        path.write_bytes(pickle.dumps({"weights": [0.0, 1.0]}, protocol=4))
+    else:
+        torch.save({"weights": np.zeros(3)}, path)
+    with pytest.raises(ValueError) as caught:
+        checkpoint.load(path)
+    message = str(caught.value)
+    assert message.startswith(f"{path} is not a quadsitl checkpoint"), message
+    assert reason in message, message
+    # never torch's advice to load it unsafely, nor its "if you trust the source"
+    assert "weights_only" not in message and "trust" not in message and "\n" not in message
+    result = run_cli("eval", str(path))
+    assert result.returncode == 2 and "weights_only" not in result.stderr, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and "Warning" not in result.stderr
+
+
+def test_plot_refuses_to_replace_existing_pngs_without_force(tmp_path):
+    run = tmp_path / "hover-ppo-fast-seed0"
+    run.mkdir()
+    (run / "config.json").write_text(json.dumps(make_config("hover", "ppo", "fast").to_dict()))
+    (run / "metrics.csv").write_text(
+        "iteration,env_steps,mean_return,eval_success\n1,4096,1.0,nan\n2,8192,2.0,0.5\n"
+    )
+    out = tmp_path / "images"
+    out.mkdir()
+    png = out / "learning_hover_fast.png"
+    png.write_bytes(b"a tracked picture")
+    refused = run_cli("plot", str(run), "-o", str(out))
+    assert refused.returncode == 2 and "already exist" in refused.stderr, refused.stderr
+    assert "--force" in refused.stderr and png.read_bytes() == b"a tracked picture"
+    replaced = run_cli("plot", str(run), "-o", str(out), "--force")
+    assert replaced.returncode == 0, replaced.stderr
+    assert png.read_bytes().startswith(b"\x89PNG")

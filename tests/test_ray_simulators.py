@@ -5,9 +5,14 @@ places a new one."""
 
 from __future__ import annotations
 
+import os
+import shutil
 import socket
+import subprocess
+import tempfile
 import time
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -15,7 +20,7 @@ import pytest
 
 import quadsitl  # noqa: F401  (registers the envs)
 from quadsitl.mavlink.motor_client import SimulatorError
-from tests.conftest import OBS_TOLERANCE, fly_both
+from tests.conftest import OBS_TOLERANCE, cli, fly_both
 
 ray = pytest.importorskip("ray")
 from ray.cluster_utils import Cluster  # noqa: E402
@@ -98,3 +103,30 @@ def test_ray_options_are_checked(two_nodes):
     ):
         with pytest.raises(ValueError, match=match):
             gym.make_vec("QuadSITL/Hover-v0", 1, "vector_entry_point", backend="mavlink", **bad)
+
+
+@pytest.mark.slow  # a Ray of its own starts (15-30 s on two loaded cores)
+def test_train_on_ray_starts_a_private_ray_despite_a_dead_clusters_address_file(tmp_path):
+    # Ray's default ray.init() joins the cluster named in ray_current_cluster, even a
+    # dead one (it hung); joining must be explicit: --ray ADDR or RAY_ADDRESS.
+    folder = tempfile.mkdtemp(prefix="ray", dir="/tmp")  # short: Ray's sockets go here
+    Path(folder, "ray").mkdir()  # Ray's temporary folder is RAY_TMPDIR/ray
+    Path(folder, "ray", "ray_current_cluster").write_text("127.0.0.1:9\n")  # nothing listens
+    env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"} | {"RAY_TMPDIR": folder}
+    tiny = "--num-envs 2 --vehicles-per-sim 2 --steps 64 --quiet --runs"
+    try:
+        done = subprocess.run(
+            [
+                *cli(f"train --task hover --algo ppo --preset fast --backend mavlink --ray {tiny}"),
+                str(tmp_path),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=240,
+            env=env,
+        )
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "quadsitl train: simulators on a private local Ray" in done.stderr, done.stderr
+    assert (tmp_path / "hover-ppo-fast-seed0-mavlink" / "checkpoints" / "last.pt").is_file()

@@ -1,18 +1,24 @@
-"""``quadsitl sweep`` on Ray Tune: tiny trials in a local Ray with 2 CPUs, a metric per
-iteration, the results table, resuming after an interruption, and bad input refused
-before Ray starts."""
+"""``quadsitl sweep`` on Ray Tune: tiny trials in a private local Ray with 2 CPUs (even
+with a stale Ray cluster file about), a metric per iteration, the results table as
+trials finish, resuming after an interruption, and bad input refused before Ray
+starts."""
 
 from __future__ import annotations
 
 import json
+import os
 import re
+import shutil
 import signal
 import subprocess
+import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from policies import sweep as S
 from tests.conftest import cli
 
 pytest.importorskip("ray")  # the sweep extra, which `make test` installs
@@ -20,12 +26,26 @@ pytest.importorskip("ray")  # the sweep extra, which `make test` installs
 TWO_ITERATIONS = "8192"  # fast preset, hover: 128 envs x 32 steps = 4,096 per iteration
 
 
-def _sweep(runs: Path, *options: str) -> subprocess.Popen[str]:
+@pytest.fixture(scope="module")
+def stale_cluster() -> Iterator[dict[str, str]]:
+    """The environment of a machine where a Ray cluster died and left its address file
+    (``ray_current_cluster``, which Ray's default ``ray.init()`` joins) behind. A short
+    folder: Ray's sockets live under it."""
+    folder = tempfile.mkdtemp(prefix="ray", dir="/tmp")
+    Path(folder, "ray").mkdir()  # Ray's temporary folder is RAY_TMPDIR/ray
+    Path(folder, "ray", "ray_current_cluster").write_text("127.0.0.1:9\n")  # nothing listens
+    env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
+    yield {**env, "RAY_TMPDIR": folder}
+    shutil.rmtree(folder, ignore_errors=True)
+
+
+def _sweep(runs: Path, env: dict[str, str], *options: str) -> subprocess.Popen[str]:
     return subprocess.Popen(
         cli(f"sweep --steps {TWO_ITERATIONS} --runs {runs} {' '.join(options)}"),
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
+        env=env,
     )
 
 
@@ -38,10 +58,21 @@ def _iterations_reported(runs: Path) -> dict[str, int]:
     return out
 
 
-def test_a_grid_of_four_trials_reports_every_iteration_and_writes_the_table(tmp_path):
-    sweep = _sweep(tmp_path, "--grid task=hover algo=ppo,trpo seed=0..1 --cpus 2 --test-episodes 5")
+def test_a_grid_of_four_trials_reports_every_iteration_and_writes_the_table(
+    tmp_path, stale_cluster
+):
+    grid = "--grid task=hover algo=ppo,trpo seed=0..1 --cpus 2 --test-episodes 5"
+    sweep = _sweep(tmp_path, stale_cluster, grid)
     output, _ = sweep.communicate(timeout=400)
     assert sweep.returncode == 0, output[-3000:]
+    # a private Ray, said so, although a (dead) cluster's address file is about
+    assert "quadsitl sweep: Ray: a private local Ray with 2 CPUs" in output, output[-3000:]
+    # as each trial finishes: where its folder and the results table are
+    results = tmp_path / "sweeps" / "sweep" / "results.md"
+    for count in range(1, 5):
+        assert re.search(
+            rf"trial {count}/4 done: {tmp_path}/hover-\S+; results so far: {results}", output
+        ), output[-3000:]
     reported = _iterations_reported(tmp_path)
     # two iterations, then the test of the best checkpoint: three reports per trial
     assert len(reported) == 4 and set(reported.values()) == {3}, reported
@@ -64,8 +95,8 @@ def test_a_grid_of_four_trials_reports_every_iteration_and_writes_the_table(tmp_
     assert (tmp_path / "sweeps" / "sweep" / "learning_hover_fast.png").is_file()
 
 
-def test_resume_after_an_interruption_runs_only_the_missing_trials(tmp_path):
-    sweep = _sweep(tmp_path, "--grid task=hover algo=ppo seed=0..3 --cpus 1")
+def test_resume_after_an_interruption_runs_only_the_missing_trials(tmp_path, stale_cluster):
+    sweep = _sweep(tmp_path, stale_cluster, "--grid task=hover algo=ppo seed=0..3 --cpus 1")
     first = tmp_path / f"hover-ppo-fast-seed0-total_steps{TWO_ITERATIONS}" / "metrics.csv"
     deadline = time.monotonic() + 300
     while not (first.is_file() and len(first.read_text().splitlines()) == 3):
@@ -74,14 +105,23 @@ def test_resume_after_an_interruption_runs_only_the_missing_trials(tmp_path):
     # Ctrl-C as soon as the first trial is done (trials reuse their worker, so the next
     # ones follow at once): Tune saves its state and stops.
     sweep.send_signal(signal.SIGINT)
-    sweep.communicate(timeout=120)
+    output, _ = sweep.communicate(timeout=120)
+    # one line that says how to go on, and the table of what finished
+    assert sweep.returncode == 130 and "Traceback" not in output, output[-3000:]
+    resume = "quadsitl sweep: interrupted; resume with: quadsitl sweep --grid task=hover"
+    assert resume in output and output.rstrip().endswith("--resume"), output[-3000:]
+    assert "Tuner.restore" not in output  # Tune's own advice is for Python, not this command
+    table = (tmp_path / "sweeps" / "sweep" / "results.md").read_text()
+    assert "| hover | ppo |" in table and " of 4 trials finished" in table, table
     done_before = {
         p.parent.name: p.stat().st_mtime_ns
         for p in tmp_path.glob("hover-*/metrics.csv")
         if len(p.read_text().splitlines()) == 3
     }
     assert 1 <= len(done_before) < 4, done_before
-    resumed = _sweep(tmp_path, "--grid task=hover algo=ppo seed=0..3 --cpus 1 --resume")
+    resumed = _sweep(
+        tmp_path, stale_cluster, "--grid task=hover algo=ppo seed=0..3 --cpus 1 --resume"
+    )
     output, _ = resumed.communicate(timeout=400)
     assert resumed.returncode == 0, output[-3000:]
     for run in tmp_path.glob("hover-*"):
@@ -104,6 +144,10 @@ def test_resume_after_an_interruption_runs_only_the_missing_trials(tmp_path):
         ("--grid task=hover --search algo=choice:ppo,sac", "unknown algorithm 'sac'"),
         ("--grid task=hover algo=ppo --search gamma=uniform:0.9:1.5", "gamma"),
         ("--grid task=hover algo=ppo --resume", "nothing to resume"),
+        ("--grid task=hover algo=ppo --name ../../etc", "one folder name"),
+        ("--grid task=hover,hover algo=ppo", "hover given twice"),
+        ("--grid task=hover algo=ppo seed=0..100000000", "at most 10,000 trials"),
+        ("--grid task=hover algo=ppo --steps 10000000000000000000", "at most 10,000,000,000"),
     ],
 )
 def test_bad_sweeps_are_refused_before_ray_starts(tmp_path, options, message):
@@ -116,3 +160,80 @@ def test_bad_sweeps_are_refused_before_ray_starts(tmp_path, options, message):
     )
     assert done.returncode == 2 and message in done.stderr, done.stderr
     assert time.monotonic() - started < 30 and not (tmp_path / "sweeps").exists()
+
+
+def test_grids_are_checked_before_they_are_built():
+    started = time.monotonic()
+    with pytest.raises(S.SweepError, match="100,000,001 values"):
+        S.parse_grid(["seed=0..100000000"])
+    with pytest.raises(S.SweepError, match=r"the sweep has 10,100 trials"):
+        S.check_trials(S.parse_grid(["task=hover", "algo=ppo", "seed=0..100"]), {}, samples=100)
+    assert time.monotonic() - started < 5  # nothing of that size was built
+    with pytest.raises(S.SweepError, match=r"0\.0001 given twice"):
+        S.parse_grid(["learning_rate=1e-4,0.0001"])  # equal values, spelt differently
+    with pytest.raises(S.SweepError, match="seed is already an axis"):
+        S.parse_grid(["seed=0", "seed=1"])
+    with pytest.raises(S.SweepError, match="would share the run folder"):  # 6 digits alike
+        S.check_trials(
+            S.parse_grid(["task=hover", "algo=ppo", "learning_rate=1e-4,1.0000001e-4"]), {}
+        )
+    for bad in ("../../etc", "a/b", "..", ".hidden", "", "x" * 101):
+        with pytest.raises(S.SweepError, match="one folder name"):
+            S.check_name(bad)
+    S.check_name("lr-search_2.v1")
+
+
+def test_a_new_sweep_refuses_run_folders_it_did_not_make(tmp_path):
+    # a `quadsitl train` run where the sweep's first trial would go (no --steps: same name)
+    taken = tmp_path / "hover-ppo-fast-seed0"
+    taken.mkdir()
+    (taken / "config.json").write_text("{}")
+    done = subprocess.run(
+        cli(f"sweep --runs {tmp_path} --grid task=hover algo=ppo seed=0..1"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2 and "already hold a run that it did not make" in done.stderr
+    assert str(taken) in done.stderr and not (tmp_path / "sweeps").exists()
+    # in a trial (a searched run's folder is known only then): refused, never adopted
+    with pytest.raises(S.SweepError, match="holds a run that this sweep did not make"):
+        S.claim(taken, "/runs/sweeps/a")
+    fresh = tmp_path / "fresh"
+    S.claim(fresh, "/runs/sweeps/a")  # a new folder: marked as the sweep's
+    (fresh / "config.json").write_text("{}")
+    S.claim(fresh, "/runs/sweeps/a")  # its own run, restarted: continued
+    with pytest.raises(S.SweepError, match=r"\(sweep /runs/sweeps/a\)"):
+        S.claim(fresh, "/runs/sweeps/b")
+
+
+def test_one_bad_row_never_costs_the_finished_trials_their_results():
+    good = {
+        "task": "hover",
+        "algo": "ppo",
+        "run": "runs/a",
+        "error": "",
+        "finished": True,
+        "wall_seconds": 10.0,
+        "env_steps": 8192,
+        "mean_return": 5.0,
+        "success_rate": 1.0,
+        "test_success": 1.0,
+        "test_metric": 0.02,
+        "reach_seconds": 4.0,
+        "reach_steps": 4096,
+    }
+    bad = {
+        "task": "hover",
+        "algo": "ppo",
+        "run": "runs/b",
+        "error": "",
+        "finished": True,
+        "test_success": 0.5,
+    }  # no wall clock, steps or training metrics
+    never = S.result_row(None, None, None)  # a trial an interruption kept from starting
+    failed = {**S.result_row(None, None, "Traceback ...\nValueError: boom"), "run": "runs/c"}
+    text = S.results_text([good, bad, never, failed])
+    assert "| hover | ppo | 2 | 1.00 ± 0.00 |" in text, text
+    assert "| hover | PPO | 75% ± 25% (100%, 50%) |" in text, text
+    assert "- runs/c: ValueError: boom" in text and "2 of 4 trials finished" in text, text

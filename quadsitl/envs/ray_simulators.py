@@ -15,6 +15,7 @@ simulator is placed.
 from __future__ import annotations
 
 import contextlib
+import os
 import socket
 from typing import Any
 
@@ -24,6 +25,19 @@ from quadsitl.mavlink.motor_client import SimulatorError
 PLACE_TIMEOUT = 60.0  # s for Ray to place an actor and its simulator to start
 CALL_TIMEOUT = 5.0  # s for an actor to answer a question about its simulator
 LOCAL = "local"  # ray=True: a Ray started here, or the cluster named by RAY_ADDRESS
+
+
+def ray_target(address: str | None) -> tuple[str, str]:
+    """(the address for ``ray.init``, what it is in words). Joining a cluster is explicit:
+    ``address`` (other than ``"local"``), else the environment's RAY_ADDRESS; otherwise
+    ``"local"``, a private Ray started here. Never Ray's own default, which joins the
+    cluster that its ``ray_current_cluster`` file names — even one long dead."""
+    if address and address != LOCAL:
+        return address, f"the Ray cluster at {address}"
+    named = os.environ.get("RAY_ADDRESS", "").strip()
+    if named:
+        return named, f"the Ray cluster at {named} (from RAY_ADDRESS)"
+    return LOCAL, "a private local Ray"
 
 
 def check_ray_address(address: str) -> None:
@@ -51,13 +65,14 @@ def import_ray() -> Any:
 
 def join_ray(address: str) -> None:
     """Use the Ray this process already joined, or join ``address`` (``"local"``: start
-    one here unless RAY_ADDRESS names a cluster)."""
+    a private one here unless RAY_ADDRESS names a cluster; :func:`ray_target`)."""
     ray = import_ray()
     if ray.is_initialized():
         return
-    check_ray_address(address)
+    target, _ = ray_target(address)
+    check_ray_address(target)
     ray.init(
-        address=None if address == LOCAL else address,
+        address=target,
         include_dashboard=False,
         log_to_driver=False,
         configure_logging=False,
