@@ -176,12 +176,15 @@ class MotorClient:
             if message.get_type() == "STATUSTEXT":
                 self._collect(message)
 
-    def _exchange(self, what: str, done: Any) -> Any:
+    def _exchange(self, what: str, done: Any, eager: bool = False) -> Any:
         """Wait for the message that completes the exchange just sent (``done(message)``
-        True), sending the same frames again while it does not come; that message."""
+        True), sending the same frames again while it does not come; that message.
+        ``eager``: resend after a few usual round trips (a lockstep step, whose repeat
+        the simulator recognises), else after ``resend_after`` (a command: the fewer
+        needless repeats, the fewer late acknowledgements)."""
         seq, messages, sent_at = self._outgoing
         deadline = sent_at + self.timeout
-        wait = resend_wait(self.round_trip, self.resend_after)
+        wait = resend_wait(self.round_trip, self.resend_after) if eager else self.resend_after
         resent = False
         while True:
             while self._inbox:
@@ -209,10 +212,10 @@ class MotorClient:
             f"{self.timeout:g} s" + (f" (it said: {recent})" if recent else "")
         )
 
-    def _wait_for(self, wanted: str, what: str, accept: Any = None) -> Any:
+    def _wait_for(self, wanted: str, what: str, accept: Any = None, eager: bool = False) -> Any:
         """The next ``wanted`` message (that ``accept`` takes), resending meanwhile."""
         return self._exchange(
-            what, lambda m: m.get_type() == wanted and (accept is None or accept(m))
+            what, lambda m: m.get_type() == wanted and (accept is None or accept(m)), eager
         )
 
     def _collect(self, message: Any) -> None:
@@ -296,13 +299,20 @@ class MotorClient:
             [self._command_long(STAGE_MOTION, *motion), self._command_long(RESET_STATE, *pose)]
         )
         results: dict[int, int] = {}
+        where = np.asarray(position_ned, float)
 
         def done(message: Any) -> bool:
             kind = message.get_type()
             if kind == "COMMAND_ACK" and message.command in (STAGE_MOTION, RESET_STATE):
                 results[message.command] = int(message.result)
                 return message.result != mav.MAV_RESULT_ACCEPTED
-            return kind == "ODOMETRY" and RESET_STATE in results  # the state follows the ACK
+            # The state follows the ACK, and is where the reset put it (a late answer
+            # of an earlier reset, resent, is not taken for it).
+            return (
+                kind == "ODOMETRY"
+                and RESET_STATE in results
+                and np.allclose([message.x, message.y, message.z], where, atol=1e-3)
+            )
 
         self._exchange("state after reset", done)
         refused = [r for r in results.values() if r != mav.MAV_RESULT_ACCEPTED]
