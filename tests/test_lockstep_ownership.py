@@ -20,6 +20,7 @@ from quadsitl.envs.sim_process import SimProcess
 from quadsitl.mavlink.fleet_client import FleetClient
 from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_MOTION
+from quadsitl.mavlink.ownership import OWNER_SILENCE, Ownership
 from quadsitl.mavlink.runner import SimConfig
 from tests.conftest import OBS_TOLERANCE, REWARD_TOLERANCE, fly_both, run_cli
 
@@ -179,3 +180,25 @@ def test_an_unsigned_lockstep_link_beyond_loopback_refuses_to_start():
     # With a key it is allowed; on loopback no key is needed.
     SimConfig(hil_url="udpin:0.0.0.0:4560", lockstep=True, signing_key=bytes(range(32))).validate()
     SimConfig(hil_url="udpin:127.0.0.1:4560", lockstep=True).validate()
+
+
+def test_ownership_lapses_after_the_owners_silence_and_only_the_owner_releases():
+    """The rule the simulator applies to every message on its motor link (wall times
+    given, so the 10 s of silence need not be waited for)."""
+    owner, other = ("127.0.0.1", 1000), ("127.0.0.1", 2000)
+    link = Ownership()
+    assert link.admit(other, "HEARTBEAT", 0.0) and link.owner is None  # hello takes nothing
+    assert link.admit(owner, "COMMAND_LONG", 0.0) and link.owner == owner
+    assert not link.admit(other, "COMMAND_LONG", 1.0)
+    assert link.tell(other, 1.0) == "lockstep in use by 127.0.0.1:1000"
+    assert link.tell(other, 1.1) is None  # not more often than every 0.5 s
+    link.release(other)  # a stranger's release changes nothing
+    assert link.owner == owner
+    assert link.admit(owner, "SET_ACTUATOR_CONTROL_TARGET", 5.0)
+    assert not link.admit(other, "COMMAND_LONG", 5.0 + OWNER_SILENCE - 0.1)
+    assert link.admit(other, "COMMAND_LONG", 5.0 + OWNER_SILENCE + 0.1)  # silent: lapsed
+    assert link.owner == other
+    link.release(other)
+    assert link.owner is None
+    assert link.admit(owner, "COMMAND_LONG", 100.0, may_take=False)  # unsigned: handled
+    assert link.owner is None  # on to the signature check, but takes nothing
