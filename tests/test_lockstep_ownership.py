@@ -27,12 +27,12 @@ from tests.conftest import OBS_TOLERANCE, REWARD_TOLERANCE, fly_both, run_cli
 RATES = ["--physics-rate", "100", "--control-rate", "20", "--gcs", "none", "--api", "none"]
 
 
-@pytest.fixture
-def running_sim():
-    """A simulator that is up (a client has connected and closed, handing it back)."""
-    sim = SimProcess(RATES)
-    probe = FleetClient("127.0.0.1", sim.port, 1)
-    deadline = time.monotonic() + 60
+def _started(vehicles: int) -> SimProcess:
+    """A simulator of ``vehicles`` that is up (a client has connected and closed,
+    handing it back): a loaded machine may take long to start one."""
+    sim = SimProcess(["--vehicles", str(vehicles), *RATES])
+    probe = FleetClient("127.0.0.1", sim.port, vehicles)
+    deadline = time.monotonic() + 90
     while True:
         try:
             probe.connect()
@@ -40,6 +40,12 @@ def running_sim():
         except SimulatorError:
             assert time.monotonic() < deadline and sim.alive, "the simulator did not start"
     probe.close()
+    return sim
+
+
+@pytest.fixture
+def running_sim():
+    sim = _started(1)
     yield sim
     sim.stop()
 
@@ -138,17 +144,19 @@ def test_after_a_stalled_simulator_the_env_refuses_to_step_until_reset_then_matc
     """SIGSTOP past the timeout, SIGCONT: the simulator then applies the command the
     env gave up on. The env must not run one action behind: it refuses to step, and a
     reset puts both vehicles back in step with the in-process env."""
+    sim = _started(2)
     local = gym.make_vec("QuadSITL/Hover-v0", 2, "vector_entry_point", init_position_noise=0.3)
     remote = gym.make_vec(
         "QuadSITL/Hover-v0",
         2,
         "vector_entry_point",
         backend="mavlink",
+        sim_address=f"127.0.0.1:{sim.port}",
         vehicles_per_sim=2,
         timeout=0.5,
         init_position_noise=0.3,
     )
-    pid = remote.unwrapped.backend.processes[0].process.pid
+    pid = sim.process.pid
     try:
         local.reset(seed=4)
         remote.reset(seed=4)
@@ -169,6 +177,7 @@ def test_after_a_stalled_simulator_the_env_refuses_to_step_until_reset_then_matc
     finally:
         remote.close()
         local.close()
+        sim.stop()
 
 
 def test_an_unsigned_lockstep_link_beyond_loopback_refuses_to_start():
