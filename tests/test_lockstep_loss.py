@@ -15,10 +15,10 @@ from quadsitl.envs.sim_process import SimProcess
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.fleet_client import FleetClient
 from quadsitl.mavlink.hil_state import WireState
-from quadsitl.mavlink.motor_client import SimulatorError
+from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
 from quadsitl.mavlink.motor_path import RESET_STATE
-from quadsitl.physics import PAPER
-from tests.conftest import OBS_TOLERANCE, fly_both
+from quadsitl.physics import PAPER, Fleet
+from tests.conftest import OBS_TOLERANCE, MotorSim, fly_both
 
 RATES = ["--physics-rate", "100", "--control-rate", "20", "--gcs", "none", "--api", "none"]
 
@@ -165,3 +165,41 @@ def test_a_signed_fleet_matches_in_process():
     finally:
         local.close()
         remote.close()
+
+
+def test_motor_client_resends_through_ten_percent_loss_and_steps_each_command_once():
+    """The single-vehicle client through a relay losing 10 % each way: it connects,
+    resets, arms and steps 150 times; every step advances exactly one control period
+    and the flight is the in-process physics' (a repeat is never stepped twice)."""
+    sim = MotorSim("--lockstep")
+    airframe = PAPER
+    hover = airframe.hover_rotor_speed / airframe.max_rotor_speed
+    try:
+        with LossyRelay(("127.0.0.1", sim.hil_port), drop=0.1, seed=7) as relay:
+            client = MotorClient("127.0.0.1", relay.port, timeout=5.0)
+            deadline = time.monotonic() + 60
+            while True:  # the process needs a moment to start
+                try:
+                    client.connect()
+                    break
+                except SimulatorError:
+                    assert time.monotonic() < deadline and sim.process.poll() is None
+            start = client.reset([0.0, 0.0, -6.0], velocity_ned=[0.3, 0.0, 0.0])
+            client.arm()
+            fleet = Fleet(1, airframe, dt=0.001)
+            fleet.reset(start.to_physics(airframe.gear_height))
+            rng = np.random.default_rng(1)
+            for i in range(150):
+                controls = np.clip(hover + rng.normal(0, 0.05, 4), 0, 1).astype(np.float32)
+                answer = client.step(controls)
+                assert answer.time_usec == start.time_usec + (i + 1) * 4000
+                fleet.step(controls.astype(np.float64) * airframe.max_rotor_speed, n_substeps=4)
+                expected = WireState.from_physics(
+                    fleet.state[0], airframe.gear_height, answer.time_usec, 0, 0.0
+                )
+                np.testing.assert_allclose(answer.position_ned, expected.position_ned, atol=1e-4)
+                np.testing.assert_allclose(answer.velocity_frd, expected.velocity_frd, atol=1e-4)
+            assert relay.dropped > 10 and client.resent > 5
+            client.close()
+    finally:
+        sim.stop()

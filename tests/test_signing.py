@@ -105,16 +105,23 @@ def test_motor_commands_need_the_key(signed_sim):
     signed.reset([0.0, 0.0, -5.0])
     signed.arm()
     assert signed.step([0.7] * 4, lockstep=True).time_usec > 0
-    # Without the key: the client is sent nothing, not even a heartbeat (its own
-    # heartbeat passes, unsigned, but only a signed frame makes a peer live).
+    # While the signed client owns the motor link, another is refused outright ...
+    with (
+        MotorClient("127.0.0.1", signed_sim.hil_port, timeout=2.5) as other,
+        pytest.raises(SimulatorError, match=r"lockstep in use by 127\.0\.0\.1:"),
+    ):
+        other.connect()
+    assert signed.step([0.7] * 4, lockstep=True).time_usec > 0  # the signed one still flies
+    signed.close()  # hands the link back
+    # ... and without the key nobody takes the free link: the client is sent nothing,
+    # not even a heartbeat (its own heartbeat passes, unsigned, but only a signed frame
+    # makes a peer live), nor does a motor command pass.
     with MotorClient("127.0.0.1", signed_sim.hil_port, timeout=2.5) as unsigned:
         with pytest.raises(SimulatorError, match="heartbeat"):
             unsigned.connect()
-        unsigned._send(unsigned.mav.hil_actuator_controls_encode(0, [0.7] * 16, 128, 1))
+        unsigned._send([unsigned.mav.hil_actuator_controls_encode(0, [0.7] * 16, 128, 1)])
         with pytest.raises(SimulatorError, match="state answer"):
             unsigned.receive_state()
-    assert signed.step([0.7] * 4, lockstep=True).time_usec > 0  # the signed one still flies
-    signed.close()
 
 
 def test_keys_from_passphrase_and_files(tmp_path):

@@ -8,14 +8,21 @@ answers (the simulators work in parallel); ``reset`` sends the reset commands of
 vehicles to reset (docs/mavlink.md) and arms them. Lost datagrams are resent by the
 :class:`~quadsitl.mavlink.fleet_client.FleetClient` of each process.
 
+Never out of step: after a :class:`SimulatorError` (a simulator stalled past the
+timeout, died, or answered for the wrong time) the simulators may have applied a
+command the env never saw answered, so ``step`` refuses until a reset of every
+vehicle, which starts each simulator afresh and takes its clock from its answer.
+
 Tasks without a ground fly ``FLYING_ALTITUDE`` metres up in the simulator (which has
 one), far enough that every task's bounds end an episode before the ground is near.
 """
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
+from collections.abc import Iterator
 
 import numpy as np
 from gymnasium.error import ClosedEnvironmentError
@@ -46,12 +53,14 @@ class RemoteFleet(VehicleStates):
         self.gear = airframe.gear_height
         self.offset = np.array([0.0, 0.0, 0.0 if ground else FLYING_ALTITUDE])
         self.closed = False
+        self.out_of_step = True  # until a reset has put every vehicle where it is here
 
     def connect(self, clients: list[FleetClient]) -> None:
         """Fly through these clients (new simulators after a restart)."""
         if sum(c.n for c in clients) != self.n:
             raise ValueError(f"the clients fly {sum(c.n for c in clients)} vehicles, not {self.n}")
         self.clients = clients
+        self.out_of_step = True  # new simulators: the next reset sets every vehicle
         starts = np.cumsum([0] + [c.n for c in clients])
         self.rows = [slice(int(a), int(b)) for a, b in itertools.pairwise(starts)]
 
@@ -72,17 +81,23 @@ class RemoteFleet(VehicleStates):
         self.check_open()
         super().reset(state, contact, mask)  # checks the input, as the local fleet does
         chosen = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
+        if self.out_of_step and not chosen.all():
+            raise SimulatorError(
+                "the simulators may be out of step with this env after an earlier error; "
+                "reset every env at once (no mask) to start them all afresh"
+            )
         if np.ptp(self.state[chosen][:, L.ROTORS], axis=1).max(initial=0.0) > 1e-9:
             raise ValueError("the MAVLink reset sets all four rotors to one speed")
-        for client, rows in zip(self.clients, self.rows, strict=True):
-            local = np.flatnonzero(chosen[rows])
-            if local.size == 0:
-                continue
-            states = self.state[rows][local].copy()
-            states[:, L.POS] += self.offset
-            wire = WireState.from_physics(states, self.gear, 0, None, None)
-            answer = client.reset(local.tolist(), wire, frames.enu_to_ned(states[:, L.VEL]))
-            self._take(rows, answer, local)
+        with self._in_step():
+            for client, rows in zip(self.clients, self.rows, strict=True):
+                local = np.flatnonzero(chosen[rows])
+                if local.size == 0:
+                    continue
+                states = self.state[rows][local].copy()
+                states[:, L.POS] += self.offset
+                wire = WireState.from_physics(states, self.gear, 0, None, None)
+                answer = client.reset(local.tolist(), wire, frames.enu_to_ned(states[:, L.VEL]))
+                self._take(rows, answer, local)
 
     def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
         self.check_open()
@@ -90,19 +105,33 @@ class RemoteFleet(VehicleStates):
         if not np.isfinite(cmd).all():
             raise ValueError(f"rotor commands must be finite, got {cmd}")
         controls = np.clip(cmd / self.max_rotor_speed[:, None], 0.0, 1.0)
+        if self.out_of_step:
+            raise SimulatorError(
+                "an earlier simulator error may have left the simulators a command ahead "
+                "of this env; call reset() to put every vehicle back in step"
+            )
         before = [client.time_usec for client in self.clients]
-        for client, rows in zip(self.clients, self.rows, strict=True):
-            client.send_step(controls[rows])
-        for client, rows, start in zip(self.clients, self.rows, before, strict=True):
-            answer = client.receive_step()
-            if answer.time_usec - start != self.period_usec:
-                raise SimulatorError(
-                    f"the simulator advanced {answer.time_usec - start} µs for one "
-                    f"command; the task needs {self.period_usec} µs (start it with --lockstep "
-                    f"--physics-rate {1 / self.dt:g} --control-rate {1e6 / self.period_usec:g})"
-                )
-            self._take(rows, answer)
+        with self._in_step():
+            for client, rows in zip(self.clients, self.rows, strict=True):
+                client.send_step(controls[rows])
+            for client, rows, start in zip(self.clients, self.rows, before, strict=True):
+                answer = client.receive_step()
+                if answer.time_usec - start != self.period_usec:
+                    raise SimulatorError(
+                        f"the simulator advanced {answer.time_usec - start} µs for one "
+                        f"command; the task needs {self.period_usec} µs (start it with "
+                        f"--lockstep --physics-rate {1 / self.dt:g} --control-rate "
+                        f"{1e6 / self.period_usec:g})"
+                    )
+                self._take(rows, answer)
         self.time += n_substeps * self.dt
+
+    @contextlib.contextmanager
+    def _in_step(self) -> Iterator[None]:
+        """Whatever fails inside leaves the env out of step until the next reset."""
+        self.out_of_step = True
+        yield
+        self.out_of_step = False
 
     def _take(self, rows: slice, answer: WireState, local: np.ndarray | None = None) -> None:
         """The physics state of the answered vehicles (``local``: of these only)."""

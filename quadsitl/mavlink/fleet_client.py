@@ -35,15 +35,18 @@ from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.commands import FORCE_MAGIC
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.mavlink.links import MAX_DATAGRAM, is_loopback
-from quadsitl.mavlink.motor_client import SPIN_SECONDS, SimulatorError
-from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_MOTION
+from quadsitl.mavlink.motor_client import (
+    RESEND_AFTER,
+    SPIN_SECONDS,
+    SimulatorError,
+    refusal,
+    resend_wait,
+)
+from quadsitl.mavlink.motor_path import RELEASE_LOCKSTEP, RESET_STATE, STAGE_MOTION
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
 
 HEARTBEAT_WAIT = 2.5  # s: the shortest wait for every vehicle's heartbeat (1 Hz each)
-RESEND_AFTER = 0.05  # s: the longest wait for an answer before the commands go again
-MIN_RESEND_AFTER = 0.001  # s: the shortest; in between, RESEND_ROUND_TRIPS usual round trips
-RESEND_ROUND_TRIPS = 2.5
 ODOMETRY = mav.MAVLINK_MSG_ID_ODOMETRY
 ACTUATOR_OUTPUT_STATUS = mav.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS
 NAMED_VALUE_INT = mav.MAVLINK_MSG_ID_NAMED_VALUE_INT
@@ -150,14 +153,23 @@ class FleetClient:
         """Keep the simulator's texts, long ones put together from their chunks."""
         data = chunk.rstrip(b"\0")
         if text_id == 0:
-            self.statustexts.append(data.decode("utf-8", "replace"))
+            self._text(data.decode("utf-8", "replace"))
             return
         if seq == 0 or self._chunks[0] != text_id:
             self._chunks = (text_id, b"")
         self._chunks = (text_id, self._chunks[1] + data)
         if len(data) < STATUSTEXT_CHUNK:  # the last chunk
-            self.statustexts.append(self._chunks[1].decode("utf-8", "replace"))
+            text = self._chunks[1].decode("utf-8", "replace")
             self._chunks = (0, b"")
+            self._text(text)
+
+    def _text(self, text: str) -> None:
+        """Keep a text; one saying the simulator belongs to another client ends the
+        exchange at once (waiting would not change it)."""
+        self.statustexts.append(text)
+        refused = refusal(text, self._where())
+        if refused is not None:
+            raise refused
 
     def _where(self) -> str:
         return f"{self.address[0]}:{self.address[1]}"
@@ -253,6 +265,7 @@ class FleetClient:
         self._sent_at = time.monotonic()
         # A state counts only once its reset is acknowledged (the state follows the ACK).
         self._collect(groups, rows, lambda i, t: RESET_STATE in acks[i], acks, "reset answer")
+        self.time_usec = int(self.answer.time_usec)  # the next round starts there
         return self.answer
 
     def _actuator_frame(self, stamp: int, i: int, row: list[float]) -> Any:
@@ -314,9 +327,7 @@ class FleetClient:
             self.round_trip = took if math.isnan(mean) else 0.9 * mean + 0.1 * took
 
     def _resend_wait(self) -> float:
-        if math.isnan(self.round_trip):
-            return self.resend_after
-        return min(self.resend_after, max(MIN_RESEND_AFTER, RESEND_ROUND_TRIPS * self.round_trip))
+        return resend_wait(self.round_trip, self.resend_after)
 
     def _take(
         self,
@@ -391,6 +402,14 @@ class FleetClient:
             self._rows[t[0]] = None
 
     def close(self) -> None:
+        """Hand the simulator back (it then serves the next client at once; were this
+        lost, it frees itself after its owner's silence) and close the socket."""
+        try:
+            release = self._command_frame(RELEASE_LOCKSTEP, 0)
+            for _ in range(2):  # no answer awaited: sent twice against a loss
+                self._send([release])
+        except OSError:
+            pass
         self.sock.close()
 
 

@@ -30,7 +30,13 @@ from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink import telemetry as T
 from quadsitl.mavlink.hil_state import ROW_BY_ROW, WireState
 from quadsitl.mavlink.links import Link, Peer
-from quadsitl.mavlink.motor_path import LOCKSTEP_IDLE, answer_parts, check_controls
+from quadsitl.mavlink.motor_path import (
+    LOCKSTEP_IDLE,
+    RELEASE_LOCKSTEP,
+    answer_parts,
+    check_controls,
+)
+from quadsitl.mavlink.ownership import Ownership, may_take
 from quadsitl.mavlink.server import MOTOR_LINK, MavlinkServer
 from quadsitl.mavlink.signing import is_signed
 from quadsitl.mavlink.tlog import TlogWriter
@@ -63,6 +69,7 @@ class FleetServer:
             for schedule in server.schedules.values():  # the vehicles' telemetry takes turns
                 schedule.offset = i / len(servers) * T.FASTEST_INTERVAL
         self._round_wall = -math.inf  # wall time of the last round command
+        self.ownership = Ownership()  # of the motor link: one client at a time
 
     # --- the loop's hooks -------------------------------------------------------------
     def receive(self, link: Link, received_at: float | None = None) -> None:
@@ -79,6 +86,8 @@ class FleetServer:
         signing = any(server.signing is not None for server in self.servers)
         fast = FAST_IDS if link.name == MOTOR_LINK and not signing else frozenset()
         for message, peer in link.receive(fast):
+            if link.name == MOTOR_LINK and not self._admit(message, peer.address, link):
+                continue
             if isinstance(message, FC.Frame):  # an unsigned round command, parsed fast
                 link.accept(peer)  # (only when signing is off)
                 # time_usec, controls[8], group_mlx, target_system, target_component
@@ -152,6 +161,35 @@ class FleetServer:
         the console once."""
         for index, server in enumerate(self.servers):
             server.statustext(severity, text, echo=index == 0)
+
+    # --- ownership of the motor link (ownership.py) ------------------------------------
+    def _admit(self, message: Any, address: Any, link: Link) -> bool:
+        """Whether a message on the motor link comes from its owner (or takes a free
+        link); a stranger is told who owns it, and hears nothing else there."""
+        now = time.monotonic()
+        fast = isinstance(message, FC.Frame)
+        if address == self.ownership.owner and (fast or message.get_type() != "COMMAND_LONG"):
+            self.ownership.heard = now  # the owner's round or answer: the hot path
+            return True
+        check = self.servers[0].signing
+        if fast:  # an unsigned round command
+            kind, takes = "SET_ACTUATOR_CONTROL_TARGET", check is None
+        else:
+            kind, takes = message.get_type(), may_take(check, message)
+        if kind == "COMMAND_LONG" and message.command == RELEASE_LOCKSTEP:
+            if takes:
+                self.ownership.release(address)
+            link.only = self.ownership.owner
+            return False
+        admitted = self.ownership.admit(address, kind, now, takes)
+        link.only = self.ownership.owner
+        if not admitted:
+            text = self.ownership.tell(address, now)
+            if text is not None:
+                server = self.servers[0]
+                notice = server.encoder.statustext_encode(Severity.WARNING, text.encode(), 0, 0)
+                link.send_to(link.pack(notice, server.system_id), address)
+        return admitted
 
     # --- routing ----------------------------------------------------------------------
     def _dispatch(self, message: Any, link: Link, peer: Peer) -> None:

@@ -98,6 +98,7 @@ class Link:
         self._held_limit = FC.DATAGRAM_LIMIT  # bytes per datagram when released
         self.peers: dict[Any, Peer] = {}
         self.destination: tuple[str, int] | None = None
+        self.only: Any = None  # when set, the one peer that hears what is sent here
         self.bad_frames = 0
         self.sent = 0
         try:
@@ -264,9 +265,11 @@ class Link:
             return
         now = time.monotonic()
         targets = []
-        if self.destination is not None:
+        if self.destination is not None and self.only in (None, self.destination):
             targets.append(self.destination)
         for address, peer in list(self.peers.items()):
+            if self.only is not None and address != self.only:
+                continue
             if peer.sock is not None:
                 try:
                     peer.sock.send(frame)
@@ -285,6 +288,15 @@ class Link:
             with contextlib.suppress(OSError):
                 self.sock.sendto(frame, target)
         self.sent += 1
+
+    def send_to(self, frame: bytes, address: Any) -> None:
+        """Write packed frames to one peer only (not held, whatever :attr:`only` says)."""
+        peer = self.peers.get(address)
+        with contextlib.suppress(OSError):
+            if peer is not None and peer.sock is not None:
+                peer.sock.send(frame)
+            elif self.kind != "tcpin":
+                self.sock.sendto(frame, address)
 
     def close(self) -> None:
         for peer in self.peers.values():

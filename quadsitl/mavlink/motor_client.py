@@ -2,8 +2,15 @@
 
 Talks to ``quadsitl sim --hil udpin:HOST:PORT`` (or any of its links) over one UDP
 socket with its own pymavlink codec: HIL_ACTUATOR_CONTROLS out, the state answer
-(:class:`~quadsitl.mavlink.hil_state.WireState`) back. Used by the MAVLink gym
-environment and the lockstep benchmark; an example for anyone writing their own.
+(:class:`~quadsitl.mavlink.hil_state.WireState`) back. Used by the lockstep benchmark;
+an example for anyone writing their own.
+
+Lost datagrams are resent as the fleet client resends them (:func:`resend_wait`): what
+goes unanswered goes again after 2.5 usual round trips (at least 1 ms, at most
+``resend_after``, doubling while nothing comes back), as the same frames (same
+sequence numbers), which the simulator recognises: a repeated lockstep command is
+answered without stepping again; the commands (arm, the reset pair) are idempotent.
+:class:`SimulatorError` only when nothing answers for ``timeout`` seconds.
 """
 
 from __future__ import annotations
@@ -23,15 +30,45 @@ from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.commands import FORCE_MAGIC
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.mavlink.links import is_loopback
-from quadsitl.mavlink.motor_path import ARMED_FLAG, LOCKSTEP_FLAG, RESET_STATE, STAGE_MOTION
+from quadsitl.mavlink.motor_path import (
+    ARMED_FLAG,
+    LOCKSTEP_FLAG,
+    RELEASE_LOCKSTEP,
+    RESET_STATE,
+    STAGE_MOTION,
+    check_controls,
+)
+from quadsitl.mavlink.ownership import BUSY_PREFIX, OWNER_SILENCE
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
 
 SPIN_SECONDS = 0.002  # poll this long for an answer before sleeping in select()
+RESEND_AFTER = 0.05  # s: the longest wait for an answer before the commands go again
+MIN_RESEND_AFTER = 0.001  # s: the shortest; in between, RESEND_ROUND_TRIPS usual round trips
+RESEND_ROUND_TRIPS = 2.5
 
 
 class SimulatorError(RuntimeError):
     """The simulator did not answer in time, or refused a command."""
+
+
+def resend_wait(round_trip: float, longest: float) -> float:
+    """How long to wait for an answer before sending again: RESEND_ROUND_TRIPS usual
+    round trips (``round_trip``, NaN while unknown), within MIN_RESEND_AFTER..``longest``."""
+    if math.isnan(round_trip):
+        return longest
+    return min(longest, max(MIN_RESEND_AFTER, RESEND_ROUND_TRIPS * round_trip))
+
+
+def refusal(text: str, where: str) -> SimulatorError | None:
+    """The error for a simulator's text saying it belongs to another client, or None."""
+    if not text.startswith(BUSY_PREFIX):
+        return None
+    return SimulatorError(
+        f"the simulator at {where} is {text}: a lockstep simulator serves one client at a "
+        f"time (it is free once that client closes, or after {OWNER_SILENCE:g} s of its "
+        "silence; docs/security.md)"
+    )
 
 
 class _Capture:
@@ -50,6 +87,10 @@ class MotorClient:
         timeout: wall seconds to wait for any answer before :class:`SimulatorError`.
         signing_key: 32-byte MAVLink 2 key if the simulator requires signing.
         system_id, component_id: this client's MAVLink identity.
+        resend_after: the longest wait for an answer before sending again.
+
+    Attributes:
+        resent: exchanges that needed a resend.
     """
 
     def __init__(
@@ -60,9 +101,10 @@ class MotorClient:
         signing_key: bytes | None = None,
         system_id: int = 255,
         component_id: int = 191,
+        resend_after: float = RESEND_AFTER,
     ) -> None:
         self.address = (host, port)
-        self.timeout = timeout
+        self.timeout, self.resend_after = timeout, resend_after
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1" if is_loopback(host) else "0.0.0.0", 0))
         self.sock.setblocking(False)
@@ -76,16 +118,29 @@ class MotorClient:
         self.statustexts: deque[str] = deque(maxlen=100)
         self.state: WireState | None = None
         self.hil_state: Any = None  # the last HIL_STATE_QUATERNION received
+        self.resent = 0
+        self.round_trip = math.nan  # s, running mean of exchanges answered without a resend
         self._pending: dict[str, Any] = {}
         self._inbox: deque[Any] = deque()
         self._controls = [0.0] * 16
+        self._outgoing: tuple[int, list[Any], float] = (0, [], 0.0)  # seq, messages, sent at
+        self._later_than: int | None = None  # the time a step's answer must be later than
 
     # --- plumbing ---------------------------------------------------------------------
-    def _send(self, message: Any) -> None:
-        if self.mav.signing.sign_outgoing:
-            keep_signing_clock(self.mav)
-        self.mav.send(message)
-        self.sock.sendto(self._out.frame, self.address)
+    def _send(self, messages: list[Any], seq: int | None = None) -> None:
+        """``messages`` in one datagram (from sequence number ``seq``: the same frames
+        again, each signed anew, for a resend); kept for :meth:`_exchange` to resend."""
+        if seq is None:
+            seq = self.mav.seq
+            self._outgoing = (seq, messages, time.monotonic())
+        self.mav.seq = seq
+        frames = []
+        for message in messages:
+            if self.mav.signing.sign_outgoing:
+                keep_signing_clock(self.mav)
+            self.mav.send(message)
+            frames.append(self._out.frame)
+        self.sock.sendto(b"".join(frames), self.address)
 
     def _receive(self, deadline: float) -> None:
         """Queue the next datagram's messages, waiting until ``deadline`` for one."""
@@ -107,21 +162,60 @@ class MotorClient:
             self._inbox.extend(self.parser.parse_buffer(data) or [])
             return
 
-    def _wait_for(self, wanted: str, what: str, accept: Any = None) -> Any:
-        deadline = time.monotonic() + self.timeout
+    def _drain(self) -> None:
+        """Drop what is waiting but the texts: late answers of earlier exchanges (a
+        resend's), which an answer that cannot be told by its time must not be taken for."""
+        pending = list(self._inbox)
+        self._inbox.clear()
+        while True:
+            try:
+                pending += self.parser.parse_buffer(self.sock.recv(65535)) or []
+            except (BlockingIOError, ConnectionRefusedError):
+                break
+        for message in pending:
+            if message.get_type() == "STATUSTEXT":
+                self._collect(message)
+
+    def _exchange(self, what: str, done: Any, eager: bool = False) -> Any:
+        """Wait for the message that completes the exchange just sent (``done(message)``
+        True), sending the same frames again while it does not come; that message.
+        ``eager``: resend after a few usual round trips (a lockstep step, whose repeat
+        the simulator recognises), else after ``resend_after`` (a command: the fewer
+        needless repeats, the fewer late acknowledgements)."""
+        seq, messages, sent_at = self._outgoing
+        deadline = sent_at + self.timeout
+        wait = resend_wait(self.round_trip, self.resend_after) if eager else self.resend_after
+        resent = False
         while True:
             while self._inbox:
                 message = self._inbox.popleft()
                 self._collect(message)
-                if message.get_type() == wanted and (accept is None or accept(message)):
+                if done(message):
+                    if not resent:
+                        took = time.monotonic() - self._outgoing[2]
+                        mean = self.round_trip
+                        self.round_trip = took if math.isnan(mean) else 0.9 * mean + 0.1 * took
                     return message
-            if time.monotonic() >= deadline:
+            now = time.monotonic()
+            if now >= deadline:
                 break
-            self._receive(deadline)
+            if now - sent_at > wait:
+                self.resent += 1
+                resent = True
+                self._send(messages, seq)
+                sent_at = now
+                wait = min(2 * wait, self.resend_after)  # back off while nothing comes
+            self._receive(min(deadline, sent_at + wait))
         recent = "; ".join(list(self.statustexts)[-3:])
         raise SimulatorError(
             f"no {what} from the simulator at {self.address[0]}:{self.address[1]} within "
             f"{self.timeout:g} s" + (f" (it said: {recent})" if recent else "")
+        )
+
+    def _wait_for(self, wanted: str, what: str, accept: Any = None, eager: bool = False) -> Any:
+        """The next ``wanted`` message (that ``accept`` takes), resending meanwhile."""
+        return self._exchange(
+            what, lambda m: m.get_type() == wanted and (accept is None or accept(m)), eager
         )
 
     def _collect(self, message: Any) -> None:
@@ -129,6 +223,9 @@ class MotorClient:
         kind = message.get_type()
         if kind == "STATUSTEXT":
             self.statustexts.append(message.text)
+            refused = refusal(message.text, f"{self.address[0]}:{self.address[1]}")
+            if refused is not None:
+                raise refused
         elif kind == "HIL_STATE_QUATERNION":
             self.hil_state = message  # PX4's view of the same state (when asked for)
         elif kind == "ACTUATOR_OUTPUT_STATUS":
@@ -156,7 +253,8 @@ class MotorClient:
         """Introduce ourselves (a udpin link learns its peers) and wait for a heartbeat.
         Unless ``hil_state``, ask for answers without HIL_STATE_QUATERNION (this client
         reads ODOMETRY; leaving it out saves encoding and decoding a message a step)."""
-        self._send(self.mav.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0))
+        hello = self.mav.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        self._send([hello])
         heartbeat = self._wait_for("HEARTBEAT", "heartbeat")
         self.target_system = heartbeat.get_srcSystem()
         interval = 0 if hil_state else -1
@@ -164,10 +262,14 @@ class MotorClient:
             mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_HIL_STATE_QUATERNION, interval
         )
 
-    def command(self, command: int, *params: float) -> int:
-        """COMMAND_LONG and its MAV_RESULT (up to 7 params; missing ones are 0)."""
+    def _command_long(self, command: int, *params: float) -> Any:
         values = list(params) + [0.0] * (7 - len(params))
-        self._send(self.mav.command_long_encode(self.target_system, 1, command, 0, *values))
+        return self.mav.command_long_encode(self.target_system, 1, command, 0, *values)
+
+    def command(self, command: int, *params: float) -> int:
+        """COMMAND_LONG and its MAV_RESULT (up to 7 params; missing ones are 0), resent
+        until acknowledged."""
+        self._send([self._command_long(command, *params)])
         ack = self._wait_for(
             "COMMAND_ACK", f"COMMAND_ACK for {command}", lambda m: m.command == command
         )
@@ -187,18 +289,35 @@ class MotorClient:
         rates_frd: ArrayLike = (0.0, 0.0, 0.0),
         rotor_speed: float = math.nan,
     ) -> WireState:
-        """Put the vehicle in a state (local NED; see docs/mavlink.md); the state after it."""
+        """Put the vehicle in a state (local NED; see docs/mavlink.md); the state after it.
+        Both reset commands go in one datagram (a loss takes both or neither), resent
+        together until the reset's ACK and the state after it arrive."""
         motion = [*np.asarray(velocity_ned, float), *np.asarray(rates_frd, float), rotor_speed]
-        result = self.command(STAGE_MOTION, *motion)
-        if result != mav.MAV_RESULT_ACCEPTED:
-            raise SimulatorError(f"reset refused (MAV_RESULT {result}): {self._last_text()}")
-        self.state = None
         pose = [*np.asarray(position_ned, float), *np.asarray(q_ned_frd, float)]
-        result = self.command(RESET_STATE, *pose)
-        if result != mav.MAV_RESULT_ACCEPTED:
-            raise SimulatorError(f"reset refused (MAV_RESULT {result}): {self._last_text()}")
-        if self.state is None:  # the state follows the ACK
-            self._wait_for("ODOMETRY", "state after reset")
+        self._drain()
+        self._send(
+            [self._command_long(STAGE_MOTION, *motion), self._command_long(RESET_STATE, *pose)]
+        )
+        results: dict[int, int] = {}
+        where = np.asarray(position_ned, float)
+
+        def done(message: Any) -> bool:
+            kind = message.get_type()
+            if kind == "COMMAND_ACK" and message.command in (STAGE_MOTION, RESET_STATE):
+                results[message.command] = int(message.result)
+                return message.result != mav.MAV_RESULT_ACCEPTED
+            # The state follows the ACK, and is where the reset put it (a late answer
+            # of an earlier reset, resent, is not taken for it).
+            return (
+                kind == "ODOMETRY"
+                and RESET_STATE in results
+                and np.allclose([message.x, message.y, message.z], where, atol=1e-3)
+            )
+
+        self._exchange("state after reset", done)
+        refused = [r for r in results.values() if r != mav.MAV_RESULT_ACCEPTED]
+        if refused:
+            raise SimulatorError(f"reset refused (MAV_RESULT {refused[0]}): {self._last_text()}")
         assert self.state is not None
         return self.state
 
@@ -211,15 +330,28 @@ class MotorClient:
         """The first half of :meth:`step` (to drive several simulators at once)."""
         self._controls[: L.N_ROTORS] = [float(u) for u in np.asarray(controls).reshape(-1)]
         stamp = self.state.time_usec if self.state is not None else 0
+        # A command the simulator steps for is answered with a later time; any other
+        # (real time, or one it refuses) with the time it has.
+        steps = lockstep and check_controls(self._controls[: L.N_ROTORS]) is None
+        self._later_than = stamp if steps and self.state is not None else None
+        if self._later_than is None:
+            self._drain()
         self._send(
-            self.mav.hil_actuator_controls_encode(
-                stamp, self._controls, ARMED_FLAG if armed else 0, LOCKSTEP_FLAG if lockstep else 0
-            )
+            [
+                self.mav.hil_actuator_controls_encode(
+                    stamp,
+                    self._controls,
+                    ARMED_FLAG if armed else 0,
+                    LOCKSTEP_FLAG if lockstep else 0,
+                )
+            ]
         )
 
     def receive_state(self) -> WireState:
-        """The second half of :meth:`step`: wait for the state answer."""
-        self._wait_for("ODOMETRY", "state answer")
+        """The second half of :meth:`step`: wait for the state answer (an answer of an
+        earlier step, arriving late, is not taken for it)."""
+        after = self._later_than
+        self._wait_for("ODOMETRY", "state answer", lambda m: after is None or m.time_usec > after)
         assert self.state is not None
         return self.state
 
@@ -227,6 +359,12 @@ class MotorClient:
         return self.statustexts[-1] if self.statustexts else "no reason given"
 
     def close(self) -> None:
+        """Hand the simulator back (it then serves the next client at once) and close."""
+        try:
+            for _ in range(2):  # no answer awaited: sent twice against a loss
+                self._send([self._command_long(RELEASE_LOCKSTEP)])
+        except OSError:
+            pass
         self.sock.close()
 
     def __enter__(self) -> MotorClient:

@@ -34,6 +34,7 @@ from quadsitl.vehicle.vehicle import Vehicle
 
 RESET_STATE = mav.MAV_CMD_USER_1  # 31010
 STAGE_MOTION = mav.MAV_CMD_USER_2  # 31011
+RELEASE_LOCKSTEP = mav.MAV_CMD_USER_3  # 31012: the owner hands the motor link back
 ARMED_FLAG = mav.MAV_MODE_FLAG_SAFETY_ARMED  # 128
 LOCKSTEP_FLAG = 1
 LOCKSTEP_IDLE = 5.0  # wall s without lockstep commands before real time resumes
@@ -118,7 +119,8 @@ class MotorPath:
         self.last_command_usec = 0
         self.resets = 0
         self.staged: dict[str, Any] | None = None
-        self.counters = {"accepted": 0, "rejected": 0, "while_disarmed": 0}
+        self.counters = {"accepted": 0, "rejected": 0, "while_disarmed": 0, "repeats": 0}
+        self.last_frame: tuple[Any, ...] | None = None  # the last lockstep command applied
         self._previous_velocity: tuple[float, np.ndarray] | None = None
 
     @property
@@ -150,14 +152,28 @@ class MotorPath:
     def command(self, msg: Any) -> str | None:
         """Apply one motor command (and step, in lockstep). Returns a problem worth
         reporting: the first rejection of each kind (then every 100th), or the first
-        command ignored by a disarmed vehicle (then every 1000th)."""
+        command ignored by a disarmed vehicle (then every 1000th). In lockstep, the same
+        frame again (same sender, sequence number and content: a client resending after
+        a lost answer) is answered without stepping again."""
+        lockstep = bool(msg.flags & LOCKSTEP_FLAG) or self.always_lockstep
+        frame = (
+            msg.get_srcSystem(),
+            msg.get_srcComponent(),
+            msg.get_seq(),
+            bytes(msg.get_payload()),
+        )
+        if lockstep and frame == self.last_frame:
+            self.counters["repeats"] += 1
+            self.last_lockstep_wall = time.monotonic()
+            return None
         problem = self.check(msg)
         if problem is not None:
             return self.reject(*problem)
         warning = self.apply(msg.controls[: L.N_ROTORS], bool(msg.mode & ARMED_FLAG))
         if msg.time_usec:
             self.last_command_usec = msg.time_usec
-        if msg.flags & LOCKSTEP_FLAG or self.always_lockstep:
+        self.last_frame = frame if lockstep else None
+        if lockstep:
             self.last_lockstep_wall = time.monotonic()
             X.advance(self.vehicle)
         return warning
@@ -226,6 +242,7 @@ class MotorPath:
         result = X.reset_state(v, state)
         if result.ok:
             self.staged = None
+            self.last_frame = None  # a command after a reset is never a repeat
             self.resets += 1
             self._previous_velocity = None
         return result

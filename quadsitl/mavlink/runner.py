@@ -31,7 +31,7 @@ import numpy as np
 from quadsitl.mavlink.degrade import TelemetryGovernor
 from quadsitl.mavlink.fleet_server import FleetServer
 from quadsitl.mavlink.identity import get_identity
-from quadsitl.mavlink.links import Link
+from quadsitl.mavlink.links import Link, is_loopback, parse_url
 from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.physics import Airframe, get_airframe
@@ -101,6 +101,15 @@ class SimConfig:
             raise ValueError(f"speed factor must be 0.01..100, got {self.speed}")
         if not [u for u in (self.gcs_url, self.api_url, self.hil_url, *self.extra_urls) if u]:
             raise ValueError("at least one link is needed")
+        if self.lockstep and self.hil_url and self.signing_key is None:
+            _, host, _ = parse_url(self.hil_url)
+            if not is_loopback(host):
+                raise ValueError(
+                    f"--lockstep with --hil {self.hil_url} listens beyond this host: sign it "
+                    "(--signing-passphrase TEXT, --signing-key FILE, or QUADSITL_SIGNING_KEY / "
+                    "QUADSITL_SIGNING_PASSPHRASE in the environment; the env then needs "
+                    "signing_key=) or listen on 127.0.0.1"
+                )
 
 
 def _compile(vehicles: int, airframe: str) -> None:
