@@ -25,29 +25,36 @@ HOURS = 1.0
 NAN = float("nan")
 
 
-def synthesise(path: Path) -> int:
-    """Write the log; returns the number of messages."""
+def synthesise(path: Path, seconds: float = HOURS * 3600) -> int:
+    """Write the log (``seconds`` long); returns the number of messages. Also the
+    foreign-style (PX4-like) log of ``make images``."""
     enc = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     writer = TlogWriter(path)
     t0 = time.time()
     count = 0
-    for tick in range(int(HOURS * 3600 * 50)):
+    for tick in range(int(seconds * 50)):
         t = tick / 50
         ms = tick * 20
         x, y, yaw = 10 * math.cos(t / 10), 10 * math.sin(t / 10), (t / 10) % (2 * math.pi)
+        down = -5.0 - math.sin(t / 7)  # climbing and sinking a metre
+        lat = 473977420 + round(x / 111_111 * 1e7)  # the same circle in GPS coordinates
+        lon = 85455940 + round(y / (111_111 * 0.677) * 1e7)
+        drained = t / 3600  # 0..1 over an hour
         q = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
         messages = [
             enc.attitude_encode(ms, 0.05, -0.02, yaw - math.pi, 0.0, 0.0, 0.1),
             enc.attitude_quaternion_encode(ms, *q, 0.0, 0.0, 0.1, [0.0] * 4),
-            enc.local_position_ned_encode(ms, x, y, -5.0, -y / 10, x / 10, 0.0),
-            enc.global_position_int_encode(ms, 473977420, 85455940, 493000, 5000, 0, 0, 0, 0),
+            enc.local_position_ned_encode(ms, x, y, down, -y / 10, x / 10, 0.0),
+            enc.global_position_int_encode(
+                ms, lat, lon, 488000 - round(down * 1000), -round(down * 1000), 0, 0, 0, 0
+            ),
             enc.odometry_encode(
                 ms * 1000,
                 1,
                 12,
                 x,
                 y,
-                -5.0,
+                down,
                 q,
                 1.0,
                 0.0,
@@ -69,17 +76,24 @@ def synthesise(path: Path) -> int:
         if tick % 10 == 0:
             messages.append(
                 enc.gps_raw_int_encode(
-                    ms * 1000, 3, 473977420, 85455940, 493000, 80, 120, 100, 0, 14
+                    ms * 1000, 3, lat, lon, 493000, 80, 120, 100, 0, 14 - (tick // 1500) % 3
                 )
             )
-        if tick % 50 == 0:
-            messages.append(enc.heartbeat_encode(2, 12, 129, 0, 4))
-            messages.append(enc.sys_status_encode(0, 0, 0, 0, 16000, 1000, 80, 0, 0, 0, 0, 0, 0))
+        if tick % 50 == 0:  # PX4 custom modes: position control, then mission
+            mode = (3 << 16) if t < seconds / 2 else (4 << 16) | (4 << 24)
+            messages.append(enc.heartbeat_encode(2, 12, 129, mode, 4))
+            millivolts = round(16_000 - 1_500 * drained - 50 * math.sin(t / 7))
+            remaining = round(80 - 60 * drained)
+            messages.append(
+                enc.sys_status_encode(0, 0, 0, 0, millivolts, 1000, remaining, 0, 0, 0, 0, 0, 0)
+            )
             messages.append(
                 enc.battery_status_encode(
-                    0, 0, 0, 32767, [4000] * 4 + [65535] * 6, 1000, 100, -1, 80
+                    0, 0, 0, 32767, [millivolts // 4] * 4 + [65535] * 6, 1000, 100, -1, remaining
                 )
             )
+        if tick in (0, int(seconds * 25)):
+            messages.append(enc.statustext_encode(6, b"[px4] mode changed", 0, 0))
         for message in messages:
             writer.record(message.pack(enc), t0 + t)
         count += len(messages)

@@ -24,7 +24,9 @@ def watch(
     """Log what arrives on ``url`` until Ctrl-C or ``duration``; returns messages seen.
     ``web``: serve the web viewer on this host instead of spawning a viewer."""
     conn = mavutil.mavlink_connection(url, source_system=255, source_component=190)
-    layout = blueprint((*LIVE_PANELS, "battery_remaining", "gps", "mission_item"), map_view=True)
+    layout = blueprint(
+        (*LIVE_PANELS, "battery_remaining", "gps", "mission_item"), map_view=True, whole_range=False
+    )
     rec = open_recording(
         "quadsitl_live", save, spawn=save is None and spawn, default_blueprint=layout, web=web
     )

@@ -37,7 +37,7 @@ from quadsitl.viz.scene import (
     series_style,
 )
 
-HEARTBEAT_ID = 0
+DUPLICATE_US = 10_000  # a message repeated within 10 ms on another link is the same one
 
 
 @dataclass
@@ -120,16 +120,17 @@ def convert(
     view = FlightView()
     columns = _Columns()
     track: list[np.ndarray] = []
-    last_payload: dict[tuple[int, int, int], bytes] = {}
+    last: dict[tuple[int, int, int], tuple[int, bytes]] = {}  # -> (stamp, payload)
     for stamp, message in read_tlog(tlog, stats, progress):
         # A log of several links (quadsitl's own) holds each broadcast message once per
-        # link: skip a message identical to the previous one of its kind and source
-        # (heartbeats excepted: each one extends the flight-state band).
+        # link, written within microseconds: skip a message identical to the previous
+        # one of its kind and source logged less than DUPLICATE_US before.
         key = (message.get_msgId(), message.get_srcSystem(), message.get_srcComponent())
         payload = bytes(message.get_payload())
-        if last_payload.get(key) == payload and key[0] != HEARTBEAT_ID:
+        previous = last.get(key)
+        last[key] = (stamp, payload)
+        if previous is not None and previous[1] == payload and stamp - previous[0] < DUPLICATE_US:
             continue
-        last_payload[key] = payload
         for sample in view.samples(message):
             columns.add(stamp, sample)
             if sample.kind == "translation":
@@ -156,6 +157,15 @@ def convert(
     )
     rec.send_recording_name(Path(tlog).name)
     entities = columns.send(rec)
+    geo = columns.series.get(("map/track", "geo"))
+    if geo is not None:
+        rec.log(
+            "map/path",
+            rr.GeoLineStrings(
+                lat_lon=[np.asarray(geo[1])], colors=[[90, 90, 200]], radii=rr.Radius.ui_points(2.0)
+            ),
+            static=True,
+        )
     if track:
         rec.log(
             "world/trajectory",

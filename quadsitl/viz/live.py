@@ -26,6 +26,7 @@ class LiveLogger:
         self.view = FlightView(hover_rotor=hover_rotor)
         self.styled: set[str] = set()
         self.track: list[np.ndarray] = []
+        self.geo_track: list[tuple[float, float]] = []
         self.pose = {"translation": np.zeros(3), "rotation": np.array([0.0, 0.0, 0.0, 1.0])}
         self._drawn = 0.0
 
@@ -43,6 +44,8 @@ class LiveLogger:
         if self.track and now - self._drawn > TRACK_REDRAW:
             self._drawn = now
             self.rec.log("world/trajectory", rr.LineStrips3D([np.asarray(self.track)]))
+            if len(self.geo_track) > 1:
+                self.rec.log("map/path", rr.GeoLineStrings(lat_lon=[self.geo_track]))
 
     def text(self, text: str, level: str = "INFO") -> None:
         self.rec.set_time(TIMELINE, timestamp=time.time())
@@ -57,6 +60,8 @@ class LiveLogger:
                     self.rec.log(sample.entity, style, static=True)
             self.rec.log(sample.entity, rr.Scalars(sample.value))
         elif sample.kind == "geo":
+            self.geo_track.append(sample.value)
+            del self.geo_track[:-MAX_TRACK]
             self.rec.log(
                 sample.entity, rr.GeoPoints(lat_lon=[sample.value], radii=rr.Radius.ui_points(4.0))
             )

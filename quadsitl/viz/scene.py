@@ -91,8 +91,8 @@ def log_vehicle_model(
 
 def model_scale(extent: float) -> float:
     """How many times life size the vehicle is drawn in a scene ``extent`` metres across:
-    life size up to 10 m, then growing so that it stays about 1/30 of the scene."""
-    return float(np.clip(extent / (30 * 2 * (ARM + ROTOR_RADIUS)), 1.0, 100.0))
+    life size up to about 8 m, then growing so that it stays about 1/15 of the scene."""
+    return float(np.clip(extent / (15 * 2 * (ARM + ROTOR_RADIUS)), 1.0, 100.0))
 
 
 def setup(rec: rr.RecordingStream, scale: float = 1.0) -> None:
@@ -107,10 +107,10 @@ def setup(rec: rr.RecordingStream, scale: float = 1.0) -> None:
 # Time-series panels: name (the entity folder under plots/) -> title with the unit. The
 # order is how a flight engineer reads them; a recording shows those it has data for.
 PANELS = {
-    "altitude": "altitude (m) vs setpoint",
-    "climb_rate": "climb rate (m/s) vs setpoint",
+    "altitude": "altitude (m)",
+    "climb_rate": "climb rate (m/s)",
     "velocity": "horizontal velocity (m/s, ENU)",
-    "attitude": "attitude (deg, unwrapped) vs setpoint",
+    "attitude": "attitude (deg, unwrapped)",
     "rates": "body rates (deg/s)",
     "rotors": "rotor speed (x hover)",
     "servo_pwm": "servo output (PWM, us)",
@@ -137,9 +137,16 @@ EPISODE_PANELS = ("reward", "reward_terms", "distance_to_goal", "altitude", "spe
 
 
 MODE_COLORS = [
-    [31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189],
-    [140, 86, 75], [227, 119, 194], [127, 127, 127], [188, 189, 34], [23, 190, 207],
-]  # fmt: skip
+    [31, 119, 180],
+    [255, 127, 14],
+    [44, 160, 44],
+    [148, 103, 189],
+    [140, 86, 75],
+    [227, 119, 194],
+    [127, 127, 127],
+    [188, 189, 34],
+    [23, 190, 207],
+]  # fmt: skip  (no red: armed is red)
 
 
 def series_style(entity: str) -> Any | None:
@@ -166,6 +173,12 @@ def framing(points: Any) -> tuple[np.ndarray, float]:
     return (low + high) / 2, max(float(np.linalg.norm(high - low)), 4.0)
 
 
+def map_zoom(extent: float) -> float:
+    """The web-map zoom level at which ``extent`` metres fill about 500 pixels (at 45°
+    latitude: 156,543 m per pixel at zoom 0, halving with each level)."""
+    return float(np.clip(math.log2(156_543 * 0.7 * 500 / max(extent, 1.0)), 2.0, 19.0))
+
+
 def grid_spacing(extent: float) -> float:
     """1, 5, 10, 50 ... m: about ten to forty lines across the flight."""
     for spacing in (1.0, 5.0, 10.0, 50.0, 100.0, 500.0):
@@ -183,17 +196,20 @@ def blueprint(
     follow: bool = False,
     map_view: bool = False,
     timeline: str = TIMELINE,
+    whole_range: bool = True,
 ) -> rrb.Blueprint:
     """The layout sent with every recording: the 3-D view (ground grid in metres, the
     camera framing ``frame`` = (centre, extent), or following the vehicle), the map
     (``map_view``: GPS), the event log, the flight-state band and one time-series panel
-    per name in ``panels`` (see PANELS; pass only those with data). The time cursor
-    opens at the end of the recording."""
+    per name in ``panels`` (see PANELS; pass only those with data; servo PWM only
+    without rotor speeds). The time cursor opens at the end of the recording, the time
+    panel collapsed to its controls; the plots show the whole recording
+    (``whole_range``), else (live) the last minute around the cursor."""
     centre, extent = frame if frame is not None else framing([])
     direction = np.array([-0.55, -0.75, 0.45])  # from the south-west, above
     eye = rrb.EyeControls3D(
         kind="Orbital",
-        position=centre + direction / np.linalg.norm(direction) * (0.9 * extent + 3.0),
+        position=centre + direction / np.linalg.norm(direction) * (1.3 * extent + 3.0),
         look_target=centre,
         eye_up=[0.0, 0.0, 1.0],
         tracking_entity="world/vehicle" if follow else None,
@@ -205,21 +221,39 @@ def blueprint(
         eye_controls=eye,
     )
     left: list[Any] = [scene]
-    shares = [3.0]
+    shares = [5.0]
     if map_view:
-        left.append(rrb.MapView(origin="map", name="map (GPS)"))
-        shares.append(2.0)
+        left.append(
+            rrb.MapView(
+                origin="map",
+                name="map (GPS; OpenStreetMap tiles when online)",
+                zoom=map_zoom(extent) if frame is not None else None,
+            )
+        )
+        shares.append(3.0)
     if events:
         left.append(rrb.TextLogView(origin="events", name="events"))
-        shares.append(1.0)
+        shares.append(2.0)
+    shown = set(panels)
+    if "rotors" in shown:  # the same outputs twice: rotor speeds, else PWM
+        shown.discard("servo_pwm")
+    everything = rr.TimeRange(rr.TimeRangeBoundary.infinite(), rr.TimeRangeBoundary.infinite())
+    axis = rrb.TimeAxis(link="Independent", view_range=everything) if whole_range else None
     plots = [
-        rrb.TimeSeriesView(origin=f"plots/{name}", name=PANELS[name])
+        rrb.TimeSeriesView(origin=f"plots/{name}", name=PANELS[name], axis_x=axis)
         for name in PANELS
-        if name in set(panels)
+        if name in shown
     ]
     right: list[Any] = []
     if state:
-        right.append(rrb.TimeSeriesView(origin=f"plots/{STATE_PANEL}", name="mode and armed"))
+        right.append(
+            rrb.TimeSeriesView(
+                origin=f"plots/{STATE_PANEL}",
+                name="mode (band) and armed (0/1)",
+                axis_x=axis,
+                axis_y=rrb.ScalarAxis(range=(-0.2, 2.4)),
+            )
+        )
     if plots:
         right.append(rrb.Grid(*plots, grid_columns=2 if len(plots) > 4 else 1))
     columns: list[Any] = [rrb.Vertical(*left, row_shares=shares)]
@@ -227,7 +261,7 @@ def blueprint(
         columns.append(rrb.Vertical(*right, row_shares=[1.0, 6.0]) if len(right) == 2 else right[0])
     return rrb.Blueprint(
         rrb.Horizontal(*columns, column_shares=[1.0, 1.0][: len(columns)]),
-        rrb.TimePanel(timeline=timeline, play_state="following"),
+        rrb.TimePanel(timeline=timeline, play_state="following", state="collapsed"),
         collapse_panels=True,
     )
 
@@ -317,6 +351,9 @@ def open_recording(
             )
     if save is not None:
         rec.save(check_output_path(save), default_blueprint=layout)
+    # Also the active layout: a viewer that showed another recording of the same kind
+    # (same application id) would otherwise keep that one's panels.
+    rec.send_blueprint(layout, make_active=True, make_default=True)
     setup(rec, scale)
     return rec
 

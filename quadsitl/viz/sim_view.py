@@ -33,7 +33,7 @@ class SimView:
 
     def __init__(self, vehicle: Vehicle, save: str | None = None, web: bool = False) -> None:
         self.vehicle = vehicle
-        layout = blueprint(PANELS, follow=True)
+        layout = blueprint(PANELS, follow=True, whole_range=False)
         self.rec = open_recording(
             "quadsitl_sim", save, spawn=save is None, default_blueprint=layout, web=web
         )
