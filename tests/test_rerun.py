@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import os
+import socket
 import subprocess
 import sys
 import time
@@ -18,8 +19,8 @@ from pymavlink.dialects.v20 import common as mavlink
 from gcs_tools.client import VehicleClient
 from gcs_tools.replay import convert, main
 from gcs_tools.tlog_reader import ReadStats, read_tlog
+from quadsitl.mavlink.links import free_udp_port
 from quadsitl.mavlink.tlog import TlogWriter
-from quadsitl.viz.scene import viewer_executable
 from tests.conftest import cli, run_cli, start_sim
 
 
@@ -245,24 +246,111 @@ def test_replay_of_a_large_log_shows_progress(flight_log, tmp_path, capsys, monk
     assert len(percents) >= 3 and percents == sorted(percents) and percents[-1] == 100
 
 
+def free_tcp_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def colour_pixels(image: np.ndarray, colour: tuple[int, int, int], tolerance: int = 40) -> int:
+    """How many pixels are within ``tolerance`` of ``colour`` in every channel."""
+    return int(np.all(np.abs(image.astype(int) - colour) <= tolerance, axis=-1).sum())
+
+
+ROTOR_RED = (220, 50, 50)  # the front rotors of quadsitl.viz.scene's vehicle model
+
+
 @pytest.mark.slow
 def test_headless_screenshot_shows_the_flight(flight_log, tmp_path):
-    rerun = viewer_executable()  # rerun-sdk, a dependency, installs it beside the interpreter
-    assert rerun is not None, "the Rerun viewer is missing from the environment"
+    """The demo-style recording rendered by the real viewer, headless: the vehicle is
+    drawn big enough to see, and no plot panel is a single flat colour."""
+    from PIL import Image
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from benchmarks.images import HeadlessViewer
+
     out = tmp_path / "flight.rrd"
     convert(flight_log, out)
     png = tmp_path / "flight.png"
-    subprocess.run(
-        [rerun, str(out), "--headless", "--window-size", "1280x720", "--screenshot-to", str(png)],
-        check=True,
-        timeout=120,
-        capture_output=True,
-    )
+    viewer = HeadlessViewer()
+    try:
+        problems = viewer.screenshot(out, png)
+    finally:
+        viewer.close()
+    assert not problems, problems
+    image = np.asarray(Image.open(png).convert("RGB"))
+    height, width, _ = image.shape
+    assert (width, height) == (1600, 900)
+    scene = image[40 : height * 45 // 100, : width // 2]  # the 3-D view, top left
+    assert colour_pixels(scene, ROTOR_RED) >= 30, "the vehicle is not visible in 3-D"
+    plots = image[40 : height - 40, width // 2 + 10 :]
+    rows, columns = 7, 2  # the mode band, then a grid of panels two wide
+    for r in range(rows):
+        for c in range(columns):
+            cell = plots[
+                r * plots.shape[0] // rows + 25 : (r + 1) * plots.shape[0] // rows - 5,
+                c * plots.shape[1] // columns + 5 : (c + 1) * plots.shape[1] // columns - 5,
+            ]
+            colours = len(np.unique(cell.reshape(-1, 3), axis=0))
+            assert colours > 20, f"plot cell ({r}, {c}) is flat ({colours} colours)"
+
+
+@pytest.mark.slow
+def test_web_viewer_in_a_real_browser(tmp_path):
+    """``quadsitl sim --rerun-web`` on loopback, its URL loaded in headless Chromium: the
+    page connects and shows the vehicle, and the 3-D view changes as it takes off."""
+    from io import BytesIO
+
     from PIL import Image
 
-    image = np.asarray(Image.open(png).convert("RGB"))
-    assert image.shape[0] >= 720
-    assert len(np.unique(image.reshape(-1, 3), axis=0)) > 100  # a scene, not a blank window
+    from tests.chromium import HeadlessChromium, chromium_executable
+
+    browser = chromium_executable()
+    if browser is None:
+        pytest.skip("Chromium is not installed (Debian: apt-get install chromium)")
+    port = free_udp_port()
+    env = dict(os.environ, QUADSITL_WEB_PORT=str(free_tcp_port()))
+    env["QUADSITL_GRPC_PORT"] = str(free_tcp_port())
+    sim = subprocess.Popen(
+        cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --logs none --rerun-web --quiet"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
+    page = client = None
+    try:
+        line = sim.stdout.readline()  # the first line: where to open it
+        assert line.startswith("Rerun web viewer: open http://127.0.0.1:"), line
+        url = line.split("open ", 1)[1].strip()
+        # A small window: the wasm viewer, rendered in software on a loaded machine,
+        # keeps up with the stream at this size.
+        page = HeadlessChromium(browser, url, size=(800, 450))
+
+        def scene() -> np.ndarray:
+            image = np.asarray(Image.open(BytesIO(page.screenshot())).convert("RGB"))
+            return image[40 : image.shape[0] * 55 // 100, : image.shape[1] // 2]
+
+        deadline = time.monotonic() + 120  # the viewer's wasm, rendered in software
+        while colour_pixels(before := scene(), ROTOR_RED) < 4:
+            assert time.monotonic() < deadline, "the page never showed the vehicle"
+            time.sleep(2)
+        client = VehicleClient(f"udpout:127.0.0.1:{port}")
+        client.connect(timeout=30)
+        client.arm()
+        client.takeoff(3.0)
+        client.wait(lambda: client.position_enu()[2] > 2.5, 60, "take-off")
+        deadline = time.monotonic() + 240  # the page may run tens of seconds behind
+        while np.mean(np.any(scene() != before, axis=-1)) < 0.01:
+            assert time.monotonic() < deadline, "the 3-D view did not change as it flew"
+            time.sleep(5)  # each screenshot costs the software-rendered page a frame
+    finally:
+        if client is not None:
+            client.close()
+        if page is not None:
+            page.close()
+        sim.terminate()
+        sim.wait(timeout=20)
 
 
 def test_sim_streams_itself_to_a_recording(tmp_path):
