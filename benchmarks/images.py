@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 from benchmarks.replay import synthesise  # noqa: E402
 from gcs_tools.demo import run_demo  # noqa: E402
 from gcs_tools.replay import convert  # noqa: E402
-from quadsitl.viz.scene import viewer_executable  # noqa: E402
+from quadsitl.viz.scene import viewer_binary  # noqa: E402
 
 OUT = ROOT / "docs" / "images"
 WINDOW = "1600x900"  # logical points; saved at this size in pixels
@@ -76,7 +76,7 @@ class HeadlessViewer:
     def __init__(self, window: str = WINDOW) -> None:
         from rerun.experimental import ViewerClient
 
-        executable = viewer_executable()
+        executable = viewer_binary()
         if executable is None:
             raise RuntimeError("the Rerun viewer executable is missing (rerun-sdk)")
         port = free_tcp_port()

@@ -6,6 +6,10 @@ LOCAL_POSITION_NED, GLOBAL_POSITION_INT and ODOMETRY at 50 Hz, ACTUATOR_OUTPUT_S
 and SERVO_OUTPUT_RAW at 10 Hz, GPS_RAW_INT at 5 Hz, HEARTBEAT, SYS_STATUS and
 BATTERY_STATUS at 1 Hz. Prints the time to read the log alone (pymavlink's decode: the
 floor) and to convert it, and ``replay_messages_per_s``.
+
+Then the cost of recording an env's episodes for Rerun (``render_mode="rerun"``, to a
+file): env steps per second with and without it, and ``rerun_overhead_ratio`` = the
+time with / the time without (target ≤ 1.10).
 """
 
 from __future__ import annotations
@@ -103,6 +107,40 @@ def synthesise(path: Path, seconds: float = HOURS * 3600) -> int:
     return count
 
 
+def env_steps_per_s(steps: int, save: Path | None) -> float:
+    """Steps per second of the hover env (hovering actions), recorded to ``save`` or not."""
+    import gymnasium as gym
+    import numpy as np
+
+    import quadsitl  # noqa: F401  (registers the envs)
+
+    options = {"render_mode": "rerun", "rerun_save": str(save)} if save else {}
+    env = gym.make("QuadSITL/Hover-v0", **options)
+    env.reset(seed=0)
+    action = np.zeros(4, np.float32)
+    start = time.perf_counter()
+    for _ in range(steps):
+        *_, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            env.reset()
+    seconds = time.perf_counter() - start
+    env.close()
+    return steps / seconds
+
+
+def rerun_overhead(folder: Path, steps: int = 3000) -> None:
+    env_steps_per_s(200, None)  # compile and warm up
+    without = env_steps_per_s(steps, None)
+    with_rerun = env_steps_per_s(steps, folder / "episodes.rrd")
+    ratio = without / with_rerun
+    verdict = "meets" if ratio <= 1.10 else "MISSES"
+    print(
+        f"env steps/s: {without:,.0f} without recording, {with_rerun:,.0f} with "
+        f'render_mode="rerun" (target: within 10 %: {verdict})'
+    )
+    print(f"rerun_overhead_ratio: {ratio:.2f}")
+
+
 def main() -> None:
     with tempfile.TemporaryDirectory() as folder:
         log = Path(folder) / "one_hour.tlog"
@@ -128,6 +166,7 @@ def main() -> None:
             f"{result.seconds / read_seconds:.2f}x the read alone"
         )
         print(f"replay_messages_per_s: {rate:.0f}")
+        rerun_overhead(Path(folder))
 
 
 if __name__ == "__main__":

@@ -7,11 +7,13 @@ from __future__ import annotations
 import base64
 import json
 import os
+import select
 import shutil
 import subprocess
 from pathlib import Path
 from typing import Any
 
+REPLY_TIMEOUT = 60.0  # s: a stuck browser fails the test instead of hanging it
 CANDIDATES = ("/usr/lib/chromium/chromium", "chromium", "chromium-browser", "google-chrome")
 
 
@@ -63,6 +65,9 @@ class HeadlessChromium:
         os.write(self.to_chrome, json.dumps(message).encode() + b"\0")
         while True:
             while b"\0" not in self.buffer:
+                ready, _, _ = select.select([self.from_chrome], [], [], REPLY_TIMEOUT)
+                if not ready:
+                    raise TimeoutError(f"Chromium did not answer {method} in {REPLY_TIMEOUT} s")
                 chunk = os.read(self.from_chrome, 1 << 20)
                 if not chunk:
                     raise RuntimeError("Chromium closed its DevTools pipe")

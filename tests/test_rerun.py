@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import os
+import select
 import socket
 import subprocess
 import sys
@@ -295,6 +296,24 @@ def test_headless_screenshot_shows_the_flight(flight_log, tmp_path):
             assert colours > 20, f"plot cell ({r}, {c}) is flat ({colours} colours)"
 
 
+def test_web_viewer_on_a_busy_port_is_a_one_line_error(tmp_path):
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        env = dict(os.environ, QUADSITL_WEB_PORT=str(busy.getsockname()[1]))
+        env["QUADSITL_GRPC_PORT"] = str(free_tcp_port())
+        result = subprocess.run(
+            cli("sim --gcs udpin:127.0.0.1:0 --api none --logs none --rerun-web --duration 5"),
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=env,
+        )
+    assert result.returncode == 2
+    assert result.stderr.startswith("quadsitl sim: error: the Rerun web viewer cannot listen")
+    assert len(result.stderr.splitlines()) == 1
+
+
 @pytest.mark.slow
 def test_web_viewer_in_a_real_browser(tmp_path):
     """``quadsitl sim --rerun-web`` on loopback, its URL loaded in headless Chromium: the
@@ -320,6 +339,8 @@ def test_web_viewer_in_a_real_browser(tmp_path):
     )
     page = client = None
     try:
+        ready, _, _ = select.select([sim.stdout], [], [], 60)
+        assert ready, "quadsitl sim --rerun-web printed no URL within 60 s"
         line = sim.stdout.readline()  # the first line: where to open it
         assert line.startswith("Rerun web viewer: open http://127.0.0.1:"), line
         url = line.split("open ", 1)[1].strip()

@@ -282,6 +282,17 @@ def viewer_executable() -> str | None:
     return shutil.which("rerun")
 
 
+def viewer_binary() -> str | None:
+    """The viewer program itself (rerun-sdk's ``rerun_cli/rerun``), not the ``rerun``
+    launcher script, so that stopping the process stops the viewer; else the launcher."""
+    try:
+        import rerun_cli
+    except ImportError:
+        return viewer_executable()
+    binary = Path(rerun_cli.__file__).parent / ("rerun.exe" if os.name == "nt" else "rerun")
+    return str(binary) if binary.is_file() else viewer_executable()
+
+
 def why_no_viewer(executable: str | None) -> str | None:
     """Why no viewer window can be shown here (None: one can), given the viewer found."""
     if executable is None:
@@ -366,12 +377,21 @@ def serve_web(rec: rr.RecordingStream, layout: rrb.Blueprint) -> str:
     QUADSITL_WEB_PORT (default 9090) and the data (gRPC) on QUADSITL_GRPC_PORT (default
     9876); the recording is streamed to it and it ends with this process.
     """
-    executable = viewer_executable()
+    executable = viewer_binary()
     if executable is None:
         raise ValueError("the web viewer needs the Rerun viewer executable (rerun-sdk)")
     bind = os.environ.get("QUADSITL_WEB_BIND") or "127.0.0.1"
     grpc_port = int(os.environ.get("QUADSITL_GRPC_PORT") or 9876)
     web_port = int(os.environ.get("QUADSITL_WEB_PORT") or 9090)
+    for port in (grpc_port, web_port):
+        with socket.socket() as probe:
+            try:
+                probe.bind((bind, port))
+            except OSError as error:
+                raise ValueError(
+                    f"the Rerun web viewer cannot listen on {bind}:{port}: {error.strerror} "
+                    "(set QUADSITL_WEB_PORT / QUADSITL_GRPC_PORT)"
+                ) from None
     server = subprocess.Popen(
         [
             *(executable, "--serve-web", "--bind", bind, "--port", str(grpc_port)),
@@ -380,6 +400,7 @@ def serve_web(rec: rr.RecordingStream, layout: rrb.Blueprint) -> str:
         stdin=subprocess.DEVNULL,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
+        preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
     )
     atexit.register(_stop, server)
     host = "127.0.0.1" if bind in ("0.0.0.0", "::") else bind
@@ -402,6 +423,15 @@ def _wait_for_port(host: str, port: int, server: subprocess.Popen, timeout: floa
         except OSError:
             time.sleep(0.1)
     raise ValueError(f"the Rerun web viewer did not open port {port} within {timeout:.0f} s")
+
+
+def _die_with_parent() -> None:
+    """In the child: SIGTERM when the process that started it dies, however it dies
+    (Linux prctl PR_SET_PDEATHSIG), so no server outlives the simulator."""
+    import ctypes
+    import signal
+
+    ctypes.CDLL(None).prctl(1, signal.SIGTERM)  # 1: PR_SET_PDEATHSIG
 
 
 def _stop(server: subprocess.Popen) -> None:
