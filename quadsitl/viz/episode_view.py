@@ -27,6 +27,7 @@ from quadsitl.viz.scene import EPISODE_PANELS, blueprint, framing, open_recordin
 
 STEP_TIMELINE = "step"
 TERMS = ("position", "attitude", "velocity", "rates")  # the columns of engine.dist
+TRACK_EVERY = 10  # steps between redraws of the episode's trajectory
 
 
 class EpisodeView:
@@ -78,8 +79,12 @@ class EpisodeView:
         points = [position, goal, [position[0], position[1], 0.0], [goal[0], goal[1], 0.0]]
         self.rec.send_blueprint(self.layout(framing(points)), make_active=True)
 
+    def _log_track(self) -> None:
+        self.rec.log("world/trajectory", rr.LineStrips3D([np.asarray(self.track)]))
+
     def _outcome(self, outcome: str) -> None:
         self.ended = True
+        self._log_track()
         level = "INFO" if outcome in ("landed", "timed_out") else "WARN"
         text = (
             f"episode {self.episode}: {outcome.replace('_', ' ')} after {self.steps} steps, "
@@ -98,7 +103,8 @@ class EpisodeView:
         rec.log("world/vehicle", rr.Transform3D(translation=position, quaternion=attitude))
         goal = engine.goal[i, F.GOAL_POS]
         self._log_goal(engine, goal)
-        rec.log("world/trajectory", rr.LineStrips3D([np.asarray(self.track)]))
+        if self.steps % TRACK_EVERY == 0:  # the whole line each time: not every step
+            self._log_track()
         rec.log("plots/altitude/altitude", rr.Scalars(float(position[2])))
         rec.log("plots/speed/speed", rr.Scalars(float(np.linalg.norm(state[L.VEL]))))
         distance = float(np.linalg.norm(position - goal))
