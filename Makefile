@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 # CPU build of PyTorch from the local wheel cache; a looser pin pulls CUDA.
 TORCH_PIN := torch==2.13.0
 
-.PHONY: venv demo test test-slow bench bench-training bench-algorithms lint format clean
+.PHONY: venv demo test test-slow bench bench-training bench-algorithms images lint format clean
 
 venv: $(VENV)/.installed
 
@@ -45,6 +45,11 @@ bench-algorithms: venv
 	$(BIN)/python benchmarks/sweep.py
 	$(BIN)/python benchmarks/algorithms.py
 	$(BIN)/python benchmarks/algorithms.py --preset paper --tasks hover
+
+# The Rerun pictures of README.md and docs/replay.md, from real runs, rendered headless
+# (without a GPU: Debian's mesa-vulkan-drivers).
+images: venv
+	$(BIN)/python benchmarks/images.py
 
 lint: venv
 	$(BIN)/ruff check .

@@ -6,6 +6,10 @@ LOCAL_POSITION_NED, GLOBAL_POSITION_INT and ODOMETRY at 50 Hz, ACTUATOR_OUTPUT_S
 and SERVO_OUTPUT_RAW at 10 Hz, GPS_RAW_INT at 5 Hz, HEARTBEAT, SYS_STATUS and
 BATTERY_STATUS at 1 Hz. Prints the time to read the log alone (pymavlink's decode: the
 floor) and to convert it, and ``replay_messages_per_s``.
+
+Then the cost of recording an env's episodes for Rerun (``render_mode="rerun"``, to a
+file): env steps per second with and without it, and ``rerun_overhead_ratio`` = the
+time with / the time without (target ≤ 1.10).
 """
 
 from __future__ import annotations
@@ -25,29 +29,36 @@ HOURS = 1.0
 NAN = float("nan")
 
 
-def synthesise(path: Path) -> int:
-    """Write the log; returns the number of messages."""
+def synthesise(path: Path, seconds: float = HOURS * 3600) -> int:
+    """Write the log (``seconds`` long); returns the number of messages. Also the
+    foreign-style (PX4-like) log of ``make images``."""
     enc = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     writer = TlogWriter(path)
     t0 = time.time()
     count = 0
-    for tick in range(int(HOURS * 3600 * 50)):
+    for tick in range(int(seconds * 50)):
         t = tick / 50
         ms = tick * 20
         x, y, yaw = 10 * math.cos(t / 10), 10 * math.sin(t / 10), (t / 10) % (2 * math.pi)
+        down = -5.0 - math.sin(t / 7)  # climbing and sinking a metre
+        lat = 473977420 + round(x / 111_111 * 1e7)  # the same circle in GPS coordinates
+        lon = 85455940 + round(y / (111_111 * 0.677) * 1e7)
+        drained = t / 3600  # 0..1 over an hour
         q = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
         messages = [
             enc.attitude_encode(ms, 0.05, -0.02, yaw - math.pi, 0.0, 0.0, 0.1),
             enc.attitude_quaternion_encode(ms, *q, 0.0, 0.0, 0.1, [0.0] * 4),
-            enc.local_position_ned_encode(ms, x, y, -5.0, -y / 10, x / 10, 0.0),
-            enc.global_position_int_encode(ms, 473977420, 85455940, 493000, 5000, 0, 0, 0, 0),
+            enc.local_position_ned_encode(ms, x, y, down, -y / 10, x / 10, 0.0),
+            enc.global_position_int_encode(
+                ms, lat, lon, 488000 - round(down * 1000), -round(down * 1000), 0, 0, 0, 0
+            ),
             enc.odometry_encode(
                 ms * 1000,
                 1,
                 12,
                 x,
                 y,
-                -5.0,
+                down,
                 q,
                 1.0,
                 0.0,
@@ -69,17 +80,24 @@ def synthesise(path: Path) -> int:
         if tick % 10 == 0:
             messages.append(
                 enc.gps_raw_int_encode(
-                    ms * 1000, 3, 473977420, 85455940, 493000, 80, 120, 100, 0, 14
+                    ms * 1000, 3, lat, lon, 493000, 80, 120, 100, 0, 14 - (tick // 1500) % 3
                 )
             )
-        if tick % 50 == 0:
-            messages.append(enc.heartbeat_encode(2, 12, 129, 0, 4))
-            messages.append(enc.sys_status_encode(0, 0, 0, 0, 16000, 1000, 80, 0, 0, 0, 0, 0, 0))
+        if tick % 50 == 0:  # PX4 custom modes: position control, then mission
+            mode = (3 << 16) if t < seconds / 2 else (4 << 16) | (4 << 24)
+            messages.append(enc.heartbeat_encode(2, 12, 129, mode, 4))
+            millivolts = round(16_000 - 1_500 * drained - 50 * math.sin(t / 7))
+            remaining = round(80 - 60 * drained)
+            messages.append(
+                enc.sys_status_encode(0, 0, 0, 0, millivolts, 1000, remaining, 0, 0, 0, 0, 0, 0)
+            )
             messages.append(
                 enc.battery_status_encode(
-                    0, 0, 0, 32767, [4000] * 4 + [65535] * 6, 1000, 100, -1, 80
+                    0, 0, 0, 32767, [millivolts // 4] * 4 + [65535] * 6, 1000, 100, -1, remaining
                 )
             )
+        if tick in (0, int(seconds * 25)):
+            messages.append(enc.statustext_encode(6, b"[px4] mode changed", 0, 0))
         for message in messages:
             writer.record(message.pack(enc), t0 + t)
         count += len(messages)
@@ -87,6 +105,40 @@ def synthesise(path: Path) -> int:
             writer.flush()
     writer.close()
     return count
+
+
+def env_steps_per_s(steps: int, save: Path | None) -> float:
+    """Steps per second of the hover env (hovering actions), recorded to ``save`` or not."""
+    import gymnasium as gym
+    import numpy as np
+
+    import quadsitl  # noqa: F401  (registers the envs)
+
+    options = {"render_mode": "rerun", "rerun_save": str(save)} if save else {}
+    env = gym.make("QuadSITL/Hover-v0", **options)
+    env.reset(seed=0)
+    action = np.zeros(4, np.float32)
+    start = time.perf_counter()
+    for _ in range(steps):
+        *_, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            env.reset()
+    seconds = time.perf_counter() - start
+    env.close()
+    return steps / seconds
+
+
+def rerun_overhead(folder: Path, steps: int = 3000) -> None:
+    env_steps_per_s(200, None)  # compile and warm up
+    without = env_steps_per_s(steps, None)
+    with_rerun = env_steps_per_s(steps, folder / "episodes.rrd")
+    ratio = without / with_rerun
+    verdict = "meets" if ratio <= 1.10 else "MISSES"
+    print(
+        f"env steps/s: {without:,.0f} without recording, {with_rerun:,.0f} with "
+        f'render_mode="rerun" (target: within 10 %: {verdict})'
+    )
+    print(f"rerun_overhead_ratio: {ratio:.2f}")
 
 
 def main() -> None:
@@ -114,6 +166,7 @@ def main() -> None:
             f"{result.seconds / read_seconds:.2f}x the read alone"
         )
         print(f"replay_messages_per_s: {rate:.0f}")
+        rerun_overhead(Path(folder))
 
 
 if __name__ == "__main__":

@@ -15,13 +15,21 @@ from collections.abc import Sequence
 from pymavlink import mavutil
 
 from quadsitl.viz.live import LiveLogger
-from quadsitl.viz.scene import open_recording
+from quadsitl.viz.scene import LIVE_PANELS, blueprint, open_recording
 
 
-def watch(url: str, save: str | None, duration: float | None, spawn: bool = True) -> int:
-    """Log what arrives on ``url`` until Ctrl-C or ``duration``; returns messages seen."""
+def watch(
+    url: str, save: str | None, duration: float | None, spawn: bool = True, web: bool = False
+) -> int:
+    """Log what arrives on ``url`` until Ctrl-C or ``duration``; returns messages seen.
+    ``web``: serve the web viewer on this host instead of spawning a viewer."""
     conn = mavutil.mavlink_connection(url, source_system=255, source_component=190)
-    rec = open_recording("quadsitl_live", save, spawn=save is None and spawn)
+    layout = blueprint(
+        (*LIVE_PANELS, "battery_remaining", "gps", "mission_item"), map_view=True, whole_range=False
+    )
+    rec = open_recording(
+        "quadsitl_live", save, spawn=save is None and spawn, default_blueprint=layout, web=web
+    )
     logger = LiveLogger(rec)
     count, last_beat = 0, 0.0
     end = None if duration is None else time.monotonic() + duration
@@ -58,10 +66,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--save", metavar="RRD", help="write a recording instead of opening the viewer"
     )
     parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    parser.add_argument(
+        "--web",
+        action="store_true",
+        help="serve the Rerun web viewer on this host (loopback) and print its URL",
+    )
     args = parser.parse_args(argv)
     try:
-        count = watch(args.url, args.save, args.duration)
-    except OSError as error:
+        count = watch(args.url, args.save, args.duration, web=args.web)
+    except (OSError, ValueError) as error:
         print(f"gcs-live: error: {args.url}: {error}", file=sys.stderr)
         return 2
     print(f"gcs-live: {count} messages" + (f" -> {args.save}" if args.save else ""))

@@ -10,7 +10,7 @@ record; what was skipped is counted in :class:`ReadStats`.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -62,8 +62,16 @@ def _plausible(data: bytes, at: int) -> bool:
     return EARLIEST_US <= stamp <= LATEST_US and data[at + 8] in (V1, V2)
 
 
-def read_tlog(path: str | Path, stats: ReadStats | None = None) -> Iterator[tuple[int, Any]]:
-    """(timestamp µs, message) for every readable record of the log, in file order."""
+PROGRESS_EVERY = 50_000  # messages between calls of ``progress``
+
+
+def read_tlog(
+    path: str | Path,
+    stats: ReadStats | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> Iterator[tuple[int, Any]]:
+    """(timestamp µs, message) for every readable record of the log, in file order;
+    ``progress(fraction of the file read)`` every PROGRESS_EVERY messages and at the end."""
     data = Path(path).read_bytes()
     stats = stats if stats is not None else ReadStats()
     parser = mavlink.MAVLink(None)
@@ -97,7 +105,11 @@ def read_tlog(path: str | Path, stats: ReadStats | None = None) -> Iterator[tupl
         if isinstance(message, mavlink.MAVLink_unknown):
             continue
         stats.messages += 1
+        if progress is not None and stats.messages % PROGRESS_EVERY == 0:
+            progress(at / end)
         yield stamp, message
+    if progress is not None:
+        progress(1.0)
 
 
 def _resync(data: bytes, start: int) -> int:

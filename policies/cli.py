@@ -351,8 +351,8 @@ def _eval(args: argparse.Namespace) -> int:
 
         view = EpisodeView(f"eval {Path(args.checkpoint).name}", args.rerun or None)
 
-        def on_step(engine, reward):  # type: ignore[no-untyped-def]
-            view.reset(engine) if reward is None else view.step(engine, reward)
+        def on_step(engine, reward, outcome=None):  # type: ignore[no-untyped-def]
+            view.reset(engine, outcome) if reward is None else view.step(engine, reward)
 
     try:
         result = evaluate(net, config, args.task, args.episodes, args.backend, on_step=on_step)

@@ -99,7 +99,8 @@ def evaluate(
 ) -> Evaluation:
     """Run ``episodes`` of ``task`` (default: the one trained for) with the policy's mean
     action, from the trained start distribution. ``on_step(engine, reward)`` is called
-    after each reset (reward None) and step of env 0 (e.g. to record it)."""
+    after each reset (reward None) and step of env 0 (e.g. to record it); when env 0's
+    episode ends (and it resets at once), as ``on_step(engine, None, outcome)``."""
     task = task or config.task
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
         raise ValueError(f"episodes must be an integer ≥ 1, got {episodes!r}")
@@ -132,9 +133,11 @@ def evaluate(
             action = net.act(torch.as_tensor(obs), deterministic=True).numpy()
             obs, reward, terminated, truncated, info = env.step(np.clip(action, low, high))
             ended = np.flatnonzero(terminated | truncated)
-            if on_step is not None:
-                on_step(engine, None if 0 in ended else float(reward[0]))
             metrics = info.get("final_info", {})
+            if on_step is not None and 0 in ended:
+                on_step(engine, None, str(metrics["outcome"][0]))
+            elif on_step is not None:
+                on_step(engine, float(reward[0]))
             for i in ended.tolist():
                 returns.append(float(metrics["episode_return"][i]))
                 success.append(bool(metrics["success"][i]))

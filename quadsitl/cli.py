@@ -55,6 +55,9 @@ def _build_parser() -> argparse.ArgumentParser:
     replay.add_argument(
         "-o", "--output", metavar="RRD", help="write the recording here (default: open the viewer)"
     )
+    replay.add_argument(
+        "--web", action="store_true", help="serve it with the web viewer on this host instead"
+    )
     return parser
 
 
@@ -201,6 +204,12 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         metavar="RRD",
         help="stream the vehicle to this Rerun recording file instead of a viewer",
     )
+    sim.add_argument(
+        "--rerun-web",
+        action="store_true",
+        help="serve the Rerun web viewer and the vehicle's stream on this host (loopback; "
+        "QUADSITL_WEB_BIND, QUADSITL_WEB_PORT=9090, QUADSITL_GRPC_PORT=9876) and print its URL",
+    )
     sim.add_argument("--quiet", action="store_true", help="do not print vehicle events")
 
 
@@ -334,11 +343,11 @@ def _sim_collaborators(args: argparse.Namespace) -> tuple[Any, Any]:
         def make_autopilot(airframe: Any) -> Any:
             return PolicyAutopilot.from_checkpoint(path, airframe)
 
-    if args.rerun or args.rerun_save:
+    if args.rerun or args.rerun_save or args.rerun_web:
         from quadsitl.viz.sim_view import SimView
 
         def make_view(vehicle: Any) -> Any:
-            return SimView(vehicle, args.rerun_save, notice=_say("sim"))
+            return SimView(vehicle, args.rerun_save, notice=_say("sim"), web=args.rerun_web)
 
     return make_autopilot, make_view
 
@@ -398,7 +407,8 @@ def _main(argv: Sequence[str] | None = None) -> int:
     if args.command == "replay":
         from gcs_tools.replay import main as replay_main
 
-        return replay_main([args.tlog] + (["-o", args.output] if args.output else []))
+        options = (["-o", args.output] if args.output else []) + (["--web"] if args.web else [])
+        return replay_main([args.tlog, *options], prog="quadsitl replay")
     if args.command == "sim":
         from quadsitl.mavlink.runner import run_simulator
 

@@ -3,7 +3,10 @@ files that are not logs; the recording is read back with Rerun's own reader."""
 
 from __future__ import annotations
 
+import math
 import os
+import select
+import socket
 import subprocess
 import sys
 import time
@@ -17,9 +20,9 @@ from pymavlink.dialects.v20 import common as mavlink
 from gcs_tools.client import VehicleClient
 from gcs_tools.replay import convert, main
 from gcs_tools.tlog_reader import ReadStats, read_tlog
+from quadsitl.mavlink.links import free_udp_port
 from quadsitl.mavlink.tlog import TlogWriter
-from quadsitl.viz.scene import viewer_executable
-from tests.conftest import cli, start_sim
+from tests.conftest import cli, run_cli, start_sim
 
 
 def rows_per_entity(rrd: Path) -> dict[str, int]:
@@ -27,6 +30,64 @@ def rows_per_entity(rrd: Path) -> dict[str, int]:
     for chunk in rrc.RrdReader(rrd).store().stream():
         rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
     return rows
+
+
+def scalars(rrd: Path, entity: str) -> np.ndarray:
+    """The values of one time series, in time order, read back with Rerun's reader."""
+    times, values = [], []
+    for chunk in rrc.RrdReader(rrd).store().stream():
+        if chunk.entity_path != entity or chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        if "Scalars:scalars" not in batch.schema.names:
+            continue
+        timeline = next(n for n in batch.schema.names if n in ("time", "step"))
+        times += batch.column(timeline).cast("int64").to_pylist()
+        values += [v[0] for v in batch.column("Scalars:scalars").to_pylist()]
+    order = np.argsort(np.asarray(times), kind="stable")
+    return np.asarray(values, dtype=np.float64)[order]
+
+
+def views(rrd: Path) -> dict[str, tuple[str, str]]:
+    """The views of the recording's blueprint (its last one): name -> (kind, origin)."""
+    reader = rrc.RrdReader(rrd)
+    assert reader.blueprints(), "no blueprint was sent with the recording"
+    found: dict[str, tuple[str, str]] = {}
+    for chunk in reader.store(store=reader.blueprints()[-1]).stream():
+        batch = chunk.to_record_batch()
+        if "ViewBlueprint:class_identifier" not in batch.schema.names:
+            continue
+        for kind, name, origin in zip(
+            batch.column("ViewBlueprint:class_identifier").to_pylist(),
+            batch.column("ViewBlueprint:display_name").to_pylist(),
+            batch.column("ViewBlueprint:space_origin").to_pylist(),
+            strict=True,
+        ):
+            found[name[0]] = (kind[0], origin[0])
+    return found
+
+
+def check_panels(rrd: Path, expected: set[str]) -> dict[str, tuple[str, str]]:
+    """The blueprint has a 3-D view and the ``expected`` time-series panels (by origin),
+    and every time-series panel it shows has data."""
+    shown = views(rrd)
+    kinds = {kind for kind, _ in shown.values()}
+    assert "3D" in kinds, shown
+    series = {origin for kind, origin in shown.values() if kind == "TimeSeries"}
+    assert expected <= series, expected - series
+    rows = rows_per_entity(rrd)
+    for origin in series:
+        with_data = [e for e, n in rows.items() if e.startswith(f"/{origin}/") and n > 0]
+        assert with_data, f"panel {origin} is empty"
+    return shown
+
+
+def check_attitude(rrd: Path) -> None:
+    """Roll, pitch and yaw in degrees, continuous: no jump over 180° between samples."""
+    for axis in ("roll", "pitch", "yaw"):
+        values = scalars(rrd, f"/plots/attitude/{axis}")
+        assert len(values) > 10, axis
+        assert np.all(np.abs(np.diff(values)) <= 180.0), axis
 
 
 @pytest.fixture(scope="module")
@@ -58,17 +119,41 @@ def test_a_recorded_flight_converts_with_every_part(flight_log, tmp_path):
         "/world/trajectory",
         "/world/home",
         "/events",
-        "/plots/altitude",
+        "/plots/altitude/altitude",
         "/plots/attitude/roll",
-        "/plots/rotors/speed_1",
-        "/plots/battery/voltage",
-        "/world/vehicle/rotors",
+        "/plots/rates/roll",
+        "/plots/rotors/rotor_1",
+        "/plots/battery_voltage/voltage",
+        "/plots/state/armed",
+        "/map/track",
+        "/world/vehicle/model/rotors",
+        "/world/vehicle/marker",
     ):
         assert rows.get(entity, 0) > 0, entity
     # Every position sample is one row of altitude and one translation of the vehicle.
-    assert rows["/plots/altitude"] == result.entities["plots/altitude"] > 100
-    assert rows["/world/vehicle"] >= 2 * rows["/plots/altitude"] - 5  # + rotations
+    assert rows["/plots/altitude/altitude"] == result.entities["plots/altitude/altitude"] > 100
+    assert rows["/world/vehicle"] >= 2 * rows["/plots/altitude/altitude"] - 5  # + rotations
     assert rows["/events"] >= 4  # armed, took off, landed, disarmed (and mode changes)
+    shown = check_panels(
+        out,
+        {
+            "plots/state",
+            "plots/altitude",
+            "plots/climb_rate",
+            "plots/attitude",
+            "plots/rates",
+            "plots/rotors",
+            "plots/battery_voltage",
+        },
+    )
+    assert ("Map", "map") in shown.values() and ("TextLog", "events") in shown.values()
+    check_attitude(out)
+    # Rotor speeds are multiples of hover: about 1 in flight.
+    rotor = scalars(out, "/plots/rotors/rotor_1")
+    assert 0.8 < np.median(rotor[rotor > 0.1]) < 1.2
+    # The flight-state band: armed goes 0 -> 1 -> 0.
+    armed = scalars(out, "/plots/state/armed")
+    assert armed[0] == 0 and armed.max() == 1 and armed[-1] == 0
 
 
 def test_log_without_position_messages_still_converts(tmp_path):
@@ -77,10 +162,9 @@ def test_log_without_position_messages_still_converts(tmp_path):
     enc = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     t0 = time.time()
     writer.record(enc.heartbeat_encode(2, 12, 128 | 1, 0, 4).pack(enc), t0)  # PX4, armed
-    for i in range(50):
-        writer.record(
-            enc.attitude_encode(i * 20, 0.1, -0.1, 0.01 * i, 0, 0, 0).pack(enc), t0 + 0.02 * i
-        )
+    for i in range(50):  # yaw turning through ±180° three times (wrapped, as MAVLink sends)
+        yaw = (0.4 * i + math.pi) % (2 * math.pi) - math.pi
+        writer.record(enc.attitude_encode(i * 20, 0.1, -0.1, yaw, 0, 0, 0).pack(enc), t0 + 0.02 * i)
     writer.record(enc.statustext_encode(4, b"hello from PX4", 0, 0).pack(enc), t0 + 1)
     writer.close()
     out = tmp_path / "attitude_only.rrd"
@@ -90,6 +174,14 @@ def test_log_without_position_messages_still_converts(tmp_path):
     assert rows["/plots/attitude/yaw"] == 50
     assert rows["/events"] == 2  # the arming/mode line and the STATUSTEXT
     assert "/world/trajectory" not in rows
+    check_attitude(out)
+    yaw = scalars(out, "/plots/attitude/yaw")
+    assert yaw[-1] - yaw[0] == pytest.approx(np.degrees(0.4 * 49), abs=1e-3)  # unwrapped
+    assert scalars(out, "/plots/attitude/roll")[0] == pytest.approx(np.degrees(0.1))
+    # Only the panels with data: no altitude, rotors or battery panel.
+    shown = check_panels(out, {"plots/attitude", "plots/rates", "plots/state"})
+    origins = {origin for _, origin in shown.values()}
+    assert not {"plots/altitude", "plots/rotors", "plots/battery_voltage", "map"} & origins
 
 
 def test_damaged_log_gives_a_partial_recording_and_a_warning(flight_log, tmp_path):
@@ -105,40 +197,184 @@ def test_damaged_log_gives_a_partial_recording_and_a_warning(flight_log, tmp_pat
     assert result.stats.damaged and result.stats.truncated
     assert 0.8 * count < result.stats.messages < count
     assert any("damaged" in w for w in result.warnings)
-    assert rows_per_entity(out)["/plots/altitude"] > 50
+    assert rows_per_entity(out)["/plots/altitude/altitude"] > 50
 
 
 @pytest.mark.parametrize(
     "content", [b"", b"not a telemetry log at all\n" * 100, bytes(range(256)) * 40]
 )
-def test_not_a_log_says_so_without_a_traceback(tmp_path, capsys, content):
+def test_not_a_log_says_so_once_and_writes_nothing(tmp_path, capsys, content):
     bogus = tmp_path / "bogus.tlog"
     bogus.write_bytes(content)
-    assert main([str(bogus), "-o", str(tmp_path / "bogus.rrd")]) == 1
-    err = capsys.readouterr().err
-    assert "no MAVLink messages found" in err and "Traceback" not in err
+    out = tmp_path / "bogus.rrd"
+    assert main([str(bogus), "-o", str(out)]) == 1
+    captured = capsys.readouterr()
+    assert captured.err.startswith("gcs-replay: error: no MAVLink messages found")
+    assert len(captured.err.splitlines()) == 1 and "Traceback" not in captured.err
+    assert captured.out == ""  # no "open it with: rerun ..."
+    assert not out.exists()
     assert main([str(tmp_path / "missing.tlog")]) == 2
     assert "no such file" in capsys.readouterr().err
 
 
+def test_quadsitl_replay_names_itself_and_what_the_input_is(tmp_path):
+    bogus = tmp_path / "bogus.tlog"
+    bogus.write_bytes(b"not a log\n" * 10)
+    result = run_cli("replay", str(bogus), "-o", str(tmp_path / "bogus.rrd"))
+    assert result.returncode == 1
+    assert result.stderr.startswith("quadsitl replay: error: no MAVLink messages found")
+    assert "gcs-replay" not in result.stderr and result.stdout == ""
+    fifo = tmp_path / "pipe.tlog"
+    os.mkfifo(fifo)
+    for path, words in ((tmp_path, "is a directory"), (fifo, "FIFO"), ("/dev/zero", "device")):
+        result = run_cli("replay", str(path), "-o", str(tmp_path / "x.rrd"))
+        assert result.returncode == 2, path
+        assert result.stderr.startswith("quadsitl replay: error: "), result.stderr
+        assert words in result.stderr and "no such file" not in result.stderr
+        assert len(result.stderr.splitlines()) == 1
+    assert not (tmp_path / "x.rrd").exists()
+
+
+def test_replay_of_a_large_log_shows_progress(flight_log, tmp_path, capsys, monkeypatch):
+    import gcs_tools.replay
+    import gcs_tools.tlog_reader
+
+    monkeypatch.setattr(gcs_tools.replay, "PROGRESS_BYTES", 0)  # any log counts as large
+    monkeypatch.setattr(gcs_tools.tlog_reader, "PROGRESS_EVERY", 100)
+    assert main([str(flight_log), "-o", str(tmp_path / "flight.rrd")]) == 0
+    lines = [line for line in capsys.readouterr().err.splitlines() if "reading" in line]
+    percents = [int(line.rsplit(" ", 1)[-1].rstrip("%")) for line in lines]
+    assert len(percents) >= 3 and percents == sorted(percents) and percents[-1] == 100
+
+
+def free_tcp_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def colour_pixels(image: np.ndarray, colour: tuple[int, int, int], tolerance: int = 40) -> int:
+    """How many pixels are within ``tolerance`` of ``colour`` in every channel."""
+    return int(np.all(np.abs(image.astype(int) - colour) <= tolerance, axis=-1).sum())
+
+
+ROTOR_RED = (220, 50, 50)  # the front rotors of quadsitl.viz.scene's vehicle model
+
+
 @pytest.mark.slow
 def test_headless_screenshot_shows_the_flight(flight_log, tmp_path):
-    rerun = viewer_executable()  # rerun-sdk, a dependency, installs it beside the interpreter
-    assert rerun is not None, "the Rerun viewer is missing from the environment"
+    """The demo-style recording rendered by the real viewer, headless: the vehicle is
+    drawn big enough to see, and no plot panel is a single flat colour."""
+    from PIL import Image
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from benchmarks.images import HeadlessViewer
+
     out = tmp_path / "flight.rrd"
     convert(flight_log, out)
     png = tmp_path / "flight.png"
-    subprocess.run(
-        [rerun, str(out), "--headless", "--window-size", "1280x720", "--screenshot-to", str(png)],
-        check=True,
-        timeout=120,
-        capture_output=True,
-    )
+    viewer = HeadlessViewer()
+    try:
+        problems = viewer.screenshot(out, png)
+    finally:
+        viewer.close()
+    assert not problems, problems
+    image = np.asarray(Image.open(png).convert("RGB"))
+    height, width, _ = image.shape
+    assert (width, height) == (1600, 900)
+    scene = image[40 : height * 45 // 100, : width // 2]  # the 3-D view, top left
+    assert colour_pixels(scene, ROTOR_RED) >= 30, "the vehicle is not visible in 3-D"
+    plots = image[40 : height - 40, width // 2 + 10 :]
+    rows, columns = 7, 2  # the mode band, then a grid of panels two wide
+    for r in range(rows):
+        for c in range(columns):
+            cell = plots[
+                r * plots.shape[0] // rows + 25 : (r + 1) * plots.shape[0] // rows - 5,
+                c * plots.shape[1] // columns + 5 : (c + 1) * plots.shape[1] // columns - 5,
+            ]
+            colours = len(np.unique(cell.reshape(-1, 3), axis=0))
+            assert colours > 20, f"plot cell ({r}, {c}) is flat ({colours} colours)"
+
+
+def test_web_viewer_on_a_busy_port_is_a_one_line_error(tmp_path):
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        env = dict(os.environ, QUADSITL_WEB_PORT=str(busy.getsockname()[1]))
+        env["QUADSITL_GRPC_PORT"] = str(free_tcp_port())
+        result = subprocess.run(
+            cli("sim --gcs udpin:127.0.0.1:0 --api none --logs none --rerun-web --duration 5"),
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=env,
+        )
+    assert result.returncode == 2
+    assert result.stderr.startswith("quadsitl sim: error: the Rerun web viewer cannot listen")
+    assert len(result.stderr.splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_web_viewer_in_a_real_browser(tmp_path):
+    """``quadsitl sim --rerun-web`` on loopback, its URL loaded in headless Chromium while
+    the vehicle takes off: the page connects and draws the vehicle's model in the 3-D
+    view, and goes on changing with the stream."""
+    from io import BytesIO
+
     from PIL import Image
 
-    image = np.asarray(Image.open(png).convert("RGB"))
-    assert image.shape[0] >= 720
-    assert len(np.unique(image.reshape(-1, 3), axis=0)) > 100  # a scene, not a blank window
+    from tests.chromium import HeadlessChromium, chromium_executable
+
+    browser = chromium_executable()
+    if browser is None:
+        pytest.skip("Chromium is not installed (Debian: apt-get install chromium)")
+    port = free_udp_port()
+    env = dict(os.environ, QUADSITL_WEB_PORT=str(free_tcp_port()))
+    env["QUADSITL_GRPC_PORT"] = str(free_tcp_port())
+    sim = subprocess.Popen(
+        cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --logs none --rerun-web --quiet"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
+    page = client = None
+    try:
+        ready, _, _ = select.select([sim.stdout], [], [], 60)
+        assert ready, "quadsitl sim --rerun-web printed no URL within 60 s"
+        line = sim.stdout.readline()  # the first line: where to open it
+        assert line.startswith("Rerun web viewer: open http://127.0.0.1:"), line
+        url = line.split("open ", 1)[1].strip()
+        client = VehicleClient(f"udpout:127.0.0.1:{port}")  # flying while the page loads
+        client.connect(timeout=30)
+        client.arm()
+        client.takeoff(3.0)
+        # A small window: the wasm viewer, rendered in software on a loaded machine,
+        # keeps up with the stream at this size (it may still run tens of seconds late).
+        page = HeadlessChromium(browser, url, size=(800, 450))
+
+        def screenshot() -> np.ndarray:
+            return np.asarray(Image.open(BytesIO(page.screenshot())).convert("RGB"))
+
+        deadline = time.monotonic() + 180  # the viewer's wasm, rendered in software
+        while True:
+            first = screenshot()
+            scene = first[40 : first.shape[0] * 55 // 100, : first.shape[1] // 2]
+            if colour_pixels(scene, ROTOR_RED) >= 4:
+                break  # connected, and the vehicle's model is drawn in the 3-D view
+            assert time.monotonic() < deadline, "the page never showed the vehicle"
+            time.sleep(3)
+        deadline = time.monotonic() + 120
+        while np.mean(np.any(screenshot() != first, axis=-1)) < 0.01:
+            assert time.monotonic() < deadline, "the page stopped following the stream"
+            time.sleep(5)  # each screenshot costs the software-rendered page a frame
+    finally:
+        if client is not None:
+            client.close()
+        if page is not None:
+            page.close()
+        sim.terminate()
+        sim.wait(timeout=20)
 
 
 def test_sim_streams_itself_to_a_recording(tmp_path):
@@ -152,7 +388,13 @@ def test_sim_streams_itself_to_a_recording(tmp_path):
     assert result.returncode == 0, result.stderr
     rows = rows_per_entity(out)
     assert rows["/world/vehicle"] >= 2 * 30  # pose at 30 Hz for 2 s
-    assert rows["/plots/rotors/speed_1"] >= 30 and "/world/vehicle/rotors" in rows
+    assert rows["/plots/rotors/rotor_1"] >= 30 and "/world/vehicle/model/rotors" in rows
+    check_panels(
+        out,
+        {"plots/state", "plots/altitude", "plots/attitude", "plots/rotors", "plots/rates"},
+    )
+    check_attitude(out)
+    assert "/plots/state/mode/LOITER" in rows  # the heartbeat's flight mode band
 
 
 def test_sim_rerun_without_a_display_says_so_in_one_plain_line(tmp_path):
@@ -182,7 +424,9 @@ def test_live_viewer_watches_a_running_vehicle(sim, tmp_path):
     count = watch(f"udpout:127.0.0.1:{sim.port}", str(out), duration=3.0)
     assert count > 100
     rows = rows_per_entity(out)
-    assert rows["/world/vehicle"] > 50 and rows["/plots/altitude"] > 50
+    assert rows["/world/vehicle"] > 50 and rows["/plots/altitude/altitude"] > 50
+    check_attitude(out)
+    assert ("3D", "world") in views(out).values()
     assert rows["/events"] >= 1  # the first heartbeat: disarmed, mode LOITER
 
 
@@ -205,7 +449,18 @@ def test_render_mode_rerun_records_episodes(tmp_path):
     env.close()
     rows = rows_per_entity(out)
     assert rows["/world/vehicle"] == rows["/world/goal"] == steps
-    assert rows["/plots/reward"] == steps - 2  # no reward at a reset
+    assert rows["/plots/reward/reward"] == steps - 2  # no reward at a reset
+    check_panels(
+        out,
+        {
+            "plots/reward",
+            "plots/reward_terms",
+            "plots/distance_to_goal",
+            "plots/altitude",
+            "plots/speed",
+        },
+    )
+    assert rows["/events"] == 2  # each episode's outcome
     with pytest.raises(ValueError, match="render_mode"):
         gym.make("QuadSITL/Hover-v0", render_mode="human")
 
@@ -220,4 +475,4 @@ def test_quadsitl_replay_command(flight_log, tmp_path):
     )
     assert result.returncode == 0, result.stderr
     assert f"open it with: rerun {out}" in result.stdout
-    assert rows_per_entity(out)["/plots/altitude"] > 100
+    assert rows_per_entity(out)["/plots/altitude/altitude"] > 100

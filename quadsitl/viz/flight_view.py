@@ -4,8 +4,11 @@ Used row by row by the live viewer and column by column by the replay. Works wit
 whatever a log holds: position from LOCAL_POSITION_NED (or ODOMETRY, or
 GLOBAL_POSITION_INT until a local one appears), attitude from ATTITUDE_QUATERNION (or
 ODOMETRY, HIL_STATE_QUATERNION, ATTITUDE), rotors from ACTUATOR_OUTPUT_STATUS or
-SERVO_OUTPUT_RAW, battery from BATTERY_STATUS or SYS_STATUS; messages it does not know
-are ignored. Frames: see :mod:`quadsitl.viz.scene` (ENU on screen).
+SERVO_OUTPUT_RAW, battery from BATTERY_STATUS or SYS_STATUS, setpoints from
+POSITION_TARGET_LOCAL_NED / SET_POSITION_TARGET_LOCAL_NED and ATTITUDE_TARGET, GPS from
+GPS_RAW_INT and GLOBAL_POSITION_INT (``map/track``), the flight state from HEARTBEAT and
+MISSION_CURRENT; messages it does not know are ignored. Angles are in degrees, unwrapped
+(continuous through ±180°). Frames: see :mod:`quadsitl.viz.scene` (ENU on screen).
 """
 
 from __future__ import annotations
@@ -28,7 +31,8 @@ SEVERITY = ["CRITICAL"] * 3 + ["ERROR", "WARN", "INFO", "INFO", "DEBUG"]  # MAV_
 
 @dataclass
 class Sample:
-    """``kind``: translation (3,), rotation (xyzw), scalar, point (3,) or text."""
+    """``kind``: translation (3,), rotation (xyzw), scalar, point (3,), geo (lat, lon in
+    degrees) or text."""
 
     entity: str
     kind: str
@@ -45,12 +49,14 @@ class FlightView:
     mission_changed: bool = False
     seen: set[str] = field(default_factory=set)
     last_mode: tuple[bool, str] | None = None
+    hover_rotor: float = 1.0  # rotor value at hover (rad/s for quadsitl); 1: raw values
+    last_angle: dict[str, float] = field(default_factory=dict)  # entity -> last degrees
 
     def samples(self, msg: Any, own: bool = False) -> list[Sample]:
         """Samples of one message; ``own``: built by the simulator itself (no header)."""
         kind = msg.get_type()
-        if kind == "HEARTBEAT" and not own:
-            return self._heartbeat(msg)
+        if kind == "HEARTBEAT":
+            return self._heartbeat(msg, own)
         if kind in ("SET_POSITION_TARGET_LOCAL_NED", "MISSION_ITEM_INT", "MISSION_ITEM"):
             return self._from_anyone(kind, msg)  # either direction: GCS or vehicle
         if not own and not self._from_vehicle(msg):
@@ -68,24 +74,47 @@ class FlightView:
             return source[0] != 255  # before its heartbeat: anything but a ground station
         return source == self.vehicle
 
-    def _heartbeat(self, msg: Any) -> list[Sample]:
-        source = (msg.get_srcSystem(), msg.get_srcComponent())
-        if self.vehicle is None and msg.type != GCS_TYPE and msg.autopilot != 8:
-            self.vehicle = source
-        if source != self.vehicle:
-            return []
+    def _heartbeat(self, msg: Any, own: bool = False) -> list[Sample]:
+        """The flight-state band at every heartbeat (armed 0/1, 2 on the current mode's
+        series, NaN ending the previous mode's), and an event when it changes."""
+        if not own:
+            source = (msg.get_srcSystem(), msg.get_srcComponent())
+            if self.vehicle is None and msg.type != GCS_TYPE and msg.autopilot != 8:
+                self.vehicle = source
+            if source != self.vehicle:
+                return []
         armed = bool(msg.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         state = (armed, _mode_name(msg))
-        if state == self.last_mode:
-            return []
-        self.last_mode = state
-        return [Sample("events", "text", f"{'ARMED' if armed else 'disarmed'}, mode {state[1]}")]
+        band = f"plots/state/mode/{state[1]}"
+        out = []
+        if self.last_mode is not None and state != self.last_mode:
+            was_armed, was_mode = self.last_mode
+            out.append(Sample("plots/state/armed", "scalar", float(was_armed)))
+            if was_mode != state[1]:
+                old_band = f"plots/state/mode/{was_mode}"
+                out += [Sample(old_band, "scalar", 2.0), Sample(old_band, "scalar", math.nan)]
+        out += [Sample("plots/state/armed", "scalar", float(armed)), Sample(band, "scalar", 2.0)]
+        if state != self.last_mode:
+            self.last_mode = state
+            text = f"{'ARMED' if armed else 'disarmed'}, mode {state[1]}"
+            out.append(Sample("events", "text", text))
+        return out
+
+    def _angle(self, entity: str, radians: float) -> Sample:
+        """Degrees, continuous with the entity's previous sample (unwrapped)."""
+        value = math.degrees(radians)
+        last = self.last_angle.get(entity)
+        if last is not None and math.isfinite(value):
+            value += 360.0 * round((last - value) / 360.0)
+        if math.isfinite(value):
+            self.last_angle[entity] = value
+        return Sample(entity, "scalar", value)
 
     def _from_anyone(self, kind: str, msg: Any) -> list[Sample]:
         if kind == "SET_POSITION_TARGET_LOCAL_NED":
-            if msg.coordinate_frame != mavutil.mavlink.MAV_FRAME_LOCAL_NED or msg.type_mask & 7:
+            if msg.coordinate_frame != mavutil.mavlink.MAV_FRAME_LOCAL_NED:
                 return []
-            return [Sample("world/setpoint", "point", frames.ned_to_enu([msg.x, msg.y, msg.z]))]
+            return self._position_target(msg)
         if getattr(msg, "mission_type", 0) != 0 or self.home is None:
             return []
         scale = 1e-7 if kind == "MISSION_ITEM_INT" else 1.0
@@ -119,12 +148,14 @@ class FlightView:
     def _global_position_int(self, msg: Any) -> list[Sample]:
         if self.home is None:
             self.home = Home(msg.lat * 1e-7, msg.lon * 1e-7, (msg.alt - msg.relative_alt) * 1e-3)
+        geo = Sample("map/track", "geo", (msg.lat * 1e-7, msg.lon * 1e-7))
         if "LOCAL_POSITION_NED" in self.seen or "ODOMETRY" in self.seen:
-            return []
+            return [geo]
         east, north, _ = self.home.to_local(msg.lat * 1e-7, msg.lon * 1e-7, self.home.altitude)
         position = np.array([east, north, msg.relative_alt * 1e-3])
         velocity = frames.ned_to_enu([msg.vx * 0.01, msg.vy * 0.01, msg.vz * 0.01])
         return [
+            geo,
             Sample("world/vehicle", "translation", position),
             *_altitude_velocity(position, velocity),
         ]
@@ -146,8 +177,16 @@ class FlightView:
 
     def _attitude(self, msg: Any) -> list[Sample]:
         out = [
-            Sample(f"plots/attitude/{name}", "scalar", math.degrees(value))
+            self._angle(f"plots/attitude/{name}", value)
             for name, value in (("roll", msg.roll), ("pitch", msg.pitch), ("yaw", msg.yaw))
+        ]
+        out += [
+            Sample(f"plots/rates/{name}", "scalar", math.degrees(value))
+            for name, value in (
+                ("roll", msg.rollspeed),
+                ("pitch", msg.pitchspeed),
+                ("yaw", msg.yawspeed),
+            )
         ]
         if not {"ATTITUDE_QUATERNION", "ODOMETRY", "HIL_STATE_QUATERNION"} & self.seen:
             q_ned = frames.quat_from_euler(msg.roll, msg.pitch, msg.yaw)
@@ -158,10 +197,46 @@ class FlightView:
             )
         return out
 
+    def _attitude_target(self, msg: Any) -> list[Sample]:
+        if msg.type_mask & 128:  # ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
+            return []
+        roll, pitch, yaw = frames.euler_from_quat(np.asarray(msg.q, dtype=np.float64)).tolist()
+        return [
+            self._angle(f"plots/attitude/{name}_setpoint", value)
+            for name, value in (("roll", roll), ("pitch", pitch), ("yaw", yaw))
+        ]
+
+    def _position_target_local_ned(self, msg: Any) -> list[Sample]:
+        if msg.coordinate_frame != mavutil.mavlink.MAV_FRAME_LOCAL_NED:
+            return []
+        return self._position_target(msg)
+
+    def _position_target(self, msg: Any) -> list[Sample]:
+        """Altitude and climb-rate setpoints (and the commanded point) of a local target."""
+        out = []
+        if not msg.type_mask & 7:  # position given
+            point = frames.ned_to_enu([msg.x, msg.y, msg.z])
+            out.append(Sample("world/setpoint", "point", point))
+            out.append(Sample("plots/altitude/setpoint", "scalar", float(point[2])))
+        if not msg.type_mask & 0x20 and math.isfinite(msg.vz):  # vz given
+            out.append(Sample("plots/climb_rate/setpoint", "scalar", -float(msg.vz)))
+        return out
+
+    def _mission_current(self, msg: Any) -> list[Sample]:
+        return [Sample("plots/mission_item/seq", "scalar", float(msg.seq))]
+
+    def _gps_raw_int(self, msg: Any) -> list[Sample]:
+        out = [Sample("plots/gps/fix_type", "scalar", float(msg.fix_type))]
+        if msg.satellites_visible != 255:
+            out.append(Sample("plots/gps/satellites", "scalar", float(msg.satellites_visible)))
+        if "GLOBAL_POSITION_INT" not in self.seen and msg.fix_type >= 2:
+            out.append(Sample("map/track", "geo", (msg.lat * 1e-7, msg.lon * 1e-7)))
+        return out
+
     def _actuator_output_status(self, msg: Any) -> list[Sample]:
         count = bin(msg.active).count("1") or 4
         return [
-            Sample(f"plots/rotors/speed_{i + 1}", "scalar", msg.actuator[i])
+            Sample(f"plots/rotors/rotor_{i + 1}", "scalar", msg.actuator[i] / self.hover_rotor)
             for i in range(min(count, 8))
         ]
 
@@ -173,15 +248,17 @@ class FlightView:
 
     def _battery_status(self, msg: Any) -> list[Sample]:
         cells = [v for v in msg.voltages if v not in (0, 65535)]
-        out = [Sample("plots/battery/remaining_percent", "scalar", msg.battery_remaining)]
+        out = []
+        if msg.battery_remaining >= 0:
+            out.append(Sample("plots/battery_remaining/percent", "scalar", msg.battery_remaining))
         if cells:
-            out.append(Sample("plots/battery/voltage", "scalar", sum(cells) / 1000))
+            out.append(Sample("plots/battery_voltage/voltage", "scalar", sum(cells) / 1000))
         return out
 
     def _sys_status(self, msg: Any) -> list[Sample]:
         if "BATTERY_STATUS" in self.seen or msg.voltage_battery in (0, 65535):
             return []
-        return [Sample("plots/battery/voltage", "scalar", msg.voltage_battery / 1000)]
+        return [Sample("plots/battery_voltage/voltage", "scalar", msg.voltage_battery / 1000)]
 
     def _statustext(self, msg: Any) -> list[Sample]:
         level = SEVERITY[min(max(msg.severity, 0), 7)]
@@ -190,11 +267,10 @@ class FlightView:
 
 def _altitude_velocity(position: np.ndarray, velocity: np.ndarray) -> list[Sample]:
     return [
-        Sample("plots/altitude", "scalar", float(position[2])),
-        *(
-            Sample(f"plots/velocity/{axis}", "scalar", float(v))
-            for axis, v in zip(("east", "north", "up"), velocity, strict=True)
-        ),
+        Sample("plots/altitude/altitude", "scalar", float(position[2])),
+        Sample("plots/climb_rate/climb", "scalar", float(velocity[2])),
+        Sample("plots/velocity/east", "scalar", float(velocity[0])),
+        Sample("plots/velocity/north", "scalar", float(velocity[1])),
     ]
 
 

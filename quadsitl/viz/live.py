@@ -14,17 +14,19 @@ import numpy as np
 import rerun as rr
 
 from quadsitl.viz.flight_view import FlightView, Sample
-from quadsitl.viz.scene import TIMELINE
+from quadsitl.viz.scene import TIMELINE, series_style
 
 TRACK_REDRAW = 0.5  # s of wall time between trajectory redraws
 MAX_TRACK = 20_000  # points kept for the trajectory (about 7 min at 50 Hz)
 
 
 class LiveLogger:
-    def __init__(self, rec: rr.RecordingStream) -> None:
+    def __init__(self, rec: rr.RecordingStream, hover_rotor: float = 1.0) -> None:
         self.rec = rec
-        self.view = FlightView()
+        self.view = FlightView(hover_rotor=hover_rotor)
+        self.styled: set[str] = set()
         self.track: list[np.ndarray] = []
+        self.geo_track: list[tuple[float, float]] = []
         self.pose = {"translation": np.zeros(3), "rotation": np.array([0.0, 0.0, 0.0, 1.0])}
         self._drawn = 0.0
 
@@ -42,6 +44,8 @@ class LiveLogger:
         if self.track and now - self._drawn > TRACK_REDRAW:
             self._drawn = now
             self.rec.log("world/trajectory", rr.LineStrips3D([np.asarray(self.track)]))
+            if len(self.geo_track) > 1:
+                self.rec.log("map/path", rr.GeoLineStrings(lat_lon=[self.geo_track]))
 
     def text(self, text: str, level: str = "INFO") -> None:
         self.rec.set_time(TIMELINE, timestamp=time.time())
@@ -49,7 +53,18 @@ class LiveLogger:
 
     def _log(self, sample: Sample) -> None:
         if sample.kind == "scalar":
+            if sample.entity not in self.styled:
+                self.styled.add(sample.entity)
+                style = series_style(sample.entity)
+                if style is not None:
+                    self.rec.log(sample.entity, style, static=True)
             self.rec.log(sample.entity, rr.Scalars(sample.value))
+        elif sample.kind == "geo":
+            self.geo_track.append(sample.value)
+            del self.geo_track[:-MAX_TRACK]
+            self.rec.log(
+                sample.entity, rr.GeoPoints(lat_lon=[sample.value], radii=rr.Radius.ui_points(4.0))
+            )
         elif sample.kind in ("translation", "rotation"):
             # Both together: a logged Transform3D replaces the whole transform.
             self.pose[sample.kind] = np.asarray(sample.value, dtype=np.float64)
