@@ -130,7 +130,7 @@ def test_training_through_the_wire_flies_its_envs_as_fleets(tmp_path):
         timeout=300,
     )
     assert done.returncode == 0, done.stderr[-2000:]
-    run = tmp_path / "hover-ppo-fast-seed0"
+    run = tmp_path / "hover-ppo-fast-seed0-mavlink"  # its own folder beside in-process runs
     rows = (run / "metrics.csv").read_text().strip().splitlines()
     assert len(rows) == 3  # header and two iterations
     assert '"vehicles_per_sim": 4' in (run / "config.json").read_text()
