@@ -113,10 +113,10 @@ def test_resume_after_an_interruption_runs_only_the_missing_trials(tmp_path, sta
     assert "Tuner.restore" not in output  # Tune's own advice is for Python, not this command
     table = (tmp_path / "sweeps" / "sweep" / "results.md").read_text()
     assert "| hover | ppo |" in table and " of 4 trials finished" in table, table
-    done_before = {
+    done_before = {  # trained to the end: both rows, and the checkpoint saved after the last
         p.parent.name: p.stat().st_mtime_ns
         for p in tmp_path.glob("hover-*/metrics.csv")
-        if len(p.read_text().splitlines()) == 3
+        if len(p.read_text().splitlines()) == 3 and _checkpointed_after(p)
     }
     assert 1 <= len(done_before) < 4, done_before
     resumed = _sweep(
@@ -129,6 +129,13 @@ def test_resume_after_an_interruption_runs_only_the_missing_trials(tmp_path, sta
     for name, mtime in done_before.items():  # finished trials were not run again
         assert (tmp_path / name / "metrics.csv").stat().st_mtime_ns == mtime, name
     assert "| hover | ppo | 4 |" in (tmp_path / "sweeps" / "sweep" / "results.md").read_text()
+
+
+def _checkpointed_after(metrics: Path) -> bool:
+    """Whether the run's last.pt was saved after its last metrics row: a run interrupted
+    between the two (the row is written first) continues from the previous iteration."""
+    last = metrics.parent / "checkpoints" / "last.pt"
+    return last.is_file() and last.stat().st_mtime_ns >= metrics.stat().st_mtime_ns
 
 
 @pytest.mark.parametrize(
