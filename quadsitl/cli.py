@@ -95,19 +95,7 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         action="store_true",
         help="simulated time moves only with motor commands, one control period each",
     )
-    signing = sim.add_mutually_exclusive_group()
-    signing.add_argument(
-        "--signing-key",
-        metavar="FILE",
-        help="require MAVLink 2 signing with the key in FILE (64 hex digits or 32 bytes; "
-        "environment: QUADSITL_SIGNING_KEY=64 hex digits)",
-    )
-    signing.add_argument(
-        "--signing-passphrase",
-        metavar="TEXT",
-        help="require MAVLink 2 signing with key SHA-256(TEXT), as MAVProxy's "
-        "'signing setup TEXT' (environment: QUADSITL_SIGNING_PASSPHRASE)",
-    )
+    _add_signing_options(sim, "require MAVLink 2 signing")
     sim.add_argument(
         "--link",
         action="append",
@@ -245,17 +233,23 @@ def _add_fly_parser(commands: argparse._SubParsersAction) -> None:
         metavar="S",
         help="give up when the mission is not done after S seconds (default: 600)",
     )
-    signing = fly.add_mutually_exclusive_group()
+    _add_signing_options(fly, "sign every message (for a vehicle with signing on)")
+
+
+def _add_signing_options(parser: argparse.ArgumentParser, what: str) -> None:
+    """--signing-key FILE | --signing-passphrase TEXT, read by :func:`_signing_key`;
+    ``what`` says what the key is for."""
+    signing = parser.add_mutually_exclusive_group()
     signing.add_argument(
         "--signing-key",
         metavar="FILE",
-        help="sign every message with the key in FILE, for a vehicle with signing on (64 "
-        "hex digits or 32 bytes; environment: QUADSITL_SIGNING_KEY=64 hex digits)",
+        help=f"{what} with the key in FILE (64 hex digits or 32 bytes; "
+        "environment: QUADSITL_SIGNING_KEY=64 hex digits)",
     )
     signing.add_argument(
         "--signing-passphrase",
         metavar="TEXT",
-        help="sign with key SHA-256(TEXT), as quadsitl sim's --signing-passphrase "
+        help=f"{what} with key SHA-256(TEXT), as MAVProxy's 'signing setup TEXT' "
         "(environment: QUADSITL_SIGNING_PASSPHRASE)",
     )
 
