@@ -25,10 +25,12 @@ from quadsitl.mavlink.tlog import TlogWriter
 from tests.conftest import cli, run_cli, start_sim
 
 
-def rows_per_entity(rrd: Path) -> dict[str, int]:
+def rows_per_entity(rrd: Path, static: bool = True) -> dict[str, int]:
+    """Rows logged per entity (``static``: counting the static ones, logged once)."""
     rows: dict[str, int] = {}
     for chunk in rrc.RrdReader(rrd).store().stream():
-        rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+        if static or not chunk.is_static:
+            rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
     return rows
 
 
@@ -447,8 +449,9 @@ def test_render_mode_rerun_records_episodes(tmp_path):
             if terminated or truncated:
                 break
     env.close()
-    rows = rows_per_entity(out)
-    assert rows["/world/vehicle"] == rows["/world/goal"] == steps
+    rows = rows_per_entity(out, static=False)
+    assert rows["/world/vehicle"] == rows["/plots/altitude/altitude"] == steps
+    assert rows["/world/goal"] == 2  # a waypoint is logged once an episode: it stays put
     assert rows["/plots/reward/reward"] == steps - 2  # no reward at a reset
     check_panels(
         out,
@@ -463,6 +466,72 @@ def test_render_mode_rerun_records_episodes(tmp_path):
     assert rows["/events"] == 2  # each episode's outcome
     with pytest.raises(ValueError, match="render_mode"):
         gym.make("QuadSITL/Hover-v0", render_mode="human")
+
+
+def _record_episodes(path: Path, task: str, seeds: tuple[int, ...]) -> int:
+    """Episodes of ``task`` flown on hover actions, recorded to ``path``; the rows."""
+    import gymnasium as gym
+
+    import quadsitl  # noqa: F401
+
+    env = gym.make(f"QuadSITL/{task}-v0", render_mode="rerun", rerun_save=str(path))
+    steps = 0
+    for seed in seeds:
+        env.reset(seed=seed)
+        steps += 1
+        done = False
+        while not done:
+            *_, terminated, truncated, _ = env.step(np.zeros(4, np.float32))
+            steps += 1
+            done = terminated or truncated
+    env.close()
+    return steps
+
+
+def test_episodes_sent_row_by_row_equal_episodes_sent_at_once(tmp_path, monkeypatch):
+    """A step only buffers its row; the buffer goes to Rerun when it is full or old. How
+    it was cut must not show: a moving target is logged at every step, each episode's
+    path ends where the vehicle is at its end, and the series are the same."""
+    from quadsitl.viz import episode_view
+
+    whole = tmp_path / "whole.rrd"
+    steps = _record_episodes(whole, "TargetFollow", (0, 1))
+    monkeypatch.setattr(episode_view, "FLUSH_AFTER", -1.0)  # every row sent on its own
+    cut = tmp_path / "cut.rrd"
+    assert _record_episodes(cut, "TargetFollow", (0, 1)) == steps
+    for rrd in (whole, cut):
+        rows = rows_per_entity(rrd, static=False)
+        assert rows["/world/goal"] == rows["/world/vehicle"] == steps  # the target moves
+        assert rows["/events"] == 2
+    for entity in ("/plots/distance_to_goal/distance", "/plots/reward/reward"):
+        np.testing.assert_array_equal(scalars(whole, entity), scalars(cut, entity))
+    for rrd in (whole, cut):  # the last path drawn of each episode: all of it
+        paths: dict[int, list] = {}
+        for chunk in rrc.RrdReader(rrd).store().stream():
+            if chunk.entity_path == "/world/trajectory":
+                batch = chunk.to_record_batch()
+                for episode, strip in zip(
+                    batch.column("episode").to_pylist(),
+                    batch.column("LineStrips3D:strips").to_pylist(),
+                    strict=True,
+                ):
+                    paths[episode] = strip[0]
+        last: dict[int, tuple[int, list]] = {}  # episode: (step, translation)
+        for chunk in rrc.RrdReader(rrd).store().stream():
+            if chunk.entity_path == "/world/vehicle":
+                batch = chunk.to_record_batch()
+                for episode, step, translation in zip(
+                    batch.column("episode").to_pylist(),
+                    batch.column("step").to_pylist(),
+                    batch.column("Transform3D:translation").to_pylist(),
+                    strict=True,
+                ):
+                    if step >= last.get(episode, (-1, None))[0]:
+                        last[episode] = (step, translation[0])
+        assert sorted(paths) == sorted(last) == [0, 1]
+        for episode, path in paths.items():
+            assert len(path) > 10
+            np.testing.assert_allclose(path[-1], last[episode][1], atol=1e-5)
 
 
 def test_quadsitl_replay_command(flight_log, tmp_path):

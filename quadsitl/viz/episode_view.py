@@ -1,20 +1,28 @@
 """``render_mode="rerun"`` of the task envs (and ``quadsitl eval --rerun``): episodes in Rerun.
 
 Logged on the ``step`` timeline (one tick per env step), in the task's world frame
-(ENU, metres): the vehicle posed from the physics state (with its trail), what the task
+(ENU, metres): the vehicle posed from the physics state (with the episode's path), what the task
 flies to — the goal (a sphere of the task's goal radius), the landing pad (a disc of
 its radius) or the moving target — and the reward, the goal errors the reward is made
 of (position, attitude, velocity, rates), the distance to the goal, altitude and speed.
 Each episode's outcome (landed, crashed, timed out ...) is an event. Each episode
 starts a new ``episode`` on its own timeline; the layout (blueprint) frames the task's
 start and goal on the first reset.
+
+Recording must not slow the env down (within 10 % of its steps per second), so a step
+only copies one row of numbers into a buffer (:class:`EpisodeRows`); the buffer goes to
+Rerun in whole columns (``send_columns``) when it is full, when an episode has waited
+longer than ``FLUSH_AFTER`` wall seconds (a viewer watching a slow loop still sees it
+move), and at ``close``.
 """
 
 from __future__ import annotations
 
 import math
+import time
 import warnings
 
+import numba
 import numpy as np
 import rerun as rr
 
@@ -23,11 +31,35 @@ from quadsitl.tasks import TaskEngine
 from quadsitl.tasks import features as F
 from quadsitl.tasks import spec as S
 from quadsitl.tasks.land import PAD_RADIUS
-from quadsitl.viz.scene import EPISODE_PANELS, blueprint, framing, open_recording, quat_xyzw
+from quadsitl.viz.scene import EPISODE_PANELS, blueprint, framing, open_recording
 
 STEP_TIMELINE = "step"
 TERMS = ("position", "attitude", "velocity", "rates")  # the columns of engine.dist
-TRACK_EVERY = 10  # steps between redraws of the episode's trajectory
+MAX_TRAIL = 1000  # points a path is thinned to (a long episode's path stays light)
+CAPACITY = 32768  # steps buffered before they are sent
+FLUSH_AFTER = 0.5  # wall s: a buffer older than this is sent at the next step
+
+# One buffer row: the vehicle's state, the goal position, the goal errors, the speed,
+# the distance to the goal, the reward (NaN at a reset), the episode and the step.
+C_GOAL = slice(L.STATE_SIZE, L.STATE_SIZE + 3)
+C_DIST = slice(C_GOAL.stop, C_GOAL.stop + len(TERMS))
+C_SPEED, C_DISTANCE, C_REWARD, C_EPISODE, C_STEP = range(C_DIST.stop, C_DIST.stop + 5)
+ROW_SIZE = C_STEP + 1
+
+
+@numba.njit(cache=True)
+def _copy_row(rows, k, state, goal, dist, i, reward, episode, step):  # pragma: no cover
+    """Row ``k`` of ``rows`` from env ``i`` of the engine's arrays (one call: a step's
+    whole cost of recording is this copy)."""
+    row = rows[k]
+    row[: L.STATE_SIZE] = state[i]
+    row[C_GOAL] = goal[i, :3]
+    row[C_DIST] = dist[i]
+    row[C_SPEED] = np.sqrt(state[i, L.I_VX] ** 2 + state[i, L.I_VY] ** 2 + state[i, L.I_VZ] ** 2)
+    row[C_DISTANCE] = np.sqrt(np.sum((state[i, :3] - goal[i, :3]) ** 2))
+    row[C_REWARD] = reward
+    row[C_EPISODE] = episode
+    row[C_STEP] = step
 
 
 class EpisodeView:
@@ -45,109 +77,189 @@ class EpisodeView:
         self.episode = -1
         self.steps = 0
         self.episode_return = 0.0
-        self.track: list[np.ndarray] = []
-        self.framed = False
         self.ended = False
+        self.framed = False
+        self.task = ""
+        self.goal_radius = 0.05
+        self.rows = np.empty((CAPACITY, ROW_SIZE))
+        self.count = 0  # rows buffered
+        self.oldest = 0.0  # wall time of the oldest buffered row
+        self.track: list[np.ndarray] = []  # positions of this episode already sent
+        self.last_goal = np.full((1, 4), np.nan)  # episode and goal last sent
+        self.events: list[tuple[int, int, str, str]] = []  # episode, step, text, level
 
     def reset(self, engine: TaskEngine, previous_outcome: str | None = None) -> None:
         """A new episode; ``previous_outcome``: how the one before ended, where the caller
         knows it (a vector env resets at once, so the engine no longer does)."""
-        if previous_outcome is not None and not self.ended:
+        if previous_outcome is not None and not self.ended and self.episode >= 0:
             self._outcome(previous_outcome)
         self.episode += 1
         self.steps = 0
         self.episode_return = 0.0
-        self.track = []
         self.ended = False
         if not self.framed:
             self.framed = True
             self._frame(engine)
-        self._log(engine, reward=None)
+        self._row(engine, math.nan)
 
     def step(self, engine: TaskEngine, reward: float) -> None:
         self.steps += 1
         self.episode_return += reward
-        self._log(engine, reward)
-        outcome = int(engine.outcome[self.index])
-        if outcome != S.RUNNING and not self.ended:
-            self._outcome(S.OUTCOME_NAMES[outcome])
+        self._row(engine, reward)
+        if not self.ended and engine.outcome[self.index] != S.RUNNING:
+            self._outcome(S.OUTCOME_NAMES[int(engine.outcome[self.index])])
+
+    def _row(self, engine: TaskEngine, reward: float) -> None:
+        """One buffered row: all a step costs, unless the buffer is due to be sent."""
+        if self.count == 0:
+            self.oldest = time.monotonic()
+        _copy_row(
+            self.rows,
+            self.count,
+            engine.fleet.state,
+            engine.goal,
+            engine.dist,
+            self.index,
+            reward,
+            self.episode,
+            self.steps,
+        )
+        self.count += 1
+        if self.count == CAPACITY or time.monotonic() - self.oldest > FLUSH_AFTER:
+            self.flush()
 
     def _frame(self, engine: TaskEngine) -> None:
-        """Camera on the start, the goal and the ground under them (first reset)."""
+        """Camera on the start, the goal and the ground under them (first reset); the
+        goal's look, which every episode shares."""
         position = engine.fleet.state[self.index, L.POS]
         goal = engine.goal[self.index, F.GOAL_POS]
         points = [position, goal, [position[0], position[1], 0.0], [goal[0], goal[1], 0.0]]
         self.rec.send_blueprint(self.layout(framing(points)), make_active=True)
-
-    def _log_track(self) -> None:
-        self.rec.log("world/trajectory", rr.LineStrips3D([np.asarray(self.track)]))
+        self.task = engine.task.name
+        names = rr.SeriesLines(names=list(TERMS))
+        self.rec.log("plots/reward_terms/terms", names, static=True)
+        if self.task == "land":
+            pad = rr.LineStrips3D.from_fields(colors=[[0, 170, 0]], labels=["pad"])
+            self.rec.log("world/goal", pad, static=True)
+        else:
+            target = self.task == "target_follow"
+            self.rec.log(
+                "world/goal",
+                rr.Ellipsoids3D.from_fields(
+                    half_sizes=[[max(float(engine.task.goal_radius), 0.05)] * 3],
+                    colors=[[220, 40, 40] if target else [0, 190, 0]],
+                    labels=["target" if target else "goal"],
+                    fill_mode="MajorWireframe",
+                ),
+                static=True,
+            )
 
     def _outcome(self, outcome: str) -> None:
         self.ended = True
-        self._log_track()
         level = "INFO" if outcome in ("landed", "timed_out") else "WARN"
         text = (
             f"episode {self.episode}: {outcome.replace('_', ' ')} after {self.steps} steps, "
             f"return {self.episode_return:.1f}"
         )
-        self.rec.log("events", rr.TextLog(text, level=level))
+        self.events.append((self.episode, self.steps, text, level))
 
-    def _log(self, engine: TaskEngine, reward: float | None) -> None:
-        rec, i = self.rec, self.index
-        rec.set_time(STEP_TIMELINE, sequence=self.steps)
-        rec.set_time("episode", sequence=self.episode)
-        state = engine.fleet.state[i]
-        position = state[L.POS].copy()
-        self.track.append(position)
-        attitude = rr.Quaternion(xyzw=quat_xyzw(state[L.QUAT]))
-        rec.log("world/vehicle", rr.Transform3D(translation=position, quaternion=attitude))
-        goal = engine.goal[i, F.GOAL_POS]
-        self._log_goal(engine, goal)
-        if self.steps % TRACK_EVERY == 0:  # the whole line each time: not every step
-            self._log_track()
-        rec.log("plots/altitude/altitude", rr.Scalars(float(position[2])))
-        rec.log("plots/speed/speed", rr.Scalars(float(np.linalg.norm(state[L.VEL]))))
-        distance = float(np.linalg.norm(position - goal))
-        rec.log("plots/distance_to_goal/distance", rr.Scalars(distance))
-        for term, value in zip(TERMS, engine.dist[i], strict=True):
-            rec.log(f"plots/reward_terms/{term}", rr.Scalars(float(value)))
-        if reward is not None:
-            rec.log("plots/reward/reward", rr.Scalars(float(reward)))
+    def flush(self) -> None:
+        """Send the buffered rows to Rerun, a column per series."""
+        rows, self.count = self.rows[: self.count], 0
+        if len(rows):
+            self._send(rows.copy())
+        if self.events:
+            episode, step, text, level = zip(*self.events, strict=True)
+            self.rec.send_columns(
+                "events",
+                indexes=[
+                    rr.TimeColumn(STEP_TIMELINE, sequence=step),
+                    rr.TimeColumn("episode", sequence=episode),
+                ],
+                columns=rr.TextLog.columns(text=text, level=level),
+            )
+            self.events.clear()
 
-    def _log_goal(self, engine: TaskEngine, goal: np.ndarray) -> None:
-        """The landing pad, the moving target or the goal, as the task names it."""
-        name = engine.task.name
-        if name == "land":
-            circle = np.linspace(0.0, 2 * math.pi, 49)
-            ring = np.column_stack(
+    def _send(self, rows: np.ndarray) -> None:
+        steps = rows[:, C_STEP].astype(np.int64)
+        episodes = rows[:, C_EPISODE].astype(np.int64)
+
+        def send(entity: str, columns: object, where: np.ndarray | slice = slice(None)):
+            indexes = [
+                rr.TimeColumn(STEP_TIMELINE, sequence=steps[where]),
+                rr.TimeColumn("episode", sequence=episodes[where]),
+            ]
+            self.rec.send_columns(entity, indexes=indexes, columns=columns)  # type: ignore[arg-type]
+
+        position = rows[:, L.POS]
+        quaternion = rows[:, [L.I_QX, L.I_QY, L.I_QZ, L.I_QW]]  # Rerun's order: x, y, z, w
+        send("world/vehicle", rr.Transform3D.columns(translation=position, quaternion=quaternion))
+        self._send_goal(rows, send)
+        self._send_path(rows)
+        send("plots/altitude/altitude", rr.Scalars.columns(scalars=position[:, 2]))
+        send("plots/speed/speed", rr.Scalars.columns(scalars=rows[:, C_SPEED]))
+        distance = rr.Scalars.columns(scalars=rows[:, C_DISTANCE])
+        send("plots/distance_to_goal/distance", distance)
+        terms = rr.Scalars.columns(scalars=rows[:, C_DIST]).partition(np.full(len(rows), 4))
+        send("plots/reward_terms/terms", terms)
+        stepped = ~np.isnan(rows[:, C_REWARD])  # a reset has no reward
+        if stepped.any():
+            reward = rr.Scalars.columns(scalars=rows[stepped, C_REWARD])
+            send("plots/reward/reward", reward, stepped)
+
+    def _send_goal(self, rows: np.ndarray, send) -> None:  # type: ignore[no-untyped-def]
+        """The goal where it is new: each episode's first row, and each row a moving
+        target has moved."""
+        key = rows[:, [C_EPISODE, *range(C_GOAL.start, C_GOAL.stop)]]  # episode, goal
+        before = np.vstack((self.last_goal, key[:-1]))  # each row's predecessor
+        new = np.any(key != before, axis=1)
+        self.last_goal = key[-1:]
+        goal = rows[:, C_GOAL]
+        if self.task != "land":
+            send("world/goal", rr.Ellipsoids3D.columns(centers=goal[new]), new)
+            return
+        circle = np.linspace(0.0, 2 * math.pi, 49)
+        rings = [
+            np.column_stack(
                 (
-                    goal[0] + PAD_RADIUS * np.cos(circle),
-                    goal[1] + PAD_RADIUS * np.sin(circle),
+                    x + PAD_RADIUS * np.cos(circle),
+                    y + PAD_RADIUS * np.sin(circle),
                     np.full_like(circle, 0.01),
                 )
             )
-            self.rec.log(
-                "world/goal",
-                rr.LineStrips3D([ring], colors=[[0, 170, 0]], labels=["pad"]),
-            )
-            return
-        label = "target" if name == "target_follow" else "goal"
-        color = [220, 40, 40] if label == "target" else [0, 190, 0]
-        radius = max(float(engine.task.goal_radius), 0.05)
-        self.rec.log(
-            "world/goal",
-            rr.Ellipsoids3D(
-                centers=[goal],
-                half_sizes=[[radius] * 3],
-                colors=[color],
-                labels=[label],
-                fill_mode="MajorWireframe",
-            ),
+            for x, y, _ in goal[new]
+        ]
+        send("world/goal", rr.LineStrips3D.columns(strips=rings), new)
+
+    def _send_path(self, rows: np.ndarray) -> None:
+        """Each episode's path, as one line on its first step: the vehicle moves along
+        it as the cursor does. An episode still running is drawn as far as it has
+        flown, and drawn again, whole, when its next rows are sent."""
+        episodes = rows[:, C_EPISODE]
+        starts = np.flatnonzero(np.r_[True, episodes[1:] != episodes[:-1]])
+        strips = []
+        for start, end in zip(starts, np.r_[starts[1:], len(rows)], strict=True):
+            if start > 0 or rows[0, C_STEP] == 0:
+                self.track = []  # an episode that starts in these rows
+            self.track.append(rows[start:end, L.POS].astype(np.float32))
+            path = np.concatenate(self.track)
+            stride = max(1, math.ceil(len(path) / MAX_TRAIL))
+            strips.append(np.concatenate((path[:-1:stride], path[-1:])))
+        first_steps = np.zeros(len(strips), np.int64)
+        self.rec.send_columns(
+            "world/trajectory",
+            indexes=[
+                rr.TimeColumn(STEP_TIMELINE, sequence=first_steps),
+                rr.TimeColumn("episode", sequence=episodes[starts].astype(np.int64)),
+            ],
+            columns=rr.LineStrips3D.columns(strips=strips),
         )
 
     def close(self) -> None:
-        """Flush and let go of the recording; a viewer that went away is not an error."""
+        """Send what is buffered, flush and let go of the recording; a viewer that went
+        away is not an error."""
         try:
+            self.flush()
             self.rec.flush()
             self.rec.disconnect()
         except Exception as error:  # rerun raises RuntimeError from its sinks
