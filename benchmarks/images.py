@@ -80,13 +80,14 @@ class HeadlessViewer:
         if executable is None:
             raise RuntimeError("the Rerun viewer executable is missing (rerun-sdk)")
         port = free_tcp_port()
+        self.errors = tempfile.TemporaryFile("w+")  # noqa: SIM115 (closed in close())
         self.process = subprocess.Popen(
             [
                 *(executable, "--headless", "--window-size", window, "--port", str(port)),
                 *("--hide-welcome-screen", "--bind", "127.0.0.1"),
             ],
             stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
+            stderr=self.errors,  # a file: a pipe nobody reads could fill and stall it
         )
         deadline = time.monotonic() + 60
         while True:
@@ -94,10 +95,19 @@ class HeadlessViewer:
                 self.client = ViewerClient.connect(f"rerun+http://127.0.0.1:{port}/proxy")
                 self.client.get_state()
                 break
-            except Exception:  # not listening yet
-                if time.monotonic() > deadline or self.process.poll() is not None:
+            except Exception as error:  # not listening yet
+                if self.process.poll() is not None:
+                    self.errors.seek(0)
+                    said = self.errors.read().strip()
+                    last = said.splitlines()[-1] if said else f"exit code {self.process.returncode}"
+                    raise SystemExit(
+                        f"images.py: the headless Rerun viewer did not start ({last}); "
+                        "without a GPU it needs Debian's mesa-vulkan-drivers"
+                    ) from None
+                if time.monotonic() > deadline:
                     self.close()
-                    raise
+                    message = f"images.py: the headless viewer did not answer: {error}"
+                    raise SystemExit(message) from None
                 time.sleep(0.5)
 
     def screenshot(self, rrd: Path, png: Path) -> list[str]:
@@ -129,6 +139,7 @@ class HeadlessViewer:
     def close(self) -> None:
         self.process.terminate()
         self.process.wait(timeout=10)
+        self.errors.close()
 
 
 def last_time(rrd: Path) -> tuple[str, int]:

@@ -451,7 +451,8 @@ def test_render_mode_rerun_records_episodes(tmp_path):
     env.close()
     rows = rows_per_entity(out, static=False)
     assert rows["/world/vehicle"] == rows["/plots/altitude/altitude"] == steps
-    assert rows["/world/goal"] == 2  # a waypoint is logged once an episode: it stays put
+    # A waypoint stays put: logged every 10 steps (episodes share the step timeline).
+    assert rows["/world/goal"] == rows["/world/trajectory"] < steps / 5
     assert rows["/plots/reward/reward"] == steps - 2  # no reward at a reset
     check_panels(
         out,
@@ -495,6 +496,7 @@ def test_episodes_sent_row_by_row_equal_episodes_sent_at_once(tmp_path, monkeypa
     from quadsitl.viz import episode_view
 
     whole = tmp_path / "whole.rrd"
+    monkeypatch.setattr(episode_view, "FLUSH_AFTER", math.inf)  # sent at close
     steps = _record_episodes(whole, "TargetFollow", (0, 1))
     monkeypatch.setattr(episode_view, "FLUSH_AFTER", -1.0)  # every row sent on its own
     cut = tmp_path / "cut.rrd"
@@ -505,33 +507,48 @@ def test_episodes_sent_row_by_row_equal_episodes_sent_at_once(tmp_path, monkeypa
         assert rows["/events"] == 2
     for entity in ("/plots/distance_to_goal/distance", "/plots/reward/reward"):
         np.testing.assert_array_equal(scalars(whole, entity), scalars(cut, entity))
-    for rrd in (whole, cut):  # the last path drawn of each episode: all of it
-        paths: dict[int, list] = {}
-        for chunk in rrc.RrdReader(rrd).store().stream():
-            if chunk.entity_path == "/world/trajectory":
-                batch = chunk.to_record_batch()
-                for episode, strip in zip(
-                    batch.column("episode").to_pylist(),
-                    batch.column("LineStrips3D:strips").to_pylist(),
-                    strict=True,
-                ):
-                    paths[episode] = strip[0]
-        last: dict[int, tuple[int, list]] = {}  # episode: (step, translation)
-        for chunk in rrc.RrdReader(rrd).store().stream():
-            if chunk.entity_path == "/world/vehicle":
-                batch = chunk.to_record_batch()
-                for episode, step, translation in zip(
-                    batch.column("episode").to_pylist(),
-                    batch.column("step").to_pylist(),
-                    batch.column("Transform3D:translation").to_pylist(),
-                    strict=True,
-                ):
-                    if step >= last.get(episode, (-1, None))[0]:
-                        last[episode] = (step, translation[0])
-        assert sorted(paths) == sorted(last) == [0, 1]
-        for episode, path in paths.items():
-            assert len(path) > 10
-            np.testing.assert_allclose(path[-1], last[episode][1], atol=1e-5)
+    whole_paths, cut_paths, vehicle = _paths(whole), _paths(cut), _poses(whole)
+    assert {e for e, _ in whole_paths} == {e for e, _ in vehicle} == {0, 1}
+    assert whole_paths.keys() == cut_paths.keys()  # logged at the same steps
+    for (episode, step), path in whole_paths.items():
+        assert len(path) > 10
+        # Sent at once: each episode's whole path, ending where the vehicle ends.
+        end = max(s for e, s in vehicle if e == episode)
+        np.testing.assert_allclose(path[-1], vehicle[episode, end], atol=1e-5)
+        # Sent row by row: as far as the vehicle had flown then.
+        np.testing.assert_allclose(cut_paths[episode, step][-1], vehicle[episode, step], atol=1e-5)
+
+
+def _per_row(rrd: Path, entity: str, column: str) -> dict[tuple[int, int], list]:
+    """(episode, step) -> the first instance of ``column`` logged at ``entity``, which
+    has the Arrow type the viewer reads (it shows nothing of a column that has not)."""
+    import rerun as rr
+
+    expected = {
+        "LineStrips3D:strips": rr.components.LineStrip3DBatch._ARROW_DATATYPE,
+        "Transform3D:translation": rr.components.Translation3DBatch._ARROW_DATATYPE,
+    }[column]
+    found = {}
+    for chunk in rrc.RrdReader(rrd).store().stream():
+        if chunk.entity_path == entity and not chunk.is_static:
+            batch = chunk.to_record_batch()
+            assert batch.schema.field(column).type.value_type == expected, column
+            for episode, step, value in zip(
+                batch.column("episode").to_pylist(),
+                batch.column("step").to_pylist(),
+                batch.column(column).to_pylist(),
+                strict=True,
+            ):
+                found[episode, step] = value[0]
+    return found
+
+
+def _paths(rrd: Path) -> dict[tuple[int, int], list]:
+    return _per_row(rrd, "/world/trajectory", "LineStrips3D:strips")
+
+
+def _poses(rrd: Path) -> dict[tuple[int, int], list]:
+    return _per_row(rrd, "/world/vehicle", "Transform3D:translation")
 
 
 def test_quadsitl_replay_command(flight_log, tmp_path):

@@ -24,6 +24,7 @@ import warnings
 
 import numba
 import numpy as np
+import pyarrow as pa
 import rerun as rr
 
 from quadsitl.physics import layout as L
@@ -35,7 +36,8 @@ from quadsitl.viz.scene import EPISODE_PANELS, blueprint, framing, open_recordin
 
 STEP_TIMELINE = "step"
 TERMS = ("position", "attitude", "velocity", "rates")  # the columns of engine.dist
-MAX_TRAIL = 1000  # points a path is thinned to (a long episode's path stays light)
+PATH_EVERY = 10  # steps between two loggings of an episode's path
+MAX_PATH = 200  # points a path is thinned to (a long episode's path stays light)
 CAPACITY = 32768  # steps buffered before they are sent
 FLUSH_AFTER = 0.5  # wall s: a buffer older than this is sent at the next step
 
@@ -60,6 +62,16 @@ def _copy_row(rows, k, state, goal, dist, i, reward, episode, step):  # pragma: 
     row[C_REWARD] = reward
     row[C_EPISODE] = episode
     row[C_STEP] = step
+
+
+class _Arrow:
+    """A ready-made Arrow array, as Rerun's columns take their data."""
+
+    def __init__(self, array: pa.Array) -> None:
+        self.array = array
+
+    def as_arrow_array(self) -> pa.Array:
+        return self.array
 
 
 class EpisodeView:
@@ -111,8 +123,6 @@ class EpisodeView:
 
     def _row(self, engine: TaskEngine, reward: float) -> None:
         """One buffered row: all a step costs, unless the buffer is due to be sent."""
-        if self.count == 0:
-            self.oldest = time.monotonic()
         _copy_row(
             self.rows,
             self.count,
@@ -125,6 +135,8 @@ class EpisodeView:
             self.steps,
         )
         self.count += 1
+        if self.count == 1:
+            self.oldest = time.monotonic()
         if self.count == CAPACITY or time.monotonic() - self.oldest > FLUSH_AFTER:
             self.flush()
 
@@ -149,6 +161,7 @@ class EpisodeView:
                     half_sizes=[[max(float(engine.task.goal_radius), 0.05)] * 3],
                     colors=[[220, 40, 40] if target else [0, 190, 0]],
                     labels=["target" if target else "goal"],
+                    show_labels=False,  # at the centre, the label would hide the vehicle
                     fill_mode="MajorWireframe",
                 ),
                 static=True,
@@ -208,11 +221,12 @@ class EpisodeView:
             send("plots/reward/reward", reward, stepped)
 
     def _send_goal(self, rows: np.ndarray, send) -> None:  # type: ignore[no-untyped-def]
-        """The goal where it is new: each episode's first row, and each row a moving
-        target has moved."""
+        """The goal where it is new (each row a moving target has moved) and, as the
+        path, every PATH_EVERY steps: episodes share the step timeline, so whichever
+        episode's vehicle the cursor shows, its goal is drawn with it."""
         key = rows[:, [C_EPISODE, *range(C_GOAL.start, C_GOAL.stop)]]  # episode, goal
         before = np.vstack((self.last_goal, key[:-1]))  # each row's predecessor
-        new = np.any(key != before, axis=1)
+        new = np.any(key != before, axis=1) | (rows[:, C_STEP] % PATH_EVERY == 0)
         self.last_goal = key[-1:]
         goal = rows[:, C_GOAL]
         if self.task != "land":
@@ -232,27 +246,42 @@ class EpisodeView:
         send("world/goal", rr.LineStrips3D.columns(strips=rings), new)
 
     def _send_path(self, rows: np.ndarray) -> None:
-        """Each episode's path, as one line on its first step: the vehicle moves along
-        it as the cursor does. An episode still running is drawn as far as it has
-        flown, and drawn again, whole, when its next rows are sent."""
-        episodes = rows[:, C_EPISODE]
+        """Each episode's whole path (as far as it has been flown when its rows are
+        sent), thinned to MAX_PATH points, logged every PATH_EVERY steps: whichever
+        episode's vehicle the cursor shows, its path is drawn with it."""
+        episodes, steps = rows[:, C_EPISODE], rows[:, C_STEP]
         starts = np.flatnonzero(np.r_[True, episodes[1:] != episodes[:-1]])
-        strips = []
+        marked = steps % PATH_EVERY == 0
+        paths, copies = [], []
         for start, end in zip(starts, np.r_[starts[1:], len(rows)], strict=True):
-            if start > 0 or rows[0, C_STEP] == 0:
+            if start > 0 or steps[0] == 0:
                 self.track = []  # an episode that starts in these rows
             self.track.append(rows[start:end, L.POS].astype(np.float32))
             path = np.concatenate(self.track)
-            stride = max(1, math.ceil(len(path) / MAX_TRAIL))
-            strips.append(np.concatenate((path[:-1:stride], path[-1:])))
-        first_steps = np.zeros(len(strips), np.int64)
+            stride = max(1, math.ceil(len(path) / MAX_PATH))
+            paths.append(np.concatenate((path[:-1:stride], path[-1:])))
+            copies.append(int(marked[start:end].sum()))
+        if not any(copies):
+            return
+        points = np.concatenate([np.tile(p, (c, 1)) for p, c in zip(paths, copies, strict=True)])
+        lengths = np.repeat([len(p) for p in paths], copies)
+        offsets = np.zeros(len(lengths) + 1, np.int32)
+        np.cumsum(lengths, out=offsets[1:])
+        strip_type = rr.components.LineStrip3DBatch._ARROW_DATATYPE  # what the viewer reads
+        points_type = strip_type.value_type
+        strips = pa.ListArray.from_arrays(
+            offsets,
+            pa.FixedSizeListArray.from_arrays(points.ravel(), type=points_type),
+            type=strip_type,
+        )
+        column = rr.ComponentColumn(rr.LineStrips3D.descriptor_strips(), _Arrow(strips))
         self.rec.send_columns(
             "world/trajectory",
             indexes=[
-                rr.TimeColumn(STEP_TIMELINE, sequence=first_steps),
-                rr.TimeColumn("episode", sequence=episodes[starts].astype(np.int64)),
+                rr.TimeColumn(STEP_TIMELINE, sequence=steps[marked].astype(np.int64)),
+                rr.TimeColumn("episode", sequence=episodes[marked].astype(np.int64)),
             ],
-            columns=rr.LineStrips3D.columns(strips=strips),
+            columns=[column],
         )
 
     def close(self) -> None:
