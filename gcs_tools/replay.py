@@ -6,7 +6,9 @@ velocity, attitude, rotors and battery, and flight mode, arming and STATUSTEXT a
 text log (scene: :mod:`quadsitl.viz.scene`). Each series is sent as one column
 (``send_columns``), so an hour-long log converts in seconds. A damaged log converts as
 far as it is readable, with a warning; without ``-o`` the viewer opens. The layout
-(blueprint) sent with the recording shows the panels the log has data for.
+(blueprint) sent with the recording shows the panels the log has data for. A log of
+several vehicles (``quadsitl sim --vehicles N`` writes one log for all of them) shows
+each under its system id, with the fleet's layout (:mod:`quadsitl.viz.fleet`).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import numpy as np
 import rerun as rr
 
 from gcs_tools.tlog_reader import ReadStats, read_tlog
+from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
 from quadsitl.viz.flight_view import FlightView, Sample
 from quadsitl.viz.scene import (
     STATE_PANEL,
@@ -79,16 +82,74 @@ class _Columns:
             times, values_, levels = self.series[key]
             self.series[key] = (times, list(np.asarray(values_, float) / hover), levels)
 
-    def send(self, rec: rr.RecordingStream) -> dict[str, int]:
+    def send(self, rec: rr.RecordingStream, member: Member | None = None) -> dict[str, int]:
+        """Every series as one column; a fleet's ``member`` under its system id."""
         rows: dict[str, int] = {}
         for (entity, kind), (times, values, levels) in self.series.items():
-            style = series_style(entity) if kind == "scalar" else None
+            path, style = entity, series_style(entity) if kind == "scalar" else None
+            if member is not None:
+                path, style = (
+                    member.path(entity),
+                    member.style(entity) if kind == "scalar" else None,
+                )
+                if member.changes_values(entity):
+                    values = [member.value(entity, value) for value in values]
             if style is not None:
-                rec.log(entity, style, static=True)
+                rec.log(path, style, static=True)
             index = rr.TimeColumn(TIMELINE, timestamp=np.array(times, dtype="datetime64[us]"))
-            rec.send_columns(entity, indexes=[index], columns=_column(kind, values, levels))
-            rows[entity] = rows.get(entity, 0) + len(times)
+            rec.send_columns(path, indexes=[index], columns=_column(kind, values, levels))
+            rows[path] = rows.get(path, 0) + len(times)
         return rows
+
+
+class _System:
+    """What a log holds of one MAVLink system: its flight, as samples and track."""
+
+    def __init__(self) -> None:
+        self.view = FlightView()
+        self.columns = _Columns()
+        self.track: list[np.ndarray] = []  # m, ENU, in its own local frame
+
+    def add(self, stamp_us: int, message: Any) -> None:
+        for sample in self.view.samples(message):
+            self.columns.add(stamp_us, sample)
+            if sample.kind == "translation":
+                self.track.append(sample.value)
+
+    @property
+    def posed(self) -> bool:
+        """Whether the log says where it is or how it is turned: a vehicle to draw."""
+        return ("world/vehicle", "translation") in self.columns.series or (
+            "world/vehicle",
+            "rotation",
+        ) in self.columns.series
+
+    def mission_points(self) -> np.ndarray:
+        """(M, 3) m, ENU: the mission items with a position, in item order."""
+        view = self.view
+        return np.array([view.mission[k] for k in sorted(view.mission)]).reshape(-1, 3)
+
+
+def _route(message: Any, systems: dict[int, _System]) -> _System:
+    """The system a message belongs to: its sender once that is a vehicle (its heartbeat
+    seen), else the system it is addressed to (a ground station's mission upload)."""
+    source = message.get_srcSystem()
+    system = systems.get(source)
+    if system is not None and system.view.vehicle is not None:
+        return system
+    target = getattr(message, "target_system", 0)
+    if target:
+        source = target
+    system = systems.get(source)
+    if system is None:
+        system = systems[source] = _System()
+    return system
+
+
+def _vehicles(systems: dict[int, _System]) -> dict[int, _System]:
+    """System id -> the systems drawn: those with a pose, else those with any data."""
+    posed = {k: systems[k] for k in sorted(systems) if systems[k].posed}
+    return posed or {k: systems[k] for k in sorted(systems) if systems[k].columns.series}
 
 
 def _column(kind: str, values: list[Any], levels: list[str]) -> Any:
@@ -117,9 +178,7 @@ def convert(
     ``progress(fraction read)`` is called as the log is read."""
     started = time.perf_counter()
     stats = ReadStats()
-    view = FlightView()
-    columns = _Columns()
-    track: list[np.ndarray] = []
+    systems: dict[int, _System] = {}
     last: dict[tuple[int, int, int], tuple[int, bytes]] = {}  # -> (stamp, payload)
     for stamp, message in read_tlog(tlog, stats, progress):
         # A log of several links (quadsitl's own) holds each broadcast message once per
@@ -131,21 +190,39 @@ def convert(
         last[key] = (stamp, payload)
         if previous is not None and previous[1] == payload and stamp - previous[0] < DUPLICATE_US:
             continue
-        for sample in view.samples(message):
-            columns.add(stamp, sample)
-            if sample.kind == "translation":
-                track.append(sample.value)
+        _route(message, systems).add(stamp, message)
     if stats.messages == 0:
         return ReplayResult(stats, {}, time.perf_counter() - started, [])
-    columns.normalise_rotors()
-    mission = np.array([view.mission[k] for k in sorted(view.mission)]).reshape(-1, 3)
-    frame = framing(np.concatenate([np.asarray(track).reshape(-1, 3), mission]))
-    panels = columns.panels()
+    vehicles = _vehicles(systems)
+    for system in vehicles.values():
+        system.columns.normalise_rotors()
+    send = _send_fleet if len(vehicles) > 1 else _send_one
+    rec, entities = send(vehicles, out, spawn, web)
+    rec.send_recording_name(Path(tlog).name)
+    rec.flush()
+    if out is not None:
+        rec.disconnect()
+    warnings = []
+    if stats.damaged:
+        warnings.append(f"the log is damaged ({stats.describe()}); converted what was readable")
+    if not any(system.track for system in vehicles.values()):
+        warnings.append("no position messages: the 3-D view has no motion")
+    return ReplayResult(stats, entities, time.perf_counter() - started, warnings)
+
+
+def _send_one(
+    vehicles: dict[int, _System], out: str | Path | None, spawn: bool, web: bool
+) -> tuple[rr.RecordingStream, dict[str, int]]:
+    """The recording of one vehicle (or none): the single-vehicle scene and layout."""
+    system = next(iter(vehicles.values()), None) or _System()
+    mission = system.mission_points()
+    frame = framing(np.concatenate([np.asarray(system.track).reshape(-1, 3), mission]))
+    panels = system.columns.panels()
     layout = blueprint(
         panels - {STATE_PANEL},
         state=STATE_PANEL in panels,
         frame=frame,
-        map_view=any(entity == "map/track" for entity, _ in columns.series),
+        map_view=("map/track", "geo") in system.columns.series,
     )
     rec = open_recording(
         "quadsitl_replay",
@@ -155,31 +232,86 @@ def convert(
         scale=model_scale(frame[1]),
         web=web,
     )
-    rec.send_recording_name(Path(tlog).name)
-    entities = columns.send(rec)
-    geo = columns.series.get(("map/track", "geo"))
+    entities = system.columns.send(rec)
+    _log_statics(rec, system)
+    return rec, entities
+
+
+def _send_fleet(
+    vehicles: dict[int, _System], out: str | Path | None, spawn: bool, web: bool
+) -> tuple[rr.RecordingStream, dict[str, int]]:
+    """The recording of several vehicles, each under its system id, placed by their
+    homes (where the log has them) in the first one's local frame."""
+    reference = next(iter(vehicles.values())).view
+    members, points, panels = [], [], set()
+    for row, (system_id, system) in enumerate(vehicles.items(), start=1):
+        view = system.view
+        offset = (0.0, 0.0, 0.0)
+        if reference.home is not None and view.home is not None:
+            offset = origin_offset(
+                reference.home, reference.home_local_enu, view.home, view.home_local_enu
+            )
+        members.append(Member(system_id, row, offset))
+        local = [np.asarray(system.track).reshape(-1, 3), system.mission_points()]
+        points.append(np.concatenate(local) + offset)
+        panels |= system.columns.panels()
+    frame = framing(np.concatenate(points))
+    layout = fleet_blueprint(
+        members,
+        panels - {STATE_PANEL},
+        frame=frame,
+        map_view=any(("map/track", "geo") in s.columns.series for s in vehicles.values()),
+    )
+    rec = open_recording(
+        "quadsitl_replay",
+        str(out) if out else None,
+        spawn,
+        default_blueprint=layout,
+        scale=model_scale(frame[1]),
+        web=web,
+        vehicle=False,
+    )
+    entities: dict[str, int] = {}
+    for member, system in zip(members, vehicles.values(), strict=True):
+        member.setup(rec, model_scale(frame[1]), home=None)
+        entities.update(system.columns.send(rec, member))
+        _log_statics(rec, system, member)
+    return rec, entities
+
+
+def _log_statics(rec: rr.RecordingStream, system: _System, member: Member | None = None) -> None:
+    """The whole track (3-D and map), home and mission of one vehicle (a fleet's
+    ``member``: under its system id, the tracks in its colour)."""
+
+    def path(entity: str) -> str:
+        return entity if member is None else member.path(entity)
+
+    color = [[90, 90, 200]] if member is None else [member.color]
+    view = system.view
+    geo = system.columns.series.get(("map/track", "geo"))
     if geo is not None:
         rec.log(
-            "map/path",
+            path("map/path"),
             rr.GeoLineStrings(
-                lat_lon=[np.asarray(geo[1])], colors=[[90, 90, 200]], radii=rr.Radius.ui_points(2.0)
+                lat_lon=[np.asarray(geo[1])], colors=color, radii=rr.Radius.ui_points(2.0)
             ),
             static=True,
         )
-    if track:
+    if system.track:
         rec.log(
-            "world/trajectory",
-            rr.LineStrips3D([np.asarray(track)], colors=[[90, 90, 200]]),
+            path("world/trajectory"),
+            rr.LineStrips3D([np.asarray(system.track)], colors=color),
             static=True,
         )
     rec.log(
-        "world/home",
+        path("world/home"),
         rr.Points3D([view.home_local_enu], radii=rr.Radius.ui_points(6.0), colors=[[0, 160, 0]]),
         static=True,
     )
     if view.mission:
+        mission = system.mission_points()
         rec.log(
-            "world/mission",
+            path("world/mission"),
             rr.Points3D(
                 mission,
                 radii=rr.Radius.ui_points(6.0),
@@ -189,17 +321,10 @@ def convert(
             static=True,
         )
         rec.log(
-            "world/mission/path", rr.LineStrips3D([mission], colors=[[230, 180, 0]]), static=True
+            path("world/mission/path"),
+            rr.LineStrips3D([mission], colors=[[230, 180, 0]]),
+            static=True,
         )
-    rec.flush()
-    if out is not None:
-        rec.disconnect()
-    warnings = []
-    if stats.damaged:
-        warnings.append(f"the log is damaged ({stats.describe()}); converted what was readable")
-    if not track:
-        warnings.append("no position messages: the 3-D view has no motion")
-    return ReplayResult(stats, entities, time.perf_counter() - started, warnings)
 
 
 def input_problem(path: str) -> str | None:
