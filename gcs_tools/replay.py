@@ -287,6 +287,7 @@ def _log_statics(rec: rr.RecordingStream, system: _System, member: Member | None
         return entity if member is None else member.path(entity)
 
     color = [[90, 90, 200]] if member is None else [member.color]
+    width = None if member is None else rr.Radius.ui_points(2.0)  # a fleet's trails stand out
     view = system.view
     geo = system.columns.series.get(("map/track", "geo"))
     if geo is not None:
@@ -300,7 +301,7 @@ def _log_statics(rec: rr.RecordingStream, system: _System, member: Member | None
     if system.track:
         rec.log(
             path("world/trajectory"),
-            rr.LineStrips3D([np.asarray(system.track)], colors=color),
+            rr.LineStrips3D([np.asarray(system.track)], colors=color, radii=width),
             static=True,
         )
     rec.log(
@@ -308,23 +309,22 @@ def _log_statics(rec: rr.RecordingStream, system: _System, member: Member | None
         rr.Points3D([view.home_local_enu], radii=rr.Radius.ui_points(6.0), colors=[[0, 160, 0]]),
         static=True,
     )
-    if view.mission:
-        mission = system.mission_points()
-        rec.log(
-            path("world/mission"),
-            rr.Points3D(
-                mission,
-                radii=rr.Radius.ui_points(6.0),
-                colors=[[230, 180, 0]],
-                labels=[str(k) for k in sorted(view.mission)],
-            ),
-            static=True,
+    if not view.mission:
+        return
+    mission = system.mission_points()
+    if member is None:  # numbered waypoints in yellow
+        points = rr.Points3D(
+            mission,
+            radii=rr.Radius.ui_points(6.0),
+            colors=[[230, 180, 0]],
+            labels=[str(k) for k in sorted(view.mission)],
         )
-        rec.log(
-            path("world/mission/path"),
-            rr.LineStrips3D([mission], colors=[[230, 180, 0]]),
-            static=True,
-        )
+        line = rr.LineStrips3D([mission], colors=[[230, 180, 0]])
+    else:  # a fleet's in each vehicle's lighter colour, under its trail, without numbers
+        points = rr.Points3D(mission, radii=rr.Radius.ui_points(3.0), colors=[member.light_color])
+        line = rr.LineStrips3D([mission], colors=[member.light_color])
+    rec.log(path("world/mission"), points, static=True)
+    rec.log(path("world/mission/path"), line, static=True)
 
 
 def input_problem(path: str) -> str | None:

@@ -10,7 +10,8 @@ the globe. Entities of vehicle N (its ``name`` is ``sysN``):
   vehicle's colour), ``trajectory`` (its colour), ``home``, ``mission``, ``setpoint``;
 * ``plots/<panel>/sysN/<series>`` — its time series, in its colour, named
   ``sysN <series>`` (setpoints a lighter shade); ``plots/state/sysN/...`` — its mode
-  band and armed line on row k of the state panel (k: its place in the fleet, from 1);
+  band on row k of the state panel (k: its place in the fleet, from 1), a red line
+  under it while armed;
 * ``map/sysN/{track,path}`` — its GPS track; ``events`` — its events, ``[system N] ...``.
 
 One vehicle alone keeps the single-vehicle paths of :mod:`quadsitl.viz.scene`.
@@ -50,11 +51,16 @@ VEHICLE_COLORS = [
     [127, 127, 127],
 ]  # fmt: skip  (no red: armed and the front rotors are red)
 
+FLEET_ZOOM = 1.25  # the camera this much closer than for one flight: a fleet is compact
+ARMED_BELOW = 0.3  # rows: the armed line's place under the vehicle's mode band
+
 # The fleet's time-series panels: (panel, series shown, title). Each shows the named
 # series (all of the panel's where none are named) of every vehicle, coloured by
 # vehicle, so a panel compares the vehicles; a panel holding several series per
 # vehicle (attitude) is split, one series each. Velocity and body rates are recorded
-# but not laid out: two or three lines per vehicle in one colour do not read.
+# but not laid out: two or three lines per vehicle in one colour do not read. The
+# plots have no legend (four vehicles' entries overflow a panel): the labels in the
+# 3-D view are drawn in the vehicles' colours, and hovering a line names it.
 FLEET_PANELS: tuple[tuple[str, tuple[str, ...], str], ...] = (
     ("altitude", ("altitude", "setpoint"), "altitude (m)"),
     ("climb_rate", ("climb", "setpoint"), "climb rate (m/s)"),
@@ -86,6 +92,11 @@ class Member:
     def color(self) -> list[int]:
         return VEHICLE_COLORS[(self.row - 1) % len(VEHICLE_COLORS)]
 
+    @property
+    def light_color(self) -> list[int]:
+        """Its colour, lighter: what it was told to fly (setpoints, mission)."""
+        return [round(c + (255 - c) * 0.55) for c in self.color]
+
     def path(self, entity: str) -> str:
         """The fleet's path of a single-vehicle entity (``world/vehicle``,
         ``plots/altitude/altitude`` ...)."""
@@ -106,12 +117,14 @@ class Member:
 
     def value(self, entity: str, value: Any) -> Any:
         """The value as the fleet shows it: events say whose they are; the state band
-        (2: the mode is on; armed 0/1) moves to this vehicle's row, NaN where off."""
+        (2: the mode is on) moves to this vehicle's row and armed (0/1) just under it,
+        NaN where off."""
         if entity == "events":
             return f"[system {self.system_id}] {value}"
         if entity.startswith(f"plots/{STATE_PANEL}/"):
-            on = math.isfinite(value) and value > 0.5
-            return float(self.row) if on else math.nan
+            if not (math.isfinite(value) and value > 0.5):
+                return math.nan
+            return self.row - ARMED_BELOW if entity.endswith("/armed") else float(self.row)
         return value
 
     def sample(self, sample: Sample) -> Sample:
@@ -125,8 +138,8 @@ class Member:
             return series_style(entity)
         series = entity.split("/", 2)[-1].replace("/", " ")
         if series.endswith("setpoint"):
-            light = [round(c + (255 - c) * 0.55) for c in self.color]
-            return rr.SeriesLines(colors=[light], widths=[1.0], names=[f"{self.name} {series}"])
+            name = f"{self.name} {series}"
+            return rr.SeriesLines(colors=[self.light_color], widths=[1.0], names=[name])
         return rr.SeriesLines(colors=[self.color], widths=[1.5], names=[f"{self.name} {series}"])
 
     def setup(
@@ -187,7 +200,13 @@ def fleet_blueprint(
             else "$origin/**"  # the whole panel
         )
         plots.append(
-            rrb.TimeSeriesView(origin=f"plots/{panel}", name=title, contents=contents, axis_x=axis)
+            rrb.TimeSeriesView(
+                origin=f"plots/{panel}",
+                name=title,
+                contents=contents,
+                axis_x=axis,
+                plot_legend=rrb.PlotLegend(visible=False),
+            )
         )
     state_view = rrb.TimeSeriesView(
         origin=f"plots/{STATE_PANEL}",
@@ -195,7 +214,7 @@ def fleet_blueprint(
         + ", ".join(f"{m.row} {m.name}" for m in members[:6])
         + (" ..." if len(members) > 6 else ""),
         axis_x=axis,
-        axis_y=rrb.ScalarAxis(range=(0.4, len(members) + 0.6)),
+        axis_y=rrb.ScalarAxis(range=(0.4, len(members) + 0.4)),
     )
     return arrange(
         plots,
@@ -203,5 +222,7 @@ def fleet_blueprint(
         frame=frame,
         map_view=map_view,
         timeline=timeline,
-        subject=f"{len(members)} vehicles, labelled by system id",
+        subject=f"{len(members)} vehicles, labelled by system id in their plot colour",
+        state_share=min(3.0, 1.0 + 0.15 * len(members)),  # room for a row each
+        zoom=FLEET_ZOOM,
     )

@@ -45,8 +45,9 @@ class LiveLogger:
         if self.view.mission_changed:
             self.view.mission_changed = False
             points = np.array([self.view.mission[k] for k in sorted(self.view.mission)])
+            color = [230, 180, 0] if self.member is None else self.member.light_color
             self.rec.log(
-                self._path("world/mission"), rr.Points3D(points, radii=0.08, colors=[[230, 180, 0]])
+                self._path("world/mission"), rr.Points3D(points, radii=0.08, colors=[color])
             )
         if self.track and now - self._drawn > TRACK_REDRAW:
             self._drawn = now

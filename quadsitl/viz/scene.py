@@ -264,17 +264,21 @@ def arrange(
     map_view: bool = False,
     timeline: str = TIMELINE,
     subject: str = "vehicle",
+    state_share: float = 1.0,
+    zoom: float = 1.0,
 ) -> rrb.Blueprint:
     """The 3-D view (ground grid in metres, the camera framing ``frame`` = (centre,
     extent), or following the vehicle), the map (``map_view``: GPS) and the event log on
     the left; on the right the flight-state band over a grid of the ``plots`` (two
     columns beyond four). The time cursor opens at the end of the recording, the time
-    panel collapsed to its controls. ``subject`` names what the 3-D view shows."""
+    panel collapsed to its controls. ``subject`` names what the 3-D view shows;
+    ``state_share``: the state band's height, sixths of the grid's; ``zoom``: how many
+    times closer than usual the camera starts (a compact scene)."""
     centre, extent = frame if frame is not None else framing([])
     direction = np.array([-0.55, -0.75, 0.45])  # from the south-west, above
     eye = rrb.EyeControls3D(
         kind="Orbital",
-        position=centre + direction / np.linalg.norm(direction) * (1.3 * extent + 3.0),
+        position=centre + direction / np.linalg.norm(direction) * (1.3 * extent + 3.0) / zoom,
         look_target=centre,
         eye_up=[0.0, 0.0, 1.0],
         tracking_entity="world/vehicle" if follow else None,
@@ -304,7 +308,8 @@ def arrange(
         right.append(rrb.Grid(*plots, grid_columns=2 if len(plots) > 4 else 1))
     columns: list[Any] = [rrb.Vertical(*left, row_shares=shares)]
     if right:
-        columns.append(rrb.Vertical(*right, row_shares=[1.0, 6.0]) if len(right) == 2 else right[0])
+        shares = [state_share, 6.0]
+        columns.append(rrb.Vertical(*right, row_shares=shares) if len(right) == 2 else right[0])
     return rrb.Blueprint(
         rrb.Horizontal(*columns, column_shares=[1.0, 1.0][: len(columns)]),
         rrb.TimePanel(timeline=timeline, play_state="following", state="collapsed"),
