@@ -45,21 +45,22 @@ class LiveLogger:
         if self.view.mission_changed:
             self.view.mission_changed = False
             points = np.array([self.view.mission[k] for k in sorted(self.view.mission)])
-            color = [230, 180, 0] if self.member is None else self.member.light_color
+            mission_color = [230, 180, 0] if self.member is None else self.member.light_color
             self.rec.log(
-                self._path("world/mission"), rr.Points3D(points, radii=0.08, colors=[color])
+                self._path("world/mission"),
+                rr.Points3D(points, radii=0.08, colors=[mission_color]),
             )
         if self.track and now - self._drawn > TRACK_REDRAW:
             self._drawn = now
-            color = None if self.member is None else [self.member.color]
+            trail_color = None if self.member is None else [self.member.color]
             self.rec.log(
                 self._path("world/trajectory"),
-                rr.LineStrips3D([np.asarray(self.track)], colors=color),
+                rr.LineStrips3D([np.asarray(self.track)], colors=trail_color),
             )
             if len(self.geo_track) > 1:
                 self.rec.log(
                     self._path("map/path"),
-                    rr.GeoLineStrings(lat_lon=[self.geo_track], colors=color),
+                    rr.GeoLineStrings(lat_lon=[self.geo_track], colors=trail_color),
                 )
 
     def text(self, text: str, level: str = "INFO") -> None:
