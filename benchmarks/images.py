@@ -4,12 +4,13 @@
 
 Each recording is made the way a user makes it — the mission demo (``quadsitl demo``,
 replayed), a replay of a foreign-style (PX4-like) log, ``quadsitl eval --rerun`` of
-each shipped policy — and rendered by the Rerun viewer itself, headless, through its
-control API, a fresh viewer per picture: the recording is opened, the loading waited
-for (the time cursor at the end, where the layout sent with the recording puts it),
-the top bar hidden (no notices over the content), and a screenshot taken, saved at
-1600x900. Without a GPU the viewer needs a
-software Vulkan driver (Debian: ``mesa-vulkan-drivers``).
+each shipped policy, a 4-vehicle fleet (``quadsitl sim --vehicles 4``, each vehicle
+flying its own mission, its log replayed) — and rendered by the Rerun viewer itself,
+headless, through its control API, a fresh viewer per picture: the recording is
+opened, the loading waited for (the time cursor at the end, where the layout sent with
+the recording puts it), the top bar hidden (no notices over the content), and a
+screenshot taken, saved at 1600x900. Without a GPU the viewer needs a software Vulkan
+driver (Debian: ``mesa-vulkan-drivers``).
 """
 
 from __future__ import annotations
@@ -28,8 +29,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.replay import synthesise  # noqa: E402
-from gcs_tools.demo import run_demo  # noqa: E402
+from gcs_tools.client import VehicleClient, mav  # noqa: E402
+from gcs_tools.demo import run_demo, start_simulator, stop_simulator  # noqa: E402
 from gcs_tools.replay import convert  # noqa: E402
+from gcs_tools.scripted_flight import Waypoint, mission_items  # noqa: E402
+from quadsitl.mavlink.links import free_udp_port  # noqa: E402
 from quadsitl.viz.scene import viewer_binary  # noqa: E402
 
 OUT = ROOT / "docs" / "images"
@@ -51,6 +55,53 @@ def foreign_recording(folder: Path) -> Path:
     synthesise(log, seconds=120)
     out = folder / "px4_style.rrd"
     convert(log, out)
+    return out
+
+
+FLEET_HEIGHTS = (3.0, 4.5, 6.0, 7.5)  # m, each vehicle's mission altitude
+FLEET_SPACING = 6.0  # m between the vehicles' start positions
+
+
+def fleet_recording(folder: Path) -> Path:
+    """``quadsitl sim --vehicles 4``: each vehicle takes off to its own height, flies a
+    square of its own size east and north of its start, and lands; the one log all four
+    write is replayed (``quadsitl replay``)."""
+    logs = folder / "fleet"
+    logs.mkdir()
+    port = free_udp_port()
+    sim = start_simulator(
+        *("--vehicles", str(len(FLEET_HEIGHTS)), "--spacing", str(FLEET_SPACING)),
+        *("--gcs", f"udpin:127.0.0.1:{port}", "--api", "none", "--speed", "4"),
+        *("--logs", str(logs), "--quiet"),
+    )
+    clients = [
+        VehicleClient(f"udpout:127.0.0.1:{port}", target=1 + i) for i in range(len(FLEET_HEIGHTS))
+    ]
+    try:
+        for client, up in zip(clients, FLEET_HEIGHTS, strict=True):
+            client.connect(timeout=60)
+            client.drain()
+            side = up / 2  # m
+            square = ((0, 0), (side, 0), (side, side), (0, side), (0, 0))
+            items = mission_items(tuple(Waypoint(e, n, up) for e, n in square))
+            if client.upload_mission(items) != mav.MAV_MISSION_ACCEPTED:
+                raise RuntimeError(f"system {client.target} refused its mission")
+        for client in clients:
+            client.drain()
+            client.arm()
+            client.set_mode("MISSION")
+        deadline = time.monotonic() + 300
+        while not all(len(c.reached) >= 5 and not c.armed for c in clients):
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"the fleet did not land: {[c.reached for c in clients]}")
+            for client in clients:
+                client.pump(0.005)
+    finally:
+        for client in clients:
+            client.close()
+        stop_simulator(sim)
+    out = folder / "fleet.rrd"
+    convert(next(logs.glob("*.tlog")), out)
     return out
 
 
@@ -188,6 +239,7 @@ def recordings(folder: Path) -> dict[str, Callable[[], Path]]:
     made: dict[str, Callable[[], Path]] = {
         "rerun_demo": lambda: demo_recording(folder),
         "rerun_replay_px4": lambda: foreign_recording(folder),
+        "rerun_fleet": lambda: fleet_recording(folder),
     }
     for task in POLICIES:
         made[f"rerun_eval_{task}"] = lambda task=task: eval_recording(folder, task)

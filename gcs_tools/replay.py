@@ -6,7 +6,9 @@ velocity, attitude, rotors and battery, and flight mode, arming and STATUSTEXT a
 text log (scene: :mod:`quadsitl.viz.scene`). Each series is sent as one column
 (``send_columns``), so an hour-long log converts in seconds. A damaged log converts as
 far as it is readable, with a warning; without ``-o`` the viewer opens. The layout
-(blueprint) sent with the recording shows the panels the log has data for.
+(blueprint) sent with the recording shows the panels the log has data for. A log of
+several vehicles (``quadsitl sim --vehicles N`` writes one log for all of them) shows
+each under its system id, with the fleet's layout (:mod:`quadsitl.viz.fleet`).
 """
 
 from __future__ import annotations
@@ -19,23 +21,10 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
-import numpy as np
-import rerun as rr
-
+from gcs_tools.replay_scene import System, route, send_fleet, send_one, vehicles_of
 from gcs_tools.tlog_reader import ReadStats, read_tlog
-from quadsitl.viz.flight_view import FlightView, Sample
-from quadsitl.viz.scene import (
-    STATE_PANEL,
-    TIMELINE,
-    blueprint,
-    check_output_path,
-    framing,
-    model_scale,
-    open_recording,
-    series_style,
-)
+from quadsitl.viz.scene import check_output_path
 
 DUPLICATE_US = 10_000  # a message repeated within 10 ms on another link is the same one
 
@@ -46,63 +35,6 @@ class ReplayResult:
     entities: dict[str, int]  # entity path -> rows logged
     seconds: float
     warnings: list[str]
-
-
-class _Columns:
-    """Samples gathered per (entity, kind), sent as columns at the end."""
-
-    def __init__(self) -> None:
-        self.series: dict[tuple[str, str], tuple[list[int], list[Any], list[str]]] = {}
-
-    def add(self, stamp_us: int, sample: Sample) -> None:
-        times, values, levels = self.series.setdefault((sample.entity, sample.kind), ([], [], []))
-        times.append(stamp_us)
-        values.append(sample.value)
-        levels.append(sample.level)
-
-    def panels(self) -> set[str]:
-        """The time-series panels (``plots/<panel>/...``) that have data."""
-        return {entity.split("/")[1] for entity, _ in self.series if entity.startswith("plots/")}
-
-    def normalise_rotors(self) -> None:
-        """Rotor values as multiples of hover: divided by the median of their non-zero
-        values (a log spends most of its armed time near hover)."""
-        rotors = [key for key in self.series if key[0].startswith("plots/rotors/")]
-        if not rotors:
-            return
-        values = np.concatenate([np.asarray(self.series[key][1], float) for key in rotors])
-        moving = values[np.isfinite(values) & (np.abs(values) > 1e-6)]
-        if len(moving) == 0:
-            return
-        hover = float(np.median(np.abs(moving)))
-        for key in rotors:
-            times, values_, levels = self.series[key]
-            self.series[key] = (times, list(np.asarray(values_, float) / hover), levels)
-
-    def send(self, rec: rr.RecordingStream) -> dict[str, int]:
-        rows: dict[str, int] = {}
-        for (entity, kind), (times, values, levels) in self.series.items():
-            style = series_style(entity) if kind == "scalar" else None
-            if style is not None:
-                rec.log(entity, style, static=True)
-            index = rr.TimeColumn(TIMELINE, timestamp=np.array(times, dtype="datetime64[us]"))
-            rec.send_columns(entity, indexes=[index], columns=_column(kind, values, levels))
-            rows[entity] = rows.get(entity, 0) + len(times)
-        return rows
-
-
-def _column(kind: str, values: list[Any], levels: list[str]) -> Any:
-    if kind == "scalar":
-        return rr.Scalars.columns(scalars=np.asarray(values, dtype=np.float64))
-    if kind == "translation":
-        return rr.Transform3D.columns(translation=np.asarray(values, dtype=np.float64))
-    if kind == "rotation":
-        return rr.Transform3D.columns(quaternion=np.asarray(values, dtype=np.float64))
-    if kind == "point":
-        return rr.Points3D.columns(positions=np.asarray(values, dtype=np.float64))
-    if kind == "geo":
-        return rr.GeoPoints.columns(positions=np.asarray(values, dtype=np.float64))
-    return rr.TextLog.columns(text=[str(v) for v in values], level=levels)
 
 
 def convert(
@@ -117,9 +49,7 @@ def convert(
     ``progress(fraction read)`` is called as the log is read."""
     started = time.perf_counter()
     stats = ReadStats()
-    view = FlightView()
-    columns = _Columns()
-    track: list[np.ndarray] = []
+    systems: dict[int, System] = {}
     last: dict[tuple[int, int, int], tuple[int, bytes]] = {}  # -> (stamp, payload)
     for stamp, message in read_tlog(tlog, stats, progress):
         # A log of several links (quadsitl's own) holds each broadcast message once per
@@ -131,73 +61,22 @@ def convert(
         last[key] = (stamp, payload)
         if previous is not None and previous[1] == payload and stamp - previous[0] < DUPLICATE_US:
             continue
-        for sample in view.samples(message):
-            columns.add(stamp, sample)
-            if sample.kind == "translation":
-                track.append(sample.value)
+        route(message, systems).add(stamp, message)
     if stats.messages == 0:
         return ReplayResult(stats, {}, time.perf_counter() - started, [])
-    columns.normalise_rotors()
-    mission = np.array([view.mission[k] for k in sorted(view.mission)]).reshape(-1, 3)
-    frame = framing(np.concatenate([np.asarray(track).reshape(-1, 3), mission]))
-    panels = columns.panels()
-    layout = blueprint(
-        panels - {STATE_PANEL},
-        state=STATE_PANEL in panels,
-        frame=frame,
-        map_view=any(entity == "map/track" for entity, _ in columns.series),
-    )
-    rec = open_recording(
-        "quadsitl_replay",
-        str(out) if out else None,
-        spawn,
-        default_blueprint=layout,
-        scale=model_scale(frame[1]),
-        web=web,
-    )
+    vehicles = vehicles_of(systems)
+    for system in vehicles.values():
+        system.columns.normalise_rotors()
+    send = send_fleet if len(vehicles) > 1 else send_one
+    rec, entities = send(vehicles, out, spawn, web)
     rec.send_recording_name(Path(tlog).name)
-    entities = columns.send(rec)
-    geo = columns.series.get(("map/track", "geo"))
-    if geo is not None:
-        rec.log(
-            "map/path",
-            rr.GeoLineStrings(
-                lat_lon=[np.asarray(geo[1])], colors=[[90, 90, 200]], radii=rr.Radius.ui_points(2.0)
-            ),
-            static=True,
-        )
-    if track:
-        rec.log(
-            "world/trajectory",
-            rr.LineStrips3D([np.asarray(track)], colors=[[90, 90, 200]]),
-            static=True,
-        )
-    rec.log(
-        "world/home",
-        rr.Points3D([view.home_local_enu], radii=rr.Radius.ui_points(6.0), colors=[[0, 160, 0]]),
-        static=True,
-    )
-    if view.mission:
-        rec.log(
-            "world/mission",
-            rr.Points3D(
-                mission,
-                radii=rr.Radius.ui_points(6.0),
-                colors=[[230, 180, 0]],
-                labels=[str(k) for k in sorted(view.mission)],
-            ),
-            static=True,
-        )
-        rec.log(
-            "world/mission/path", rr.LineStrips3D([mission], colors=[[230, 180, 0]]), static=True
-        )
     rec.flush()
     if out is not None:
         rec.disconnect()
     warnings = []
     if stats.damaged:
         warnings.append(f"the log is damaged ({stats.describe()}); converted what was readable")
-    if not track:
+    if not any(system.track for system in vehicles.values()):
         warnings.append("no position messages: the 3-D view has no motion")
     return ReplayResult(stats, entities, time.perf_counter() - started, warnings)
 

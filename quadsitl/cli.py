@@ -185,7 +185,9 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         "(e.g. policies/checkpoints/random_waypoint.pt)",
     )
     sim.add_argument(
-        "--rerun", action="store_true", help="stream the vehicle to a Rerun viewer (spawned)"
+        "--rerun",
+        action="store_true",
+        help="stream the vehicle (every vehicle of a fleet) to a Rerun viewer (spawned)",
     )
     sim.add_argument(
         "--rerun-save",
@@ -340,8 +342,8 @@ def _sim_collaborators(args: argparse.Namespace) -> tuple[Any, Any]:
     if args.rerun or args.rerun_save or args.rerun_web:
         from quadsitl.viz.sim_view import SimView
 
-        def make_view(vehicle: Any) -> Any:
-            return SimView(vehicle, args.rerun_save, notice=_say("sim"), web=args.rerun_web)
+        def make_view(vehicles: Any) -> Any:
+            return SimView(vehicles, args.rerun_save, notice=_say("sim"), web=args.rerun_web)
 
     return make_autopilot, make_view
 

@@ -419,7 +419,8 @@ def test_sim_rerun_without_a_display_says_so_in_one_plain_line(tmp_path):
     assert rows_per_entity(recording)["/world/vehicle"] >= 10
 
 
-def test_live_viewer_watches_a_running_vehicle(sim, tmp_path):
+def test_live_viewer_watches_a_running_vehicle(sim, client, tmp_path):
+    """``client``: the simulator is up (its heartbeat heard) before the 3 s watch starts."""
     from gcs_tools.live import watch
 
     out = tmp_path / "live.rrd"

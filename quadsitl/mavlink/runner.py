@@ -132,7 +132,7 @@ class View(Protocol):
 
 
 MakeAutopilot = Callable[[Airframe], Autopilot]  # an autopilot for the airframe flown
-MakeView = Callable[[Vehicle], View]
+MakeView = Callable[[dict[int, Vehicle]], View]  # system id -> vehicle, all of them
 
 
 class Timing:
@@ -228,7 +228,9 @@ class Simulator:
         self._socket_map: dict[Any, Link] | None = None
         self.stopping = False
         if make_view is not None:
-            self.view = make_view(self.vehicle)
+            self.view = make_view(
+                {config.system_id + i: v for i, v in enumerate(self.group.vehicles)}
+            )
 
     def _printer(self, system_id: int) -> Callable[[str], None]:
         """Vehicle events on the console; with several vehicles, each says who it is."""

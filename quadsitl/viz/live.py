@@ -2,7 +2,8 @@
 
 Each MAVLink message goes through the same :class:`FlightView` as a replay and is
 logged at once, stamped with the wall clock; the trajectory is re-drawn at most twice
-a second and the mission when it changes.
+a second and the mission when it changes. A vehicle of a fleet (``member``) is logged
+under its system id (:mod:`quadsitl.viz.fleet`).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from quadsitl.viz.fleet import Member
 from quadsitl.viz.flight_view import FlightView, Sample
 from quadsitl.viz.scene import TIMELINE, series_style
 
@@ -21,8 +23,11 @@ MAX_TRACK = 20_000  # points kept for the trajectory (about 7 min at 50 Hz)
 
 
 class LiveLogger:
-    def __init__(self, rec: rr.RecordingStream, hover_rotor: float = 1.0) -> None:
+    def __init__(
+        self, rec: rr.RecordingStream, hover_rotor: float = 1.0, member: Member | None = None
+    ) -> None:
         self.rec = rec
+        self.member = member
         self.view = FlightView(hover_rotor=hover_rotor)
         self.styled: set[str] = set()
         self.track: list[np.ndarray] = []
@@ -40,24 +45,44 @@ class LiveLogger:
         if self.view.mission_changed:
             self.view.mission_changed = False
             points = np.array([self.view.mission[k] for k in sorted(self.view.mission)])
-            self.rec.log("world/mission", rr.Points3D(points, radii=0.08, colors=[[230, 180, 0]]))
+            mission_color = [230, 180, 0] if self.member is None else self.member.light_color
+            self.rec.log(
+                self._path("world/mission"),
+                rr.Points3D(points, radii=0.08, colors=[mission_color]),
+            )
         if self.track and now - self._drawn > TRACK_REDRAW:
             self._drawn = now
-            self.rec.log("world/trajectory", rr.LineStrips3D([np.asarray(self.track)]))
+            trail_color = None if self.member is None else [self.member.color]
+            self.rec.log(
+                self._path("world/trajectory"),
+                rr.LineStrips3D([np.asarray(self.track)], colors=trail_color),
+            )
             if len(self.geo_track) > 1:
-                self.rec.log("map/path", rr.GeoLineStrings(lat_lon=[self.geo_track]))
+                self.rec.log(
+                    self._path("map/path"),
+                    rr.GeoLineStrings(lat_lon=[self.geo_track], colors=trail_color),
+                )
 
     def text(self, text: str, level: str = "INFO") -> None:
         self.rec.set_time(TIMELINE, timestamp=time.time())
         self.rec.log("events", rr.TextLog(text, level=level))
 
+    def _path(self, entity: str) -> str:
+        return entity if self.member is None else self.member.path(entity)
+
+    def _style(self, entity: str) -> None:
+        """Once per series, beside its first sample (``entity``: the single-vehicle path)."""
+        self.styled.add(entity)
+        style = series_style(entity) if self.member is None else self.member.style(entity)
+        if style is not None:
+            self.rec.log(self._path(entity), style, static=True)
+
     def _log(self, sample: Sample) -> None:
+        if sample.kind == "scalar" and sample.entity not in self.styled:
+            self._style(sample.entity)
+        if self.member is not None:
+            sample = self.member.sample(sample)
         if sample.kind == "scalar":
-            if sample.entity not in self.styled:
-                self.styled.add(sample.entity)
-                style = series_style(sample.entity)
-                if style is not None:
-                    self.rec.log(sample.entity, style, static=True)
             self.rec.log(sample.entity, rr.Scalars(sample.value))
         elif sample.kind == "geo":
             self.geo_track.append(sample.value)

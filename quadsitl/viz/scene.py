@@ -49,11 +49,16 @@ def quat_xyzw(q_wxyz: np.ndarray) -> np.ndarray:
 
 
 def log_vehicle_model(
-    rec: rr.RecordingStream, path: str = "world/vehicle", scale: float = 1.0
+    rec: rr.RecordingStream,
+    path: str = "world/vehicle",
+    scale: float = 1.0,
+    label: str | None = None,
+    color: Any = (230, 120, 0),
 ) -> None:
     """Static geometry in the body frame (FLU): X arms, four rotor discs, a heading arrow,
     drawn ``scale`` times life size under ``{path}/model``, and a marker a few screen
-    pixels wide at the centre, so the vehicle stays visible however far the camera is."""
+    pixels wide at the centre (in ``color``, with ``label`` beside it), so the vehicle
+    stays visible however far the camera is."""
     rotors = [
         (ARM * math.cos(a), ARM * math.sin(a), 0.0) for a in np.radians([45.0, 135.0, 225.0, 315.0])
     ]
@@ -86,7 +91,13 @@ def log_vehicle_model(
     )
     rec.log(
         f"{path}/marker",
-        rr.Points3D([[0.0, 0.0, 0.0]], radii=rr.Radius.ui_points(5.0), colors=[[230, 120, 0]]),
+        rr.Points3D(
+            [[0.0, 0.0, 0.0]],
+            radii=rr.Radius.ui_points(5.0),
+            colors=[list(color)],
+            labels=None if label is None else [label],
+            show_labels=None if label is None else True,
+        ),
         static=True,
     )
 
@@ -97,9 +108,12 @@ def model_scale(extent: float) -> float:
     return float(np.clip(extent / (15 * 2 * (ARM + ROTOR_RADIUS)), 1.0, 100.0))
 
 
-def setup(rec: rr.RecordingStream, scale: float = 1.0) -> None:
-    """World coordinates and the vehicle model."""
+def setup(rec: rr.RecordingStream, scale: float = 1.0, vehicle: bool = True) -> None:
+    """World coordinates, and (``vehicle``) home and the vehicle model; a fleet logs its
+    vehicles' own (:mod:`quadsitl.viz.fleet`)."""
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    if not vehicle:
+        return
     rec.log(
         "world/home", rr.Points3D([[0.0, 0.0, 0.0]], radii=0.05, colors=[[0, 160, 0]]), static=True
     )
@@ -200,25 +214,78 @@ def blueprint(
     timeline: str = TIMELINE,
     whole_range: bool = True,
 ) -> rrb.Blueprint:
-    """The layout sent with every recording: the 3-D view (ground grid in metres, the
-    camera framing ``frame`` = (centre, extent), or following the vehicle), the map
-    (``map_view``: GPS), the event log, the flight-state band and one time-series panel
-    per name in ``panels`` (see PANELS; pass only those with data; servo PWM only
-    without rotor speeds). The time cursor opens at the end of the recording, the time
-    panel collapsed to its controls; the plots show the whole recording
-    (``whole_range``), else (live) the last minute around the cursor."""
+    """The layout sent with every recording of one vehicle: see :func:`arrange`, with one
+    time-series panel per name in ``panels`` (see PANELS; pass only those with data;
+    servo PWM only without rotor speeds) and the flight-state band (``state``)."""
+    shown = set(panels)
+    if "rotors" in shown:  # the same outputs twice: rotor speeds, else PWM
+        shown.discard("servo_pwm")
+    axis = time_axis(whole_range)
+    plots = [
+        rrb.TimeSeriesView(origin=f"plots/{name}", name=PANELS[name], axis_x=axis)
+        for name in PANELS
+        if name in shown
+    ]
+    state_view = None
+    if state:
+        state_view = rrb.TimeSeriesView(
+            origin=f"plots/{STATE_PANEL}",
+            name="mode (band) and armed (0/1)",
+            axis_x=axis,
+            axis_y=rrb.ScalarAxis(range=(-0.2, 2.4)),
+        )
+    return arrange(
+        plots,
+        state_view,
+        events=events,
+        frame=frame,
+        follow=follow,
+        map_view=map_view,
+        timeline=timeline,
+    )
+
+
+def time_axis(whole_range: bool) -> rrb.TimeAxis | None:
+    """The plots' time axis: the whole recording (``whole_range``), else (live, None)
+    Rerun's default, the last minute around the cursor."""
+    if not whole_range:
+        return None
+    everything = rr.TimeRange(rr.TimeRangeBoundary.infinite(), rr.TimeRangeBoundary.infinite())
+    return rrb.TimeAxis(link="Independent", view_range=everything)
+
+
+def arrange(
+    plots: list[Any],
+    state_view: Any | None,
+    *,
+    events: bool = True,
+    frame: tuple[np.ndarray, float] | None = None,
+    follow: bool = False,
+    map_view: bool = False,
+    timeline: str = TIMELINE,
+    subject: str = "vehicle",
+    state_share: float = 1.0,
+    zoom: float = 1.0,
+) -> rrb.Blueprint:
+    """The 3-D view (ground grid in metres, the camera framing ``frame`` = (centre,
+    extent), or following the vehicle), the map (``map_view``: GPS) and the event log on
+    the left; on the right the flight-state band over a grid of the ``plots`` (two
+    columns beyond four). The time cursor opens at the end of the recording, the time
+    panel collapsed to its controls. ``subject`` names what the 3-D view shows;
+    ``state_share``: the state band's height, sixths of the grid's; ``zoom``: how many
+    times closer than usual the camera starts (a compact scene)."""
     centre, extent = frame if frame is not None else framing([])
     direction = np.array([-0.55, -0.75, 0.45])  # from the south-west, above
     eye = rrb.EyeControls3D(
         kind="Orbital",
-        position=centre + direction / np.linalg.norm(direction) * (1.3 * extent + 3.0),
+        position=centre + direction / np.linalg.norm(direction) * (1.3 * extent + 3.0) / zoom,
         look_target=centre,
         eye_up=[0.0, 0.0, 1.0],
         tracking_entity="world/vehicle" if follow else None,
     )
     scene = rrb.Spatial3DView(
         origin="world",
-        name=f"vehicle (ENU, m; grid {grid_spacing(extent):g} m)",
+        name=f"{subject} (ENU, m; grid {grid_spacing(extent):g} m)",
         line_grid=rrb.LineGrid3D(visible=True, spacing=grid_spacing(extent)),
         eye_controls=eye,
     )
@@ -236,31 +303,13 @@ def blueprint(
     if events:
         left.append(rrb.TextLogView(origin="events", name="events"))
         shares.append(2.0)
-    shown = set(panels)
-    if "rotors" in shown:  # the same outputs twice: rotor speeds, else PWM
-        shown.discard("servo_pwm")
-    everything = rr.TimeRange(rr.TimeRangeBoundary.infinite(), rr.TimeRangeBoundary.infinite())
-    axis = rrb.TimeAxis(link="Independent", view_range=everything) if whole_range else None
-    plots = [
-        rrb.TimeSeriesView(origin=f"plots/{name}", name=PANELS[name], axis_x=axis)
-        for name in PANELS
-        if name in shown
-    ]
-    right: list[Any] = []
-    if state:
-        right.append(
-            rrb.TimeSeriesView(
-                origin=f"plots/{STATE_PANEL}",
-                name="mode (band) and armed (0/1)",
-                axis_x=axis,
-                axis_y=rrb.ScalarAxis(range=(-0.2, 2.4)),
-            )
-        )
+    right: list[Any] = [] if state_view is None else [state_view]
     if plots:
         right.append(rrb.Grid(*plots, grid_columns=2 if len(plots) > 4 else 1))
     columns: list[Any] = [rrb.Vertical(*left, row_shares=shares)]
     if right:
-        columns.append(rrb.Vertical(*right, row_shares=[1.0, 6.0]) if len(right) == 2 else right[0])
+        shares = [state_share, 6.0]
+        columns.append(rrb.Vertical(*right, row_shares=shares) if len(right) == 2 else right[0])
     return rrb.Blueprint(
         rrb.Horizontal(*columns, column_shares=[1.0, 1.0][: len(columns)]),
         rrb.TimePanel(timeline=timeline, play_state="following", state="collapsed"),
@@ -337,6 +386,7 @@ def open_recording(
     notice: Callable[[str], None] | None = None,
     scale: float = 1.0,
     web: bool = False,
+    vehicle: bool = True,
 ) -> rr.RecordingStream:
     """A recording stream saved to ``save`` (an .rrd path), sent to a spawned viewer, or
     (``web``) served with the web viewer on this host (see :func:`serve_web`).
@@ -346,7 +396,7 @@ def open_recording(
     says where: rendering never fails because of the machine it runs on. ``notice``
     takes that message (a command line prints it as one plain line); without it, it is
     a RuntimeWarning (library use). ``scale``: how many times life size the vehicle is
-    drawn (:func:`model_scale`).
+    drawn (:func:`model_scale`); ``vehicle``: False for a fleet, which draws its own.
     """
     rec = rr.RecordingStream(name)
     layout = blueprint() if default_blueprint is None else default_blueprint
@@ -372,7 +422,7 @@ def open_recording(
     # Also the active layout: a viewer that showed another recording of the same kind
     # (same application id) would otherwise keep that one's panels.
     rec.send_blueprint(layout, make_active=True, make_default=True)
-    setup(rec, scale)
+    setup(rec, scale, vehicle)
     return rec
 
 

@@ -1,23 +1,33 @@
-"""``quadsitl sim --rerun``: the simulated vehicle streamed to Rerun as it flies.
+"""``quadsitl sim --rerun``: the simulated vehicles streamed to Rerun as they fly.
 
-At most 30 times a wall-clock second, the telemetry the vehicle would send (attitude,
+At most 30 times a wall-clock second, the telemetry each vehicle would send (attitude,
 local position, rotor speeds, battery, mission item) is built by the same builders as
 the MAVLink telemetry and logged through :class:`LiveLogger`, and once a second its
 heartbeat (flight mode and armed state); vehicle events go to the text log. Rotor
-speeds are shown as multiples of the airframe's hover speed; the 3-D camera follows
-the vehicle.
+speeds are shown as multiples of the airframe's hover speed. One vehicle: the 3-D
+camera follows it. A fleet (``sim --vehicles N``): each vehicle under its system id
+(:mod:`quadsitl.viz.fleet`), the camera framing the fleet's start grid and the air
+above it. The vehicles are logged in turn, one per tick (a tick then costs what one
+vehicle's does, never a burst for the whole fleet), at most FLEET_SNAPSHOTS ticks a
+second: 30 Hz each for 2 vehicles, 15 Hz each for 4, less for more (recording more
+stole the real-time loop's time on a 2-core machine).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+
+import numpy as np
 
 from quadsitl.mavlink import telemetry as T
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
 from quadsitl.viz.live import LiveLogger
-from quadsitl.viz.scene import LIVE_PANELS, blueprint, open_recording
+from quadsitl.viz.scene import LIVE_PANELS, blueprint, framing, open_recording
 
-RATE = 30.0  # Hz of wall time
+RATE = 30.0  # Hz of wall time, per vehicle
+FLEET_SNAPSHOTS = 60.0  # Hz of wall time: vehicles logged a second, the fleet together
+FRAMED_HEIGHT = 5.0  # m above the start grid that the fleet's camera frames
 BUILDERS = (
     T.build_attitude,
     T.build_attitude_quaternion,
@@ -30,19 +40,28 @@ PANELS = (*LIVE_PANELS, "battery_remaining", "mission_item")
 
 
 class SimView:
-    """Spawns a viewer, saves to ``save`` (an .rrd path), or (``web``) serves the web
-    viewer on this host and prints its URL; ``notice`` takes the message saying where the
-    recording goes when no viewer can be shown."""
+    """``vehicles``: system id -> vehicle. Spawns a viewer, saves to ``save`` (an .rrd
+    path), or (``web``) serves the web viewer on this host and prints its URL;
+    ``notice`` takes the message saying where the recording goes when no viewer can be
+    shown."""
 
     def __init__(
         self,
-        vehicle: Vehicle,
+        vehicles: Mapping[int, Vehicle],
         save: str | None = None,
         notice: Callable[[str], None] | None = None,
         web: bool = False,
     ) -> None:
-        self.vehicle = vehicle
-        layout = blueprint(PANELS, follow=True, whole_range=False)
+        if not vehicles:
+            raise ValueError("SimView needs at least one vehicle")
+        self.vehicles = dict(vehicles)
+        members = fleet_members(self.vehicles) if len(self.vehicles) > 1 else []
+        if members:
+            grid = np.array([m.offset for m in members])
+            frame = framing(np.concatenate([grid, grid + np.array([0.0, 0.0, FRAMED_HEIGHT])]))
+            layout = fleet_blueprint(members, PANELS, frame=frame, whole_range=False)
+        else:
+            layout = blueprint(PANELS, follow=True, whole_range=False)
         self.rec = open_recording(
             "quadsitl_sim",
             save,
@@ -50,25 +69,50 @@ class SimView:
             default_blueprint=layout,
             notice=notice,
             web=web,
+            vehicle=not members,
         )
-        self.logger = LiveLogger(self.rec, hover_rotor=vehicle.airframe.hover_rotor_speed)
+        for member in members:
+            member.setup(self.rec)
+        self.loggers = [
+            LiveLogger(
+                self.rec,
+                hover_rotor=vehicle.airframe.hover_rotor_speed,
+                member=members[i] if members else None,
+            )
+            for i, vehicle in enumerate(self.vehicles.values())
+        ]
+        self.turns = list(zip(self.vehicles.values(), self.loggers, strict=True))
+        self.period = 1.0 / min(RATE * len(self.turns), FLEET_SNAPSHOTS)  # s of wall time
+        self.turn = 0
         self.next_due = 0.0
-        self.next_heartbeat = 0.0
+        self.next_heartbeat = [0.0] * len(self.turns)  # wall s, per vehicle
 
     def tick(self, wall_now: float) -> None:
+        """Log the next vehicle in turn, when a tick is due."""
         if wall_now < self.next_due:
             return
-        self.next_due = wall_now + 1.0 / RATE
-        if wall_now >= self.next_heartbeat:
-            self.next_heartbeat = wall_now + 1.0
-            self.logger.message(T.build_heartbeat(self.vehicle), own=True)
-        snapshot = T.Snapshot(self.vehicle)
+        self.next_due = wall_now + self.period
+        index, self.turn = self.turn, (self.turn + 1) % len(self.turns)
+        vehicle, logger = self.turns[index]
+        if wall_now >= self.next_heartbeat[index]:
+            self.next_heartbeat[index] = wall_now + 1.0
+            logger.message(T.build_heartbeat(vehicle), own=True)
+        snapshot = T.Snapshot(vehicle)
         for build in BUILDERS:
-            self.logger.message(build(snapshot), own=True)
+            logger.message(build(snapshot), own=True)
 
     def event(self, text: str) -> None:
-        self.logger.text(text)
+        self.loggers[0].text(text)
 
     def close(self) -> None:
         self.rec.flush()
         self.rec.disconnect()
+
+
+def fleet_members(vehicles: Mapping[int, Vehicle]) -> list[Member]:
+    """The fleet in the scene: each vehicle at its local origin's offset from the first's."""
+    first = next(iter(vehicles.values())).origin
+    return [
+        Member(system_id, row, origin_offset(first, (0, 0, 0), vehicle.origin, (0, 0, 0)))
+        for row, (system_id, vehicle) in enumerate(vehicles.items(), start=1)
+    ]

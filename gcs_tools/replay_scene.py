@@ -1,0 +1,255 @@
+"""The Rerun side of a replay: samples gathered per series and sent as columns, each
+MAVLink system's flight apart, and the recording of one vehicle or of a fleet (scene:
+:mod:`quadsitl.viz.scene`, :mod:`quadsitl.viz.fleet`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rerun as rr
+
+from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
+from quadsitl.viz.flight_view import FlightView, Sample
+from quadsitl.viz.scene import (
+    STATE_PANEL,
+    TIMELINE,
+    blueprint,
+    framing,
+    model_scale,
+    open_recording,
+    series_style,
+)
+
+
+class Columns:
+    """Samples gathered per (entity, kind), sent as columns at the end."""
+
+    def __init__(self) -> None:
+        self.series: dict[tuple[str, str], tuple[list[int], list[Any], list[str]]] = {}
+
+    def add(self, stamp_us: int, sample: Sample) -> None:
+        times, values, levels = self.series.setdefault((sample.entity, sample.kind), ([], [], []))
+        times.append(stamp_us)
+        values.append(sample.value)
+        levels.append(sample.level)
+
+    def panels(self) -> set[str]:
+        """The time-series panels (``plots/<panel>/...``) that have data."""
+        return {entity.split("/")[1] for entity, _ in self.series if entity.startswith("plots/")}
+
+    def normalise_rotors(self) -> None:
+        """Rotor values as multiples of hover: divided by the median of their non-zero
+        values (a log spends most of its armed time near hover)."""
+        rotors = [key for key in self.series if key[0].startswith("plots/rotors/")]
+        if not rotors:
+            return
+        values = np.concatenate([np.asarray(self.series[key][1], float) for key in rotors])
+        moving = values[np.isfinite(values) & (np.abs(values) > 1e-6)]
+        if len(moving) == 0:
+            return
+        hover = float(np.median(np.abs(moving)))
+        for key in rotors:
+            times, values_, levels = self.series[key]
+            self.series[key] = (times, list(np.asarray(values_, float) / hover), levels)
+
+    def send(self, rec: rr.RecordingStream, member: Member | None = None) -> dict[str, int]:
+        """Every series as one column; a fleet's ``member`` under its system id."""
+        rows: dict[str, int] = {}
+        for (entity, kind), (times, values, levels) in self.series.items():
+            path, style = entity, series_style(entity) if kind == "scalar" else None
+            if member is not None:
+                path, style = (
+                    member.path(entity),
+                    member.style(entity) if kind == "scalar" else None,
+                )
+                if member.changes_values(entity):
+                    values = [member.value(entity, value) for value in values]
+            if style is not None:
+                rec.log(path, style, static=True)
+            index = rr.TimeColumn(TIMELINE, timestamp=np.array(times, dtype="datetime64[us]"))
+            rec.send_columns(path, indexes=[index], columns=column(kind, values, levels))
+            rows[path] = rows.get(path, 0) + len(times)
+        return rows
+
+
+class System:
+    """What a log holds of one MAVLink system: its flight, as samples and track."""
+
+    def __init__(self) -> None:
+        self.view = FlightView()
+        self.columns = Columns()
+        self.track: list[np.ndarray] = []  # m, ENU, in its own local frame
+
+    def add(self, stamp_us: int, message: Any) -> None:
+        for sample in self.view.samples(message):
+            self.columns.add(stamp_us, sample)
+            if sample.kind == "translation":
+                self.track.append(sample.value)
+
+    @property
+    def posed(self) -> bool:
+        """Whether the log says where it is or how it is turned: a vehicle to draw."""
+        return ("world/vehicle", "translation") in self.columns.series or (
+            "world/vehicle",
+            "rotation",
+        ) in self.columns.series
+
+    def mission_points(self) -> np.ndarray:
+        """(M, 3) m, ENU: the mission items with a position, in item order."""
+        view = self.view
+        return np.array([view.mission[k] for k in sorted(view.mission)]).reshape(-1, 3)
+
+
+def route(message: Any, systems: dict[int, System]) -> System:
+    """The system a message belongs to: its sender once that is a vehicle (its heartbeat
+    seen), else the system it is addressed to (a ground station's mission upload)."""
+    source = message.get_srcSystem()
+    system = systems.get(source)
+    if system is not None and system.view.vehicle is not None:
+        return system
+    target = getattr(message, "target_system", 0)
+    if target:
+        source = target
+    system = systems.get(source)
+    if system is None:
+        system = systems[source] = System()
+    return system
+
+
+def vehicles_of(systems: dict[int, System]) -> dict[int, System]:
+    """System id -> the systems drawn: those with a pose, else those with any data."""
+    posed = {k: systems[k] for k in sorted(systems) if systems[k].posed}
+    return posed or {k: systems[k] for k in sorted(systems) if systems[k].columns.series}
+
+
+def column(kind: str, values: list[Any], levels: list[str]) -> Any:
+    if kind == "scalar":
+        return rr.Scalars.columns(scalars=np.asarray(values, dtype=np.float64))
+    if kind == "translation":
+        return rr.Transform3D.columns(translation=np.asarray(values, dtype=np.float64))
+    if kind == "rotation":
+        return rr.Transform3D.columns(quaternion=np.asarray(values, dtype=np.float64))
+    if kind == "point":
+        return rr.Points3D.columns(positions=np.asarray(values, dtype=np.float64))
+    if kind == "geo":
+        return rr.GeoPoints.columns(positions=np.asarray(values, dtype=np.float64))
+    return rr.TextLog.columns(text=[str(v) for v in values], level=levels)
+
+
+def send_one(
+    vehicles: dict[int, System], out: str | Path | None, spawn: bool, web: bool
+) -> tuple[rr.RecordingStream, dict[str, int]]:
+    """The recording of one vehicle (or none): the single-vehicle scene and layout."""
+    system = next(iter(vehicles.values()), None) or System()
+    mission = system.mission_points()
+    frame = framing(np.concatenate([np.asarray(system.track).reshape(-1, 3), mission]))
+    panels = system.columns.panels()
+    layout = blueprint(
+        panels - {STATE_PANEL},
+        state=STATE_PANEL in panels,
+        frame=frame,
+        map_view=("map/track", "geo") in system.columns.series,
+    )
+    rec = open_recording(
+        "quadsitl_replay",
+        str(out) if out else None,
+        spawn,
+        default_blueprint=layout,
+        scale=model_scale(frame[1]),
+        web=web,
+    )
+    entities = system.columns.send(rec)
+    log_statics(rec, system)
+    return rec, entities
+
+
+def send_fleet(
+    vehicles: dict[int, System], out: str | Path | None, spawn: bool, web: bool
+) -> tuple[rr.RecordingStream, dict[str, int]]:
+    """The recording of several vehicles, each under its system id, placed by their
+    homes (where the log has them) in the first one's local frame."""
+    reference = next(iter(vehicles.values())).view
+    members, points, panels = [], [], set()
+    for row, (system_id, system) in enumerate(vehicles.items(), start=1):
+        view = system.view
+        offset = (0.0, 0.0, 0.0)
+        if reference.home is not None and view.home is not None:
+            offset = origin_offset(
+                reference.home, reference.home_local_enu, view.home, view.home_local_enu
+            )
+        members.append(Member(system_id, row, offset))
+        local = [np.asarray(system.track).reshape(-1, 3), system.mission_points()]
+        points.append(np.concatenate(local) + offset)
+        panels |= system.columns.panels()
+    frame = framing(np.concatenate(points))
+    layout = fleet_blueprint(
+        members,
+        panels - {STATE_PANEL},
+        frame=frame,
+        map_view=any(("map/track", "geo") in s.columns.series for s in vehicles.values()),
+    )
+    rec = open_recording(
+        "quadsitl_replay",
+        str(out) if out else None,
+        spawn,
+        default_blueprint=layout,
+        scale=model_scale(frame[1]),
+        web=web,
+        vehicle=False,
+    )
+    entities: dict[str, int] = {}
+    for member, system in zip(members, vehicles.values(), strict=True):
+        member.setup(rec, model_scale(frame[1]), home=None)
+        entities.update(system.columns.send(rec, member))
+        log_statics(rec, system, member)
+    return rec, entities
+
+
+def log_statics(rec: rr.RecordingStream, system: System, member: Member | None = None) -> None:
+    """The whole track (3-D and map), home and mission of one vehicle (a fleet's
+    ``member``: under its system id, the tracks in its colour)."""
+
+    def path(entity: str) -> str:
+        return entity if member is None else member.path(entity)
+
+    color = [[90, 90, 200]] if member is None else [member.color]
+    width = None if member is None else rr.Radius.ui_points(2.0)  # a fleet's trails stand out
+    view = system.view
+    geo = system.columns.series.get(("map/track", "geo"))
+    if geo is not None:
+        rec.log(
+            path("map/path"),
+            rr.GeoLineStrings(
+                lat_lon=[np.asarray(geo[1])], colors=color, radii=rr.Radius.ui_points(2.0)
+            ),
+            static=True,
+        )
+    if system.track:
+        rec.log(
+            path("world/trajectory"),
+            rr.LineStrips3D([np.asarray(system.track)], colors=color, radii=width),
+            static=True,
+        )
+    rec.log(
+        path("world/home"),
+        rr.Points3D([view.home_local_enu], radii=rr.Radius.ui_points(6.0), colors=[[0, 160, 0]]),
+        static=True,
+    )
+    if not view.mission:
+        return
+    mission = system.mission_points()
+    if member is None:  # numbered waypoints in yellow
+        points = rr.Points3D(
+            mission,
+            radii=rr.Radius.ui_points(6.0),
+            colors=[[230, 180, 0]],
+            labels=[str(k) for k in sorted(view.mission)],
+        )
+        line = rr.LineStrips3D([mission], colors=[[230, 180, 0]])
+    else:  # a fleet's in each vehicle's lighter colour, under its trail, without numbers
+        points = rr.Points3D(mission, radii=rr.Radius.ui_points(3.0), colors=[member.light_color])
+        line = rr.LineStrips3D([mission], colors=[member.light_color])
+    rec.log(path("world/mission"), points, static=True)
+    rec.log(path("world/mission/path"), line, static=True)
