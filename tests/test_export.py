@@ -18,10 +18,10 @@ import torch
 from policies import checkpoint
 from policies.config import make_config
 from policies.export.contract import contract_path
-from policies.export.runtimes import CPolicy, OnnxPolicy, load_policy
+from policies.export.parity import max_differences, record_observations
+from policies.export.runtimes import CPolicy, load_policy
 from policies.export.writer import export
 from policies.networks import ActorCritic
-from policies.rollout import make_vector_env
 from quadsitl.cli import main
 from quadsitl.frames import quat_from_euler
 from quadsitl.physics import PAPER
@@ -35,34 +35,15 @@ PARITY = 1e-5  # max abs difference of the actions, any two forms
 RECORDED = 10_000  # observations compared
 
 
-def recorded_observations(net: ActorCritic, task: str, options: dict) -> np.ndarray:  # type: ignore[type-arg]
-    """RECORDED observations of real episodes of ``task`` flown by ``net``'s sampled
-    actions (the training distribution: its mistakes and crashes included)."""
-    env = make_vector_env(task, 50, **options)
-    low, high = env.single_action_space.low, env.single_action_space.high  # type: ignore[attr-defined]
-    torch.manual_seed(0)
-    obs, _ = env.reset(seed=123)
-    rows = []
-    try:
-        while len(rows) * 50 < RECORDED:
-            rows.append(obs.copy())
-            action = net.act(torch.as_tensor(obs)).numpy()
-            obs, *_ = env.step(np.clip(action, low, high))
-    finally:
-        env.close()
-    return np.concatenate(rows)[:RECORDED]
-
-
 def assert_three_forms_agree(source: Path, folder: Path) -> None:
     net, config, _ = checkpoint.load(source)
     onnx_file = export(source, "onnx", folder)[0]
     header = export(source, "c", folder)[0]
-    obs = recorded_observations(net, config.task, config.task_options)
+    obs = record_observations(net, config, RECORDED)
     assert obs.shape == (RECORDED, net.obs_size) and np.isfinite(obs).all()
-    reference = net.mean_action(obs)
-    for form in (OnnxPolicy(onnx_file), CPolicy(header)):
-        difference = np.abs(form.mean_action(obs) - reference).max()
-        assert difference <= PARITY, (type(form).__name__, difference)
+    assert np.unique(obs, axis=0).shape[0] > RECORDED * 0.9  # states, not one repeated
+    differences = max_differences(net, onnx_file, header, obs)
+    assert max(differences.values()) <= PARITY, differences
 
 
 @pytest.mark.parametrize("task", list(TASKS))
