@@ -87,6 +87,23 @@ def test_c_header_is_c99_needs_only_tanhf_and_maps_actions_by_eq_19(tmp_path):
     np.testing.assert_allclose(policy.rotor_speeds(action), expected, rtol=1e-6)
 
 
+def test_a_header_holding_other_code_is_refused_before_it_is_compiled(tmp_path, capsys):
+    """A header is code: one that is not exactly what quadsitl export writes never runs."""
+    header = export(CHECKPOINTS / "hover.pt", "c", tmp_path)[0]
+    marker = tmp_path / "ran"
+    header.write_text(
+        header.read_text()
+        + "#include <stdio.h>\n__attribute__((constructor)) static void evil(void) "
+        + f'{{ fclose(fopen("{marker}", "w")); }}\n'
+    )
+    one_line_error(
+        capsys,
+        ("eval", str(header), "--episodes", "1"),
+        "is not a header as quadsitl export writes it (refused: it would be compiled and run)",
+    )
+    assert not marker.exists()
+
+
 # --- the contract ---------------------------------------------------------------------------
 def test_contract_states_the_codes_layout_frames_motors_and_normalisation(tmp_path):
     source = CHECKPOINTS / "target_follow.pt"

@@ -25,7 +25,7 @@ def record_observations(net: ActorCritic, config: TrainConfig, count: int) -> np
     low, high = env.single_action_space.low, env.single_action_space.high  # type: ignore[attr-defined]
     generator = torch.Generator().manual_seed(0)
     obs, _ = env.reset(seed=123)
-    rows = []
+    rows: list[np.ndarray] = []
     try:
         while len(rows) * ENVS < count:
             rows.append(obs.copy())

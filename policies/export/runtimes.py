@@ -9,6 +9,7 @@ from __future__ import annotations
 import ctypes
 import json
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -20,6 +21,7 @@ import numpy as np
 from policies import checkpoint
 from policies.config import STARTS, TrainConfig
 from policies.export.contract import FORMAT, contract_path, layout_text
+from policies.export.to_c import parse_weights, render
 from policies.export.to_onnx import METADATA_KEY
 from policies.networks import DeterministicPolicy
 from quadsitl.physics import layout as L
@@ -85,9 +87,21 @@ class OnnxPolicy:
 
 
 class CPolicy:
-    """A C header of ``quadsitl export --format c``, compiled into a shared library."""
+    """A C header of ``quadsitl export --format c``, compiled into a shared library.
 
-    def __init__(self, header: Path) -> None:
+    A header is code, and compiling and loading it runs it: only the code ``quadsitl
+    export`` writes is accepted (the header must be exactly what its own numbers and
+    its contract render to), so a file from elsewhere can hold weights, never code."""
+
+    def __init__(self, header: Path, contract: dict[str, Any] | None = None) -> None:
+        text = header.read_text(errors="replace")
+        if contract is None:
+            contract = json.loads(contract_path(header).read_text())
+        if not _as_exported(text, contract):
+            raise ValueError(
+                f"{header} is not a header as quadsitl export writes it (refused: it would be "
+                "compiled and run)"
+            )
         compiler = shutil.which(os.environ.get("CC", "cc"))
         if compiler is None:
             raise ValueError("running a C policy needs a C compiler (cc, or $CC)")
@@ -130,6 +144,15 @@ class CPolicy:
         return speeds
 
 
+def _as_exported(text: str, contract: dict[str, Any]) -> bool:
+    """Is ``text`` exactly the header of its own numbers and ``contract``?"""
+    named = re.match(r"/\* (\S+): ", text)
+    try:
+        return named is not None and render(parse_weights(text), contract, named[1]) == text
+    except (KeyError, ValueError, TypeError, IndexError):
+        return False
+
+
 def load_policy(
     path: str | Path, task: str | None = None
 ) -> tuple[DeterministicPolicy, TrainConfig]:
@@ -152,7 +175,7 @@ def load_policy(
         if not beside.is_file():
             raise ValueError(f"{path} needs its contract {beside} (written by quadsitl export)")
         contract = _contract_of(path, beside.read_text(), task)
-        policy = CPolicy(path)
+        policy = CPolicy(path, contract)
     config = (
         TrainConfig.from_dict(contract["checkpoint"]["config"])
         if contract

@@ -21,13 +21,44 @@ from policies.export.contract import C_FORWARD, C_ROTOR_SPEEDS, NORM_CLIP
 from policies.networks import ActorCritic
 
 PER_LINE = 6  # numbers per line of an array initialiser
+ARRAY = re.compile(r"static const (float|double) (\w+)\[[^\]]*\] = \{([^}]*)\};")
 
 
 def c_header(net: ActorCritic, contract: dict[str, Any], name: str) -> str:
     """The header's text; ``name`` (the file's name) makes its include guard."""
+    return render(weights_of(net), contract, name)
+
+
+def weights_of(net: ActorCritic) -> dict[str, np.ndarray]:
+    """The header's arrays, by name (flat, row-major); the normalisation's if it has one."""
     hidden, head = _layers(net)
-    w1, b1 = _floats(hidden.weight), _floats(hidden.bias)
-    w2, b2 = _floats(head.weight), _floats(head.bias)
+    arrays = {
+        "policy_w1": _floats(hidden.weight),
+        "policy_b1": _floats(hidden.bias),
+        "policy_w2": _floats(head.weight),
+        "policy_b2": _floats(head.bias),
+    }
+    if net.norm.enabled:
+        arrays["policy_obs_mean"] = net.norm.mean.numpy()
+        arrays["policy_obs_std"] = np.sqrt(net.norm.var.numpy() + 1e-8)  # as RunningNorm divides
+    return arrays
+
+
+def parse_weights(text: str) -> dict[str, np.ndarray]:
+    """The arrays of a header's text (what :func:`weights_of` gave :func:`render`)."""
+    arrays = {}
+    for kind, name, body in ARRAY.findall(text):
+        numbers = [float(item.strip().rstrip("f")) for item in body.split(",")]
+        arrays[name] = np.array(numbers, np.float32 if kind == "float" else np.float64)
+    return arrays
+
+
+def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -> str:
+    """The header of these arrays (sizes read from them) and this contract."""
+    w1, b1, w2, b2 = (arrays[k] for k in ("policy_w1", "policy_b1", "policy_w2", "policy_b2"))
+    hidden_size, act_size = b1.size, b2.size
+    obs_size = w1.size // max(hidden_size, 1)
+    normalised = "policy_obs_mean" in arrays
     action = contract["action"]
     guard = re.sub(r"\W", "_", name).upper() + "_INCLUDED"
     checkpoint = contract["checkpoint"]
@@ -50,19 +81,17 @@ def c_header(net: ActorCritic, contract: dict[str, Any], name: str) -> str:
         "",
         "#include <math.h>",
         "",
-        f"#define POLICY_OBS_SIZE {net.obs_size}",
-        f"#define POLICY_ACT_SIZE {net.act_size}",
-        f"#define POLICY_HIDDEN {hidden.out_features}",
+        f"#define POLICY_OBS_SIZE {obs_size}",
+        f"#define POLICY_ACT_SIZE {act_size}",
+        f"#define POLICY_HIDDEN {hidden_size}",
         f"#define POLICY_CONTROL_RATE_HZ {_float(contract['control']['rate_hz'])}",
         f"#define POLICY_HOVER_ROTOR_SPEED {_float(action['hover_rotor_speed_rad_s'])} /* rad/s */",
         f"#define POLICY_BETA {_float(action['beta_rad_s'])} /* rad/s */",
         f"#define POLICY_MAX_ROTOR_SPEED {_float(action['max_rotor_speed_rad_s'])} /* rad/s */",
         "",
     ]
-    norm = net.norm
-    if norm.enabled:
-        mean = norm.mean.numpy()
-        std = np.sqrt(norm.var.numpy() + 1e-8)  # as networks.RunningNorm divides
+    if normalised:
+        mean, std = arrays["policy_obs_mean"], arrays["policy_obs_std"]
         lines += [
             "/* Observation normalisation of training: (obs - mean) / std, clipped. */",
             _array("static const double policy_obs_mean[POLICY_OBS_SIZE]", mean, _double),
@@ -81,7 +110,7 @@ def c_header(net: ActorCritic, contract: dict[str, Any], name: str) -> str:
         "    int i, j;",
         "    for (i = 0; i < POLICY_OBS_SIZE; ++i) {",
     ]
-    if norm.enabled:
+    if normalised:
         lines += [
             "        double v = ((double)obs[i] - policy_obs_mean[i]) / policy_obs_std[i];",
             f"        if (v > {NORM_CLIP:.1f}) v = {NORM_CLIP:.1f};",
