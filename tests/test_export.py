@@ -96,12 +96,22 @@ def test_a_header_holding_other_code_is_refused_before_it_is_compiled(tmp_path, 
         + "#include <stdio.h>\n__attribute__((constructor)) static void evil(void) "
         + f'{{ fclose(fopen("{marker}", "w")); }}\n'
     )
-    one_line_error(
-        capsys,
-        ("eval", str(header), "--episodes", "1"),
-        "is not a header as quadsitl export writes it (refused: it would be compiled and run)",
+    refused = "is not a header as quadsitl export writes it (refused: it would be compiled and run)"
+    one_line_error(capsys, ("eval", str(header), "--episodes", "1"), refused)
+    # Code in the contract, which the header's comment quotes: the two agree, and still no.
+    header = export(CHECKPOINTS / "hover.pt", "c", tmp_path)[0]
+    evil = (
+        "hover */ int remove(const char *); __attribute__((constructor)) static void e(void) "
+        f'{{ remove("{header}"); }} /*'
     )
-    assert not marker.exists()
+    contract = json.loads(contract_path(header).read_text())
+    contract["task"]["name"] = evil
+    contract_path(header).write_text(json.dumps(contract))
+    header.write_text(
+        header.read_text().replace("quadsitl hover policy", f"quadsitl {evil} policy")
+    )
+    one_line_error(capsys, ("eval", str(header), "--episodes", "1"), refused)
+    assert not marker.exists() and header.exists()
 
 
 # --- the contract ---------------------------------------------------------------------------

@@ -146,7 +146,7 @@ class CPolicy:
 
 def _as_exported(text: str, contract: dict[str, Any]) -> bool:
     """Is ``text`` exactly the header of its own numbers and ``contract``?"""
-    named = re.match(r"/\* (\S+): ", text)
+    named = re.match(r"/\* (.+?): the quadsitl ", text)
     try:
         return named is not None and render(parse_weights(text), contract, named[1]) == text
     except (KeyError, ValueError, TypeError, IndexError):
@@ -181,6 +181,8 @@ def load_policy(
         if contract
         else TrainConfig(task=str(task), task_options=dict(STARTS[str(task)]))
     )
+    if config.task not in TASKS:
+        raise ValueError(f"{path} flies {config.task!r}, not a quadsitl task")
     expected = F.OBS_SIZE + TASKS[config.task].extra_obs
     if policy.obs_size != expected:
         raise ValueError(

@@ -60,14 +60,23 @@ def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -
     obs_size = w1.size // max(hidden_size, 1)
     normalised = "policy_obs_mean" in arrays
     action = contract["action"]
-    guard = re.sub(r"\W", "_", name).upper() + "_INCLUDED"
+    guard = "QUADSITL_" + re.sub(r"\W", "_", name, flags=re.ASCII).upper() + "_INCLUDED"
     checkpoint = contract["checkpoint"]
+    task, algo, preset, seed = (
+        _comment(v)
+        for v in (
+            contract["task"]["name"],
+            checkpoint["algorithm"],
+            checkpoint["preset"],
+            checkpoint["seed"],
+        )
+    )
     lines = [
-        f"/* {name}: the quadsitl {contract['task']['name']} policy ({checkpoint['algorithm']}, "
-        f"{checkpoint['preset']} preset, seed {checkpoint['seed']}), written by quadsitl export.",
-        f" * Checkpoint {checkpoint['file']}, sha256 {checkpoint['sha256']}.",
+        f"/* {_comment(name)}: the quadsitl {task} policy ({algo}, {preset} preset, seed {seed}), "
+        "written by quadsitl export.",
+        f" * Checkpoint {_comment(checkpoint['file'])}, sha256 {_comment(checkpoint['sha256'])}.",
         f" * Contract (observation layout, frames, units, motor order): "
-        f"{name.rsplit('.', 1)[0]}.contract.json",
+        f"{_comment(name.rsplit('.', 1)[0])}.contract.json",
         " *",
         " *   float obs[POLICY_OBS_SIZE];      raw observation (normalised inside)",
         " *   float action[POLICY_ACT_SIZE];",
@@ -163,6 +172,15 @@ def _layers(net: ActorCritic) -> tuple[torch.nn.Linear, torch.nn.Linear]:
     ):
         raise ValueError("the C export writes one tanh hidden layer; this network is another")
     return body[0], net.policy_head.mean
+
+
+def _comment(value: object) -> str:
+    """``value`` as text that cannot end a C comment (a header's comment is written from
+    the contract, and a header is compiled: nothing in it may become code)."""
+    text = str(value)
+    if "*/" in text or "??" in text or not text.isprintable():
+        raise ValueError(f"{text!r} cannot be written into a C comment")
+    return text
 
 
 def _floats(tensor: torch.Tensor) -> np.ndarray:
