@@ -37,6 +37,7 @@ bench: venv
 	$(BIN)/python benchmarks/mavlink_env.py
 	$(BIN)/python benchmarks/mavlink_training.py
 	$(BIN)/python benchmarks/replay.py
+	$(BIN)/python benchmarks/export.py
 
 bench-training: venv
 	$(BIN)/python benchmarks/training.py

@@ -14,10 +14,10 @@ final descent of LAND, RTL and mission land items) is flown by the cascaded cont
 from __future__ import annotations
 
 import numpy as np
-import torch
 
-from policies import checkpoint
-from policies.networks import ActorCritic
+from policies.export.contract import layout_text
+from policies.export.runtimes import load_policy
+from policies.networks import DeterministicPolicy
 from quadsitl.physics import Airframe
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TaskOptions
@@ -33,7 +33,7 @@ REANCHOR = 0.5  # fraction of the carrot distance that counts as reached
 class PolicyAutopilot:
     def __init__(
         self,
-        net: ActorCritic,
+        net: DeterministicPolicy,
         airframe: Airframe,
         options: TaskOptions,
         carrot: float = 2.0,
@@ -42,7 +42,7 @@ class PolicyAutopilot:
         if net.obs_size != F.OBS_SIZE:
             raise ValueError(
                 f"this policy needs {net.obs_size} observations; only the hover and waypoint "
-                f"policies ({F.OBS_SIZE}) can fly as the autopilot"
+                f"policies ({F.OBS_SIZE}: {layout_text('hover')}) can fly as the autopilot"
             )
         self.net = net
         self.carrot = carrot
@@ -59,7 +59,8 @@ class PolicyAutopilot:
 
     @classmethod
     def from_checkpoint(cls, path: str, airframe: Airframe) -> PolicyAutopilot:
-        net, config, _ = checkpoint.load(path)
+        """From a checkpoint (.pt) or its export (.onnx, or a C .h with its contract)."""
+        net, config = load_policy(path)
         if config.task not in ("hover", "static_waypoint", "random_waypoint"):
             raise ValueError(f"a {config.task} policy cannot fly goto and mission legs")
         options = {k: v for k, v in config.task_options.items() if not k.startswith("init_")}
@@ -104,7 +105,7 @@ class PolicyAutopilot:
         local[0, L.POS] -= origin
         self.goal[0, F.GOAL_POS] = goal - origin
         F.observe(local, self.params, self.goal, self.obs, self.dist, self.tilt)
-        action = self.net.act(torch.as_tensor(self.obs), deterministic=True).numpy()[0]
+        action = self.net.mean_action(self.obs)[0]
         hover = self.airframe.hover_rotor_speed
         self.command = np.clip(hover + self.beta * action, 0.0, self.airframe.max_rotor_speed)
         return self.command

@@ -19,7 +19,7 @@ from typing import Any
 import torch
 
 from policies.config import TrainConfig
-from policies.networks import ActorCritic
+from policies.networks import ActorCritic, DeterministicPolicy
 
 FORMAT = "quadsitl-policy-1"
 MAX_SIZE = 1_000_000  # observations, actions: anything larger is not one of ours
@@ -130,11 +130,14 @@ def _check_state_dict(given: Any, expected: dict[str, torch.Tensor]) -> None:
             raise ValueError(f"state_dict[{name!r}] holds NaN or infinite values")
 
 
-def check_fits(net: ActorCritic, config: TrainConfig, task: str, obs_size: int) -> None:
+def check_fits(net: DeterministicPolicy, config: TrainConfig, task: str, obs_size: int) -> None:
     """A clear error when a checkpoint is used for another task or observation size."""
     if config.task != task:
         raise ValueError(f"checkpoint was trained for task {config.task!r}, not {task!r}")
     if net.obs_size != obs_size:
+        from policies.export.contract import layout_text
+
         raise ValueError(
-            f"checkpoint expects {net.obs_size} observations, the {task} task gives {obs_size}"
+            f"the policy expects {net.obs_size} observations, the {task} task gives "
+            f"{obs_size}: {layout_text(task)}"
         )

@@ -1,5 +1,6 @@
-"""``quadsitl train``, ``quadsitl eval`` and ``quadsitl plot``: parsed here, run lazily
-(torch is imported only by these commands)."""
+"""``quadsitl train``, ``quadsitl eval``, ``quadsitl plot``, ``quadsitl sweep`` and
+``quadsitl export`` (policies/export/cli.py): parsed here, run lazily (torch is imported
+only by these commands)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import sys
 from pathlib import Path
 
 from policies.config import ALGORITHMS, MAX_TOTAL_STEPS, TASK_NAMES, TrainConfig
+from policies.export import cli as export_cli
 
 
 def add_parsers(commands: argparse._SubParsersAction) -> None:
@@ -81,11 +83,19 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         description="Run deterministic episodes; prints success rate, return and the task's "
         "metric, and a line `success_rate: X`.",
     )
-    evaluate.add_argument("checkpoint", help="a .pt file written by quadsitl train")
+    evaluate.add_argument(
+        "checkpoint",
+        help="a .pt file written by quadsitl train, or its export: a .onnx file or a C .h "
+        "header (with its .contract.json beside it)",
+    )
     evaluate.add_argument(
         "--episodes", type=_count(1), default=100, help="episodes, ≥ 1 (default: 100)"
     )
-    evaluate.add_argument("--task", help="task to evaluate on (default: the trained one)")
+    evaluate.add_argument(
+        "--task",
+        help="task to evaluate on (default: the trained one; needed for an ONNX file not "
+        "written by quadsitl export)",
+    )
     evaluate.add_argument(
         "--backend",
         default="inprocess",
@@ -163,6 +173,7 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         help="after training, test each run's best checkpoint on N deterministic episodes "
         "and add the algorithms-comparison table to the results (default: 0, no test)",
     )
+    export_cli.add_parser(commands)
 
 
 def _count(low: int):  # type: ignore[no-untyped-def]
@@ -207,6 +218,8 @@ def run(args: argparse.Namespace) -> int:
         return _eval(args)
     if args.command == "sweep":
         return _sweep(args)
+    if args.command == "export":
+        return export_cli.run(args)
     return _plot(args)
 
 
@@ -340,10 +353,10 @@ def _next_steps(config: TrainConfig, run_dir: Path, best_success: float) -> list
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from policies import checkpoint
     from policies.evaluate import evaluate
+    from policies.export.runtimes import load_policy
 
-    net, config, _ = checkpoint.load(args.checkpoint)
+    net, config = load_policy(args.checkpoint, args.task)
     on_step = None
     view = None
     if args.rerun is not None:

@@ -12,11 +12,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import torch
 
 from policies import checkpoint
 from policies.config import TrainConfig
-from policies.networks import ActorCritic
+from policies.networks import DeterministicPolicy
 from policies.rollout import SEED_SPACING, make_vector_env
 from quadsitl.physics import layout as L
 from quadsitl.tasks import features as F
@@ -87,7 +86,7 @@ class Evaluation:
 
 
 def evaluate(
-    net: ActorCritic,
+    net: DeterministicPolicy,
     config: TrainConfig,
     task: str | None = None,
     episodes: int = 100,
@@ -98,7 +97,8 @@ def evaluate(
     seed: int = EVAL_SEED,
 ) -> Evaluation:
     """Run ``episodes`` of ``task`` (default: the one trained for) with the policy's mean
-    action, from the trained start distribution. ``on_step(engine, reward)`` is called
+    action (``net``: a network, or an exported ONNX or C policy), from the trained start
+    distribution. ``on_step(engine, reward)`` is called
     after each reset (reward None) and step of env 0 (e.g. to record it); when env 0's
     episode ends (and it resets at once), as ``on_step(engine, None, outcome)``."""
     task = task or config.task
@@ -130,7 +130,7 @@ def evaluate(
             for i in range(num_envs):
                 tracks[i].append(engine.fleet.state[i, L.POS].copy())
                 goal_tracks[i].append(engine.goal[i, F.GOAL_POS].copy())
-            action = net.act(torch.as_tensor(obs), deterministic=True).numpy()
+            action = net.mean_action(obs)
             obs, reward, terminated, truncated, info = env.step(np.clip(action, low, high))
             ended = np.flatnonzero(terminated | truncated)
             metrics = info.get("final_info", {})

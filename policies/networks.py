@@ -9,11 +9,26 @@ frozen unless ``update``), so a checkpoint carries everything needed to act.
 
 from __future__ import annotations
 
+from typing import Protocol
+
+import numpy as np
 import torch
 from torch import nn
 from torch.distributions import Normal
 
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
+
+
+class DeterministicPolicy(Protocol):
+    """What evaluation and the autopilot fly: a network, or its exported ONNX or C form
+    (policies/export/runtimes.py)."""
+
+    obs_size: int
+    act_size: int
+
+    def mean_action(self, obs: np.ndarray) -> np.ndarray:
+        """(N, act_size) float32 actions of (N, obs_size) float32 observations."""
+        ...
 
 
 class RunningNorm(nn.Module):
@@ -107,3 +122,7 @@ class ActorCritic(nn.Module):
     def act(self, obs: torch.Tensor, deterministic: bool = False) -> torch.Tensor:
         dist = self.distribution(obs)
         return dist.mean if deterministic else dist.sample()
+
+    def mean_action(self, obs: np.ndarray) -> np.ndarray:
+        """The deterministic action (the Gaussian's mean), numpy in and out."""
+        return self.act(torch.as_tensor(obs), deterministic=True).numpy()

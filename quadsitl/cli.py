@@ -182,7 +182,8 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         "--autopilot",
         metavar="CHECKPOINT",
         help="fly with a trained hover/waypoint policy instead of the cascaded controller "
-        "(e.g. policies/checkpoints/random_waypoint.pt)",
+        "(e.g. policies/checkpoints/random_waypoint.pt, or its export: a .onnx file or a C .h "
+        "header with its .contract.json)",
     )
     sim.add_argument(
         "--rerun",
@@ -385,7 +386,7 @@ def _main(argv: Sequence[str] | None = None) -> int:
             )
         except ValueError as error:
             parser.exit(2, f"quadsitl demo: error: {error}\n")
-    if args.command in ("train", "eval", "plot", "sweep"):
+    if args.command in ("train", "eval", "plot", "sweep", "export"):
         from policies.cli import run as run_policy_command
 
         try:

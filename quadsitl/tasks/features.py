@@ -2,23 +2,8 @@
 
 Compiled with numba because the single env must step in tens of microseconds and the
 vector env must handle millions of env steps per second; the formulas are short and
-each is written once. Observation layout (34 values, all tasks):
-
-=======  =====================================================  ============
-columns  meaning                                                frame / unit
-=======  =====================================================  ============
-0:3      position relative to the task origin                   ENU, m
-3:6      sin(roll, pitch, yaw)                                  –
-6:9      cos(roll, pitch, yaw)                                  –
-9:12     linear velocity                                        body FLU, m/s
-12:15    body rates                                             FLU, rad/s
-15:19    rotor speeds Ω / Ω_max                                 0..1
-19:22    goal position − position                               ENU, m
-22:25    sin ζ_goal − sin ζ  (goal attitude: level, yaw 0)      –
-25:28    cos ζ_goal − cos ζ                                     –
-28:31    goal velocity − velocity                               body FLU, m/s
-31:34    goal rates − rates  (goal rates: 0)                    FLU, rad/s
-=======  =====================================================  ============
+each is written once. The observation layout (34 values, all tasks; target following
+appends 7) is OBS_LAYOUT (and TARGET_OBS_LAYOUT) below: columns, meaning, frame and unit.
 
 Distances (the d_c of Eq. 18), one row per env: position ‖p − p_g‖, attitude
 ‖sin ζ − sin ζ_g‖ + ‖cos ζ − cos ζ_g‖, velocity ‖v − v_g‖ (world), rates ‖ω − ω_g‖.
@@ -65,6 +50,26 @@ OBS_TARGET_VELOCITY = slice(38, 41)  # target velocity, ENU m/s
 OBS_TARGET_VECTOR_X = 34
 OBS_TARGET_VELOCITY_X = 38
 TARGET_EXTRA_OBS = 7
+# The blocks as data, (columns, what, frame and unit): what an exported policy's
+# contract (policies/export) says a flight controller must feed it.
+OBS_LAYOUT = (
+    (OBS_POS, "position relative to the task origin", "world ENU, m"),
+    (OBS_SIN, "sin(roll, pitch, yaw)", "intrinsic Z-Y-X Euler angles of body FLU in world ENU"),
+    (OBS_COS, "cos(roll, pitch, yaw)", "intrinsic Z-Y-X Euler angles of body FLU in world ENU"),
+    (OBS_BODY_VEL, "linear velocity", "body FLU, m/s"),
+    (OBS_RATES, "body rates", "body FLU, rad/s"),
+    (OBS_ROTORS, "rotor speeds Ω / Ω_max, in motor order", "0..1"),
+    (OBS_GOAL_POS, "goal position − position", "world ENU, m"),
+    (OBS_GOAL_SIN, "sin ζ_goal − sin ζ (goal attitude: level, yaw 0)", "–"),
+    (OBS_GOAL_COS, "cos ζ_goal − cos ζ", "–"),
+    (OBS_GOAL_VEL, "goal velocity − velocity", "body FLU, m/s"),
+    (OBS_GOAL_RATES, "goal rates − rates (goal rates: 0)", "body FLU, rad/s"),
+)
+TARGET_OBS_LAYOUT = (  # target following's extra_obs, after OBS_LAYOUT
+    (OBS_TARGET_VECTOR, "target − position", "world ENU, m"),
+    (slice(OBS_TARGET_DISTANCE, OBS_TARGET_DISTANCE + 1), "‖target − position‖", "m"),
+    (OBS_TARGET_VELOCITY, "target velocity", "world ENU, m/s"),
+)
 
 D_POS, D_ATT, D_VEL, D_RATE = 0, 1, 2, 3
 N_DIST = 4

@@ -1,0 +1,190 @@
+"""The contract of an exported policy: what a flight controller must feed it and how to
+use what it returns, written beside the ONNX file or C header (``NAME.contract.json``).
+
+Every fact is read from the code that defines it (the observation layout of
+``quadsitl.tasks.features``, the airframe, the task options the policy was trained
+with), so the contract cannot drift from the simulator. It answers the convention
+mismatches users report: quaternion order, velocity frames, motor order, the action's
+scale.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+from pathlib import Path
+from typing import Any
+
+from policies.config import TrainConfig
+from quadsitl.frames import __doc__ as FRAMES_DOC
+from quadsitl.physics import get_airframe
+from quadsitl.physics import layout as L
+from quadsitl.tasks import TASKS, TaskOptions
+from quadsitl.tasks import features as F
+from quadsitl.tasks.spec import TaskSpec
+
+FORMAT = "quadsitl-policy-contract-1"
+ONNX_INPUT, ONNX_OUTPUT = "obs", "action"  # tensor names of the ONNX graph
+C_FORWARD = "void policy_forward(const float *obs, float *action)"
+C_ROTOR_SPEEDS = "void policy_rotor_speeds(const float *action, float *rotor_speed)"
+NORM_CLIP = 10.0  # normalised observations are clipped to ±this (networks.RunningNorm)
+
+
+def contract_path(exported: Path) -> Path:
+    """``policy.onnx`` and ``policy.h`` → ``policy.contract.json`` (one contract: both
+    forms of a checkpoint compute the same function)."""
+    return exported.with_name(exported.stem + ".contract.json")
+
+
+def sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def observation_layout(task: TaskSpec) -> tuple[tuple[slice, str, str], ...]:
+    """(columns, meaning, frame and unit) of each block of ``task``'s observation."""
+    if task.extra_obs == 0:
+        return F.OBS_LAYOUT
+    if task.extra_obs == F.TARGET_EXTRA_OBS:
+        return F.OBS_LAYOUT + F.TARGET_OBS_LAYOUT
+    raise ValueError(f"the {task.name} task's extra observations have no documented layout")
+
+
+def layout_text(task_name: str) -> str:
+    """One line: ``[0:3] position ... (world ENU, m); ...`` (for error messages)."""
+    task = TASKS[task_name]
+    blocks = observation_layout(task)
+    return "; ".join(f"[{s.start}:{s.stop}] {meaning} ({unit})" for s, meaning, unit in blocks)
+
+
+def build_contract(config: TrainConfig, checkpoint: Path, act_size: int) -> dict[str, Any]:
+    """The contract of the policy in ``checkpoint`` (trained with ``config``)."""
+    task = TASKS[config.task]
+    options = TaskOptions.from_kwargs(
+        **{k: v for k, v in config.task_options.items() if not k.startswith("init_")}
+    )
+    airframe = get_airframe(options.airframe)  # type: ignore[arg-type]
+    hover, top = airframe.hover_rotor_speed, airframe.max_rotor_speed
+    obs_size = F.OBS_SIZE + task.extra_obs
+    return {
+        "format": FORMAT,
+        "task": {
+            "name": task.name,
+            "description": _task_description(task.name),
+            "episode_seconds": task.episode_seconds,
+            "start_position_enu_m": _fixed_or_drawn(task.start),
+            "goal_position_velocity_enu": _fixed_or_drawn(task.goal),
+            "training_start_noise": {
+                k: v for k, v in config.task_options.items() if k.startswith("init_")
+            },
+        },
+        "checkpoint": {
+            "file": checkpoint.name,
+            "sha256": sha256(checkpoint),
+            "algorithm": config.algo,
+            "preset": config.preset,
+            "seed": config.seed,
+            "config": config.to_dict(),
+        },
+        "conventions": _conventions(),
+        "observation": {
+            "size": obs_size,
+            "dtype": "float32",
+            "normalisation": (
+                "inside the exported policy: feed raw observations. "
+                + (
+                    f"(obs − mean) / sqrt(var + 1e-8) with the training's running mean and "
+                    f"variance, clipped to ±{NORM_CLIP:g}"
+                    if config.normalize_obs
+                    else "none (trained on raw observations)"
+                )
+            ),
+            "layout": [
+                {"columns": [s.start, s.stop], "meaning": meaning, "frame_unit": unit}
+                for s, meaning, unit in observation_layout(task)
+            ],
+        },
+        "action": {
+            "size": act_size,
+            "dtype": "float32",
+            "meaning": (
+                "a: the network's mean action, one value per motor in motor order, not "
+                "clipped; the rotor speed command is Eq. 19 below"
+            ),
+            "rotor_speed_command": (
+                "Ω_c[i] = clip(hover_rotor_speed + beta · a[i], 0, max_rotor_speed), rad/s "
+                "(equivalently: clip a to action_bounds first)"
+            ),
+            "hover_rotor_speed_rad_s": hover,
+            "beta_rad_s": options.beta,
+            "max_rotor_speed_rad_s": top,
+            "action_bounds": [-hover / options.beta, (top - hover) / options.beta],
+        },
+        "motors": {
+            "airframe": airframe.name,
+            "order": [
+                {
+                    "motor": i + 1,
+                    "position_body_flu_m": [float(v) for v in position],
+                    "spin_seen_from_above": _spin(sign),
+                    "reaction_torque_sign_z": sign,
+                }
+                for i, (position, sign) in enumerate(
+                    zip(airframe.rotor_positions(), airframe.rotor_yaw_sign, strict=True)
+                )
+            ],
+            "thrust_coeff_n_per_rad_s_sq": airframe.thrust_coeff,
+            "motor_time_constant_s": 1.0 / airframe.motor_rate,
+            "mass_kg": airframe.mass,
+        },
+        "control": {
+            "rate_hz": 1.0 / options.control_period,
+            "period_s": options.control_period,
+            "physics_dt_s": options.physics_dt,
+            "hold": "each command is held for one control period",
+        },
+        "forms": {
+            "onnx": {
+                "input": ONNX_INPUT,
+                "output": ONNX_OUTPUT,
+                "shapes": [["batch", obs_size], ["batch", act_size]],
+            },
+            "c": {
+                "forward": C_FORWARD,
+                "rotor_speeds": C_ROTOR_SPEEDS + " (Eq. 19, clipped)",
+                "needs": "a C99 compiler and libm's tanhf",
+            },
+        },
+    }
+
+
+def _conventions() -> dict[str, str]:
+    """The frame conventions, quoted from the simulator's one statement of them."""
+    assert FRAMES_DOC is not None
+    bullets = FRAMES_DOC.split("Conventions used everywhere in quadsitl:")[1]
+    bullets = bullets.split("Every function accepts")[0]
+    quaternion, frames, euler = (
+        " ".join(item.split()) for item in bullets.split("* ")[1:4]
+    )  # as stated in quadsitl/frames.py
+    frames = frames.split("; convert only at the wire")[0] + "."
+    columns = {L.I_QW: "w", L.I_QX: "x", L.I_QY: "y", L.I_QZ: "z"}
+    return {
+        "quaternion": quaternion,
+        "quaternion_order_in_state": "(" + ", ".join(columns[k] for k in sorted(columns)) + ")",
+        "frames": frames,
+        "euler_angles": euler,
+        "observation_attitude": "no quaternion: the sines and cosines of the Euler angles",
+    }
+
+
+def _spin(reaction_sign: float) -> str:
+    # A rotor spinning counter-clockwise seen from above (+z) pushes the body to −z.
+    return "counter-clockwise" if reaction_sign < 0 else "clockwise"
+
+
+def _fixed_or_drawn(value: Any) -> Any:
+    return list(value) if isinstance(value, tuple) else "drawn each episode (docs/tasks.md)"
+
+
+def _task_description(name: str) -> str:
+    doc = importlib.import_module(f"quadsitl.tasks.{name}").__doc__ or ""
+    return " ".join(doc.split("\n\n")[0].split())

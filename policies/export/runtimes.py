@@ -1,0 +1,215 @@
+"""Exported policies run back in quadsitl: an ONNX file through onnxruntime, a C header
+compiled with the system's C compiler into a small shared library (ctypes). Both are
+:class:`policies.networks.DeterministicPolicy`, so ``quadsitl eval`` and ``quadsitl sim
+--autopilot`` fly them exactly as they fly a checkpoint.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from policies import checkpoint
+from policies.config import STARTS, TrainConfig
+from policies.export.contract import FORMAT, contract_path, layout_text
+from policies.export.to_c import parse_weights, render
+from policies.export.to_onnx import METADATA_KEY
+from policies.networks import DeterministicPolicy
+from quadsitl.physics import layout as L
+from quadsitl.tasks import TASKS
+from quadsitl.tasks import features as F
+
+# The shared library's entry points around the header's policy_forward.
+C_DRIVER = """#include "policy.h"
+int quadsitl_obs_size(void) { return POLICY_OBS_SIZE; }
+int quadsitl_act_size(void) { return POLICY_ACT_SIZE; }
+void quadsitl_forward(const float *obs, float *action) { policy_forward(obs, action); }
+void quadsitl_rotor_speeds(const float *action, float *w) { policy_rotor_speeds(action, w); }
+void quadsitl_forward_batch(const float *obs, float *action, long n)
+{
+    long k;
+    for (k = 0; k < n; ++k) policy_forward(obs + k * POLICY_OBS_SIZE, action + k * POLICY_ACT_SIZE);
+}
+"""
+C_FLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-pedantic", "-Werror", "-shared", "-fPIC")
+FLOATS = ctypes.POINTER(ctypes.c_float)
+
+
+class OnnxPolicy:
+    """An ONNX policy (input ``[batch or 1, obs_size]`` float32, first output the
+    actions) run by onnxruntime on the CPU, one thread."""
+
+    def __init__(self, path: Path) -> None:
+        try:
+            import onnxruntime
+        except ImportError:
+            raise ValueError(
+                "running an ONNX policy needs onnxruntime: pip install 'quadsitl[export]'"
+            ) from None
+        options = onnxruntime.SessionOptions()
+        options.intra_op_num_threads = options.inter_op_num_threads = 1
+        options.log_severity_level = 3  # errors only
+        try:
+            self.session = onnxruntime.InferenceSession(
+                str(path), options, providers=["CPUExecutionProvider"]
+            )
+        except Exception as error:  # onnxruntime raises its own kinds for a bad file
+            first = str(error).strip().splitlines()[0] if str(error).strip() else ""
+            raise ValueError(f"{path} is not an ONNX model onnxruntime can run ({first})") from None
+        inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
+        shape = inputs[0].shape
+        if len(inputs) != 1 or len(shape) != 2 or not isinstance(shape[1], int):
+            raise ValueError(
+                f"{path} must take one input of shape [batch, observations], not "
+                f"{[(i.name, i.shape) for i in inputs]}"
+            )
+        out_shape = outputs[0].shape
+        self.input, self.output = inputs[0].name, outputs[0].name
+        self.obs_size = shape[1]
+        self.act_size = out_shape[-1] if out_shape and isinstance(out_shape[-1], int) else 0
+        self.one_at_a_time = shape[0] == 1  # a graph exported for a batch of one
+        self.metadata = self.session.get_modelmeta().custom_metadata_map
+
+    def mean_action(self, obs: np.ndarray) -> np.ndarray:
+        obs = np.ascontiguousarray(obs, dtype=np.float32)
+        if self.one_at_a_time and obs.shape[0] != 1:
+            return np.concatenate([self.mean_action(row[None]) for row in obs])
+        return np.asarray(self.session.run([self.output], {self.input: obs})[0], np.float32)
+
+
+class CPolicy:
+    """A C header of ``quadsitl export --format c``, compiled into a shared library.
+
+    A header is code, and compiling and loading it runs it: only the code ``quadsitl
+    export`` writes is accepted (the header must be exactly what its own numbers and
+    its contract render to), so a file from elsewhere can hold weights, never code."""
+
+    def __init__(self, header: Path, contract: dict[str, Any] | None = None) -> None:
+        text = header.read_text(errors="replace")
+        if contract is None:
+            contract = json.loads(contract_path(header).read_text())
+        if not _as_exported(text, contract):
+            raise ValueError(
+                f"{header} is not a header as quadsitl export writes it (refused: it would be "
+                "compiled and run)"
+            )
+        compiler = shutil.which(os.environ.get("CC", "cc"))
+        if compiler is None:
+            raise ValueError("running a C policy needs a C compiler (cc, or $CC)")
+        with tempfile.TemporaryDirectory(prefix="quadsitl-c-policy-") as folder:
+            build = Path(folder)
+            shutil.copyfile(header, build / "policy.h")
+            (build / "driver.c").write_text(C_DRIVER)
+            library = build / "libpolicy.so"
+            command = [compiler, *C_FLAGS, "-o", str(library), str(build / "driver.c"), "-lm"]
+            result = subprocess.run(command, capture_output=True, text=True, check=False)
+            if result.returncode != 0:
+                errors = [line for line in result.stderr.splitlines() if "error" in line]
+                first = (errors or result.stderr.strip().splitlines() or ["no message"])[0]
+                raise ValueError(f"{header} does not compile as a policy header: {first}")
+            self.library = ctypes.CDLL(str(library))  # loaded: the file may go
+        self.library.quadsitl_forward.argtypes = [FLOATS, FLOATS]
+        self.library.quadsitl_forward_batch.argtypes = [FLOATS, FLOATS, ctypes.c_long]
+        self.library.quadsitl_rotor_speeds.argtypes = [FLOATS, FLOATS]
+        self.forward = self.library.quadsitl_forward  # one observation: the controller's call
+        self.obs_size = int(self.library.quadsitl_obs_size())
+        self.act_size = int(self.library.quadsitl_act_size())
+
+    def mean_action(self, obs: np.ndarray) -> np.ndarray:
+        obs = np.ascontiguousarray(obs, dtype=np.float32)
+        if obs.ndim != 2 or obs.shape[1] != self.obs_size:
+            raise ValueError(f"expected (N, {self.obs_size}) observations, got {obs.shape}")
+        action = np.empty((obs.shape[0], self.act_size), np.float32)
+        self.library.quadsitl_forward_batch(
+            obs.ctypes.data_as(FLOATS), action.ctypes.data_as(FLOATS), obs.shape[0]
+        )
+        return action
+
+    def rotor_speeds(self, action: np.ndarray) -> np.ndarray:
+        """The header's Eq. 19 of one action (4,), rad/s."""
+        action = np.ascontiguousarray(action, dtype=np.float32)
+        speeds = np.empty(self.act_size, np.float32)
+        self.library.quadsitl_rotor_speeds(
+            action.ctypes.data_as(FLOATS), speeds.ctypes.data_as(FLOATS)
+        )
+        return speeds
+
+
+def _as_exported(text: str, contract: dict[str, Any]) -> bool:
+    """Is ``text`` exactly the header of its own numbers and ``contract``?"""
+    named = re.match(r"/\* (.+?): the quadsitl ", text)
+    try:
+        return named is not None and render(parse_weights(text), contract, named[1]) == text
+    except (KeyError, ValueError, TypeError, IndexError):
+        return False
+
+
+def load_policy(
+    path: str | Path, task: str | None = None
+) -> tuple[DeterministicPolicy, TrainConfig]:
+    """(policy, training config) of a checkpoint (``.pt``), an ONNX file (``.onnx``) or a
+    C header (``.h``). An exported file's config comes from its contract; an ONNX file
+    without one (not written by ``quadsitl export``) is flown on ``task``'s standard
+    starts. Its input size is checked against the task, naming the layout expected."""
+    path = Path(path)
+    if path.suffix not in (".onnx", ".h"):
+        net, config, _ = checkpoint.load(path)
+        return net, config
+    if not path.is_file():
+        raise ValueError(f"no exported policy at {path}")
+    policy: OnnxPolicy | CPolicy
+    if path.suffix == ".onnx":
+        policy = OnnxPolicy(path)
+        contract = _contract_of(path, policy.metadata.get(METADATA_KEY), task)
+    else:
+        beside = contract_path(path)
+        if not beside.is_file():
+            raise ValueError(f"{path} needs its contract {beside} (written by quadsitl export)")
+        contract = _contract_of(path, beside.read_text(), task)
+        policy = CPolicy(path, contract)
+    config = (
+        TrainConfig.from_dict(contract["checkpoint"]["config"])
+        if contract
+        else TrainConfig(task=str(task), task_options=dict(STARTS[str(task)]))
+    )
+    if config.task not in TASKS:
+        raise ValueError(f"{path} flies {config.task!r}, not a quadsitl task")
+    expected = F.OBS_SIZE + TASKS[config.task].extra_obs
+    if policy.obs_size != expected:
+        raise ValueError(
+            f"{path} takes {policy.obs_size} observations; the {config.task} task gives "
+            f"{expected}: {layout_text(config.task)}"
+        )
+    if policy.act_size != L.N_ROTORS:
+        raise ValueError(f"{path} gives {policy.act_size} actions; the vehicle takes {L.N_ROTORS}")
+    return policy, config
+
+
+def _contract_of(path: Path, text: str | None, task: str | None) -> dict[str, Any]:
+    """The parsed contract, or {} for a foreign ONNX file flown on ``task``."""
+    if text is None:
+        if task is None:
+            raise ValueError(
+                f"{path} carries no quadsitl contract (it was not written by quadsitl "
+                "export): name the task it flies (quadsitl eval --task)"
+            )
+        if task not in TASKS:
+            raise ValueError(f"unknown task {task!r}; an exported policy flies {sorted(TASKS)}")
+        return {}
+    try:
+        contract = json.loads(text)
+        valid = contract["format"] == FORMAT and isinstance(contract["checkpoint"]["config"], dict)
+    except (ValueError, KeyError, TypeError):
+        valid = False
+    if not valid:
+        raise ValueError(f"{path}: its contract is not a {FORMAT} contract")
+    return dict(contract)

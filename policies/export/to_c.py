@@ -1,0 +1,205 @@
+"""A checkpoint's deterministic policy as one dependency-free C99 header.
+
+The header holds the weights as ``static const`` arrays and two functions:
+``policy_forward(obs, action)``, the network's mean action of a raw observation (the
+training's observation normalisation included), and ``policy_rotor_speeds(action,
+rotor_speed)``, the paper's Eq. 19 with its clip. No allocation; libm's ``tanhf`` only.
+The normalisation is computed in double, as the network computes it, so that the C
+output matches PyTorch's to float32 rounding.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Any
+
+import numpy as np
+import torch
+
+from policies.export.contract import C_FORWARD, C_ROTOR_SPEEDS, NORM_CLIP
+from policies.networks import ActorCritic
+
+PER_LINE = 6  # numbers per line of an array initialiser
+ARRAY = re.compile(r"static const (float|double) (\w+)\[[^\]]*\] = \{([^}]*)\};")
+
+
+def c_header(net: ActorCritic, contract: dict[str, Any], name: str) -> str:
+    """The header's text; ``name`` (the file's name) makes its include guard."""
+    return render(weights_of(net), contract, name)
+
+
+def weights_of(net: ActorCritic) -> dict[str, np.ndarray]:
+    """The header's arrays, by name (flat, row-major); the normalisation's if it has one."""
+    hidden, head = _layers(net)
+    arrays = {
+        "policy_w1": _floats(hidden.weight),
+        "policy_b1": _floats(hidden.bias),
+        "policy_w2": _floats(head.weight),
+        "policy_b2": _floats(head.bias),
+    }
+    if net.norm.enabled:
+        arrays["policy_obs_mean"] = net.norm.mean.numpy()
+        arrays["policy_obs_std"] = np.sqrt(net.norm.var.numpy() + 1e-8)  # as RunningNorm divides
+    return arrays
+
+
+def parse_weights(text: str) -> dict[str, np.ndarray]:
+    """The arrays of a header's text (what :func:`weights_of` gave :func:`render`)."""
+    arrays = {}
+    for kind, name, body in ARRAY.findall(text):
+        numbers = [float(item.strip().rstrip("f")) for item in body.split(",")]
+        arrays[name] = np.array(numbers, np.float32 if kind == "float" else np.float64)
+    return arrays
+
+
+def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -> str:
+    """The header of these arrays (sizes read from them) and this contract."""
+    w1, b1, w2, b2 = (arrays[k] for k in ("policy_w1", "policy_b1", "policy_w2", "policy_b2"))
+    hidden_size, act_size = b1.size, b2.size
+    obs_size = w1.size // max(hidden_size, 1)
+    normalised = "policy_obs_mean" in arrays
+    action = contract["action"]
+    guard = "QUADSITL_" + re.sub(r"\W", "_", name, flags=re.ASCII).upper() + "_INCLUDED"
+    checkpoint = contract["checkpoint"]
+    task, algo, preset, seed = (
+        _comment(v)
+        for v in (
+            contract["task"]["name"],
+            checkpoint["algorithm"],
+            checkpoint["preset"],
+            checkpoint["seed"],
+        )
+    )
+    lines = [
+        f"/* {_comment(name)}: the quadsitl {task} policy ({algo}, {preset} preset, seed {seed}), "
+        "written by quadsitl export.",
+        f" * Checkpoint {_comment(checkpoint['file'])}, sha256 {_comment(checkpoint['sha256'])}.",
+        f" * Contract (observation layout, frames, units, motor order): "
+        f"{_comment(name.rsplit('.', 1)[0])}.contract.json",
+        " *",
+        " *   float obs[POLICY_OBS_SIZE];      raw observation (normalised inside)",
+        " *   float action[POLICY_ACT_SIZE];",
+        " *   policy_forward(obs, action);     the mean action a, one per motor, not clipped",
+        " *   policy_rotor_speeds(action, w);  Eq. 19: w = clip(hover + beta a, 0, max), rad/s",
+        " *",
+        " * C99; no allocation; needs only libm's tanhf. Everything is static: include the",
+        " * header in one translation unit. */",
+        f"#ifndef {guard}",
+        f"#define {guard}",
+        "",
+        "#include <math.h>",
+        "",
+        f"#define POLICY_OBS_SIZE {obs_size}",
+        f"#define POLICY_ACT_SIZE {act_size}",
+        f"#define POLICY_HIDDEN {hidden_size}",
+        f"#define POLICY_CONTROL_RATE_HZ {_float(contract['control']['rate_hz'])}",
+        f"#define POLICY_HOVER_ROTOR_SPEED {_float(action['hover_rotor_speed_rad_s'])} /* rad/s */",
+        f"#define POLICY_BETA {_float(action['beta_rad_s'])} /* rad/s */",
+        f"#define POLICY_MAX_ROTOR_SPEED {_float(action['max_rotor_speed_rad_s'])} /* rad/s */",
+        "",
+    ]
+    if normalised:
+        mean, std = arrays["policy_obs_mean"], arrays["policy_obs_std"]
+        lines += [
+            "/* Observation normalisation of training: (obs - mean) / std, clipped. */",
+            _array("static const double policy_obs_mean[POLICY_OBS_SIZE]", mean, _double),
+            _array("static const double policy_obs_std[POLICY_OBS_SIZE]", std, _double),
+        ]
+    lines += [
+        _array("static const float policy_w1[POLICY_HIDDEN * POLICY_OBS_SIZE]", w1, _float),
+        _array("static const float policy_b1[POLICY_HIDDEN]", b1, _float),
+        _array("static const float policy_w2[POLICY_ACT_SIZE * POLICY_HIDDEN]", w2, _float),
+        _array("static const float policy_b2[POLICY_ACT_SIZE]", b2, _float),
+        "",
+        f"static inline {C_FORWARD}",
+        "{",
+        "    float z[POLICY_OBS_SIZE];",
+        "    float h[POLICY_HIDDEN];",
+        "    int i, j;",
+        "    for (i = 0; i < POLICY_OBS_SIZE; ++i) {",
+    ]
+    if normalised:
+        lines += [
+            "        double v = ((double)obs[i] - policy_obs_mean[i]) / policy_obs_std[i];",
+            f"        if (v > {NORM_CLIP:.1f}) v = {NORM_CLIP:.1f};",
+            f"        if (v < -{NORM_CLIP:.1f}) v = -{NORM_CLIP:.1f};",
+            "        z[i] = (float)v;",
+        ]
+    else:
+        lines.append("        z[i] = obs[i];")
+    lines += [
+        "    }",
+        "    for (j = 0; j < POLICY_HIDDEN; ++j) {",
+        "        float s = policy_b1[j];",
+        "        const float *w = policy_w1 + j * POLICY_OBS_SIZE;",
+        "        for (i = 0; i < POLICY_OBS_SIZE; ++i) s += w[i] * z[i];",
+        "        h[j] = tanhf(s);",
+        "    }",
+        "    for (i = 0; i < POLICY_ACT_SIZE; ++i) {",
+        "        float s = policy_b2[i];",
+        "        const float *w = policy_w2 + i * POLICY_HIDDEN;",
+        "        for (j = 0; j < POLICY_HIDDEN; ++j) s += w[j] * h[j];",
+        "        action[i] = s;",
+        "    }",
+        "}",
+        "",
+        f"static inline {C_ROTOR_SPEEDS}",
+        "{",
+        "    int i;",
+        "    for (i = 0; i < POLICY_ACT_SIZE; ++i) {",
+        "        float w = POLICY_HOVER_ROTOR_SPEED + POLICY_BETA * action[i];",
+        "        rotor_speed[i] = w < 0.0f ? 0.0f",
+        "                       : w > POLICY_MAX_ROTOR_SPEED ? POLICY_MAX_ROTOR_SPEED : w;",
+        "    }",
+        "}",
+        "",
+        f"#endif /* {guard} */",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _layers(net: ActorCritic) -> tuple[torch.nn.Linear, torch.nn.Linear]:
+    """(hidden layer, mean head), after checking the network is the one this writes:
+    one tanh hidden layer, then a linear mean."""
+    body = list(net.actor_body)
+    if not (
+        len(body) == 2
+        and isinstance(body[0], torch.nn.Linear)
+        and isinstance(body[1], torch.nn.Tanh)
+        and isinstance(net.policy_head.mean, torch.nn.Linear)
+    ):
+        raise ValueError("the C export writes one tanh hidden layer; this network is another")
+    return body[0], net.policy_head.mean
+
+
+def _comment(value: object) -> str:
+    """``value`` as text that cannot end a C comment (a header's comment is written from
+    the contract, and a header is compiled: nothing in it may become code)."""
+    text = str(value)
+    if "*/" in text or "??" in text or not text.isprintable():
+        raise ValueError(f"{text!r} cannot be written into a C comment")
+    return text
+
+
+def _floats(tensor: torch.Tensor) -> np.ndarray:
+    return tensor.detach().to(torch.float32).numpy().ravel()
+
+
+def _float(value: float) -> str:
+    """A float32 literal that reads back to the same float32."""
+    text = f"{float(np.float32(value)):.9g}"
+    return text + ("f" if any(c in text for c in ".e") else ".0f")
+
+
+def _double(value: float) -> str:
+    text = f"{float(value):.17g}"
+    return text if any(c in text for c in ".e") else text + ".0"
+
+
+def _array(declaration: str, values: np.ndarray, literal: Any) -> str:
+    assert all(math.isfinite(v) for v in values.tolist())  # checkpoint.load checked
+    items = [literal(v) for v in values.tolist()]
+    rows = [", ".join(items[k : k + PER_LINE]) for k in range(0, len(items), PER_LINE)]
+    return declaration + " = {\n    " + ",\n    ".join(rows) + "\n};"
