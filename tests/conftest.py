@@ -23,6 +23,13 @@ if "QUADSITL_STATE_DIR" not in os.environ:
     _STATE = tempfile.TemporaryDirectory(prefix="quadsitl-test-state-")  # removed at exit
     os.environ["QUADSITL_STATE_DIR"] = _STATE.name
 
+# Tests interrupt the processes they start (Ctrl-C must save and exit cleanly). A suite
+# started in the background by a non-interactive shell (`make test &`, nohup) inherits an
+# ignored SIGINT, and so would every process it starts: those would never see the
+# interrupt. Python's own handler here is reset to the default in each child at exec.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
 # In-process against through the wire: float32 on the wire, carried through episodes;
 # rewards weigh distance changes by up to 100.
 OBS_TOLERANCE = 1e-4
