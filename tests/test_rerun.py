@@ -563,3 +563,30 @@ def test_quadsitl_replay_command(flight_log, tmp_path):
     assert result.returncode == 0, result.stderr
     assert f"open it with: rerun {out}" in result.stdout
     assert rows_per_entity(out)["/plots/altitude/altitude"] > 100
+
+
+def test_sim_view_logs_one_message_a_pass_in_the_time_a_step_leaves(tmp_path):
+    """A snapshot of the vehicle logged at once made the next physics steps late: the
+    view logs one message per pass of the loop, only in a pass with time to spare before
+    the next step, unless half the time to the next snapshot has gone (faster than real
+    time no pass has that much)."""
+    from quadsitl.mavlink.runner import SimConfig, Simulator
+    from quadsitl.viz import sim_view
+
+    sim = Simulator(SimConfig(gcs_url="udpin:127.0.0.1:0", api_url=None, log_dir=None))
+    view = sim_view.SimView({1: sim.vehicle}, save=str(tmp_path / "sim.rrd"))
+    try:
+        now = 1000.0
+        view.tick(now, spare=0.0)  # a snapshot is taken; no time to log any of it
+        taken = len(view.pending)
+        assert taken >= 6
+        view.tick(now + 0.001, spare=sim_view.MESSAGE_TIME / 2)
+        assert len(view.pending) == taken
+        for logged in range(1, 3):  # time to spare: one message a pass
+            view.tick(now + 0.001 * (1 + logged), spare=sim_view.MESSAGE_TIME)
+            assert len(view.pending) == taken - logged
+        view.tick(now + 0.6 * view.period, spare=0.0)  # the next snapshot draws near
+        assert len(view.pending) == taken - 3
+    finally:
+        view.close()
+        sim.close()

@@ -124,7 +124,9 @@ def _compile(vehicles: int, airframe: str) -> None:
 class View(Protocol):
     """Something that shows the flight (e.g. :class:`quadsitl.viz.sim_view.SimView`)."""
 
-    def tick(self, wall_now: float) -> None: ...
+    def tick(self, wall_now: float, spare: float = math.inf) -> None:
+        """``spare``: wall s until the next physics step is due (work that would take
+        longer makes it late)."""
 
     def event(self, text: str) -> None: ...
 
@@ -281,13 +283,14 @@ class Simulator:
                     self._govern(now, lockstep=True)
                     self.server.tick(now)
                     last_tick = now
-                    self._housekeeping(now)
+                    self._housekeeping(now, math.inf)
             else:
                 steps = self._real_time_steps(start, steps, wall_per_step)
                 self._govern(now)
                 self.server.tick(now)
-                self._housekeeping(now)
-                wait = start + (steps + 1) * wall_per_step - time.monotonic()
+                next_step = start + (steps + 1) * wall_per_step
+                self._housekeeping(now, next_step - time.monotonic())
+                wait = next_step - time.monotonic()
             sockets = self._sockets()
             asleep = time.monotonic()
             readable, _, _ = select.select(list(sockets), [], [], max(0.0, wait))
@@ -310,12 +313,13 @@ class Simulator:
             severity = Severity.WARNING if governor.level else Severity.NOTICE
             self.server.statustext(severity, text)
 
-    def _housekeeping(self, now: float) -> None:
-        """The log and the view (with the telemetry: not on every poll in lockstep)."""
+    def _housekeeping(self, now: float, spare: float) -> None:
+        """The log and the view (with the telemetry: not on every poll in lockstep);
+        ``spare``: wall s until the next physics step is due."""
         if self.tlog is not None:
             self._flush_log(self.tlog)
         if self.view is not None:
-            self.view.tick(now)
+            self.view.tick(now, spare)
 
     def _sockets(self) -> dict[Any, Link]:
         """Every socket to wait on, and its link (cached unless a TCP link has peers

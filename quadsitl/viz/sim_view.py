@@ -10,12 +10,16 @@ camera follows it. A fleet (``sim --vehicles N``): each vehicle under its system
 above it. The vehicles are logged in turn, one per tick (a tick then costs what one
 vehicle's does, never a burst for the whole fleet), at most FLEET_SNAPSHOTS ticks a
 second: 30 Hz each for 2 vehicles, 15 Hz each for 4, less for more (recording more
-stole the real-time loop's time on a 2-core machine).
+stole the real-time loop's time on a 2-core machine). A vehicle's messages are logged
+one per pass of the simulator's loop, in the time a physics step leaves.
 """
 
 from __future__ import annotations
 
+import math
+import time
 from collections.abc import Callable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -27,6 +31,7 @@ from quadsitl.viz.scene import LIVE_PANELS, blueprint, framing, open_recording
 
 RATE = 30.0  # Hz of wall time, per vehicle
 FLEET_SNAPSHOTS = 60.0  # Hz of wall time: vehicles logged a second, the fleet together
+MESSAGE_TIME = 0.5e-3  # wall s a message's logging may take (a few rr.log calls)
 FRAMED_HEIGHT = 5.0  # m above the start grid that the fleet's camera frames
 BUILDERS = (
     T.build_attitude,
@@ -86,20 +91,34 @@ class SimView:
         self.turn = 0
         self.next_due = 0.0
         self.next_heartbeat = [0.0] * len(self.turns)  # wall s, per vehicle
+        self.pending: list[tuple[LiveLogger, Any, float]] = []  # (logger, message, stamp)
 
-    def tick(self, wall_now: float) -> None:
-        """Log the next vehicle in turn, when a tick is due."""
-        if wall_now < self.next_due:
-            return
-        self.next_due = wall_now + self.period
+    def tick(self, wall_now: float, spare: float = math.inf) -> None:
+        """Called on every pass of the simulator's loop, ``spare`` wall s before its next
+        physics step: when a snapshot is due, take the next vehicle's messages; log one
+        message a pass, when the pass has MESSAGE_TIME to spare or, where passes never
+        have (faster than real time), once half the time to the next snapshot has gone.
+        A snapshot logged at once (a dozen series) made the next physics steps late."""
+        if wall_now >= self.next_due:
+            self.next_due = wall_now + self.period
+            self.pending = self._snapshot(wall_now)
+        urgent = wall_now >= self.next_due - self.period / 2
+        if self.pending and (spare >= MESSAGE_TIME or urgent):
+            logger, message, stamp = self.pending.pop()
+            logger.message(message, own=True, now=stamp)
+
+    def _snapshot(self, wall_now: float) -> list[tuple[LiveLogger, Any, float]]:
+        """The next vehicle's messages (its heartbeat once a second), to be logged in
+        order (popped from the end), stamped with the time they were taken."""
         index, self.turn = self.turn, (self.turn + 1) % len(self.turns)
         vehicle, logger = self.turns[index]
+        stamp = time.time()
+        snapshot = T.Snapshot(vehicle)
+        messages = [build(snapshot) for build in BUILDERS]
         if wall_now >= self.next_heartbeat[index]:
             self.next_heartbeat[index] = wall_now + 1.0
-            logger.message(T.build_heartbeat(vehicle), own=True)
-        snapshot = T.Snapshot(vehicle)
-        for build in BUILDERS:
-            logger.message(build(snapshot), own=True)
+            messages.insert(0, T.build_heartbeat(vehicle))
+        return [(logger, message, stamp) for message in reversed(messages)]
 
     def event(self, text: str) -> None:
         self.loggers[0].text(text)
