@@ -9,7 +9,7 @@ simulator processes of the MAVLink backend) is a VehicleStates with its own ``st
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 import numpy as np
@@ -266,13 +266,17 @@ class Fleet(VehicleStates):
         self._choose_step()
 
     def _choose_step(self) -> None:
-        """The still-air kernel, or the one with weather once any vehicle has some."""
-        if self.backend == "reference":
-            self._step_arrays = _reference_step
-        elif self.windy:
-            self._step_arrays = kernel.single_step_wind if self.n == 1 else kernel.batch_step_wind
-        else:
-            self._step_arrays = kernel.single_step if self.n == 1 else kernel.batch_step
+        """The still-air kernel, or the one with weather once any vehicle has some (given
+        the weather's arrays here, so that a still-air step costs what it always did)."""
+        if not self.windy:
+            still = kernel.single_step if self.n == 1 else kernel.batch_step
+            self._step_arrays = _reference_step if self.backend == "reference" else still
+            return
+        step: Callable[..., int] = _reference_step
+        if self.backend != "reference":
+            step = kernel.single_step_wind if self.n == 1 else kernel.batch_step_wind
+        weather = (self.wind_params, self.wind_state, self.wind_streams)
+        self._step_arrays = lambda *arrays: step(*arrays, *weather)
 
     def set_wind(
         self,
@@ -299,16 +303,7 @@ class Fleet(VehicleStates):
             )
         dt = self.dt
         bad = self._step_arrays(
-            self.state,
-            self.params,
-            cmd,
-            self.contact,
-            self.touchdown_speed,
-            dt,
-            n_substeps,
-            self.wind_params,
-            self.wind_state,
-            self.wind_streams,
+            self.state, self.params, cmd, self.contact, self.touchdown_speed, dt, n_substeps
         )
         if bad >= 0:
             rows = cmd.reshape(self._cmd_shape)
@@ -329,9 +324,9 @@ def _reference_step(
     touchdown_speed,
     dt,
     n_substeps,
-    wind_params,
-    wind_state,
-    streams,
+    wind_params=None,
+    wind_state=None,
+    streams=None,
 ) -> int:
     """The kernel's ``step`` contract in numpy: steps in place; returns -1, or the first
     vehicle with a non-finite command (and then changes nothing). The weather steps
@@ -340,12 +335,9 @@ def _reference_step(
     bad_rows = ~np.isfinite(cmd).all(axis=1)
     if bad_rows.any():
         return int(np.argmax(bad_rows))
-    calm = not np.any(wind_params[:, [L.W_MEAN_E, L.W_MEAN_N, L.W_SIGMA_W]]) and not np.any(
-        np.isfinite(wind_params[:, L.W_GUST_LENGTH])
-    )
     for _ in range(n_substeps):
         air = None
-        if not calm:
+        if wind_params is not None:
             wind.advance(wind_state, wind_params, state, params, streams, dt)
             rotation = quat_to_matrix(state[:, L.QUAT])  # (N, 3, 3) body -> world
             rates_body = np.einsum("nji,nj->ni", rotation, wind_state[:, L.WS_AIR_RATES])

@@ -174,14 +174,11 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
     """
     jit = numba.njit(nogil=release_gil, **_OPTIONS)
     WIND = wind
-    # Block scratch: state, previous state, RK4 temp, k1..k4, parameters, commands, sums,
-    # then the wind's parameters, state, scratch and the air the derivative reads.
-    base_size = (7 * L.STATE_SIZE + L.N_PARAMS + L.N_ROTORS + 4) * B
-    wind_rows = L.N_WIND_PARAMS + L.N_WIND_STATE + wind_kernel.N_SCRATCH + wind_kernel.AIR_ROWS
-    scratch_size = base_size + (wind_rows * B if wind else 0)
+    # Block scratch: state, previous state, RK4 temp, k1..k4, parameters, commands, sums.
+    scratch_size = (7 * L.STATE_SIZE + L.N_PARAMS + L.N_ROTORS + 4) * B
 
-    @jit
-    def step(
+    @_inline
+    def advance(
         state,
         params,
         rotor_cmd,
@@ -193,13 +190,8 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
         wind_state,
         streams,
     ):  # pragma: no cover
-        """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place.
-
-        Returns -1, or the index of the first
-        vehicle with a non-finite command, in which case nothing was changed.
-        ``wind_params`` (n, N_WIND_PARAMS), ``wind_state`` (n, N_WIND_STATE) and the
-        random ``streams`` (n,) uint64 are read only by the wind build.
-        """
+        """The body of ``step``; the still-air build is given stand-ins for the wind's
+        arrays, which it never touches."""
         commands = rotor_cmd.ravel()  # (n, 4), or (4,) for one vehicle: 4 per vehicle
         bad = first_invalid_command(commands)
         if bad >= 0:
@@ -213,14 +205,12 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
         k3, k4 = scratch[5 * z : 6 * z], scratch[6 * z : 7 * z]
         p = scratch[7 * z : 7 * z + L.N_PARAMS * B]
         cmd = scratch[7 * z + L.N_PARAMS * B : 7 * z + (L.N_PARAMS + L.N_ROTORS) * B]
-        sums = scratch[7 * z + (L.N_PARAMS + L.N_ROTORS) * B : base_size]
-        w0 = base_size
-        wp = scratch[w0 : w0 + L.N_WIND_PARAMS * B]
-        w0 += L.N_WIND_PARAMS * B
-        ws = scratch[w0 : w0 + L.N_WIND_STATE * B]
-        w0 += L.N_WIND_STATE * B
-        wscratch = scratch[w0 : w0 + wind_kernel.N_SCRATCH * B]
-        air = scratch[w0 + wind_kernel.N_SCRATCH * B : scratch_size]
+        sums = scratch[7 * z + (L.N_PARAMS + L.N_ROTORS) * B :]
+        # The weather's block arrays (empty in the still-air build).
+        wp = np.empty(L.N_WIND_PARAMS * B if WIND else 0)
+        ws = np.empty(L.N_WIND_STATE * B if WIND else 0)
+        wscratch = np.empty(wind_kernel.N_SCRATCH * B if WIND else 0)
+        air = np.empty(wind_kernel.AIR_ROWS * B if WIND else 0)
         rng = np.empty(B if WIND else 0, np.uint64)
         sixth = dt / 6.0
         for first in range(0, state.shape[0], B):
@@ -276,7 +266,66 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
                     streams[first + j] = rng[j]
         return -1
 
-    return step
+    if wind:
+
+        @jit
+        def step(
+            state,
+            params,
+            rotor_cmd,
+            contact,
+            touchdown_speed,
+            dt,
+            n_substeps,
+            wind_params,
+            wind_state,
+            streams,
+        ):  # pragma: no cover
+            """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place, each
+            after a step of its weather: ``wind_params`` (n, N_WIND_PARAMS), ``wind_state``
+            (n, N_WIND_STATE), random ``streams`` (n,) uint64.
+
+            Returns -1, or the index of the first
+            vehicle with a non-finite command, in which case nothing was changed.
+            """
+            return advance(
+                state,
+                params,
+                rotor_cmd,
+                contact,
+                touchdown_speed,
+                dt,
+                n_substeps,
+                wind_params,
+                wind_state,
+                streams,
+            )
+
+        return step
+
+    @jit
+    def still_step(
+        state, params, rotor_cmd, contact, touchdown_speed, dt, n_substeps
+    ):  # pragma: no cover
+        """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place.
+
+        Returns -1, or the index of the first
+        vehicle with a non-finite command, in which case nothing was changed.
+        """
+        return advance(
+            state,
+            params,
+            rotor_cmd,
+            contact,
+            touchdown_speed,
+            dt,
+            n_substeps,
+            state,
+            state,
+            contact,
+        )
+
+    return still_step
 
 
 batch_step = compile_step(BLOCK, release_gil=True)

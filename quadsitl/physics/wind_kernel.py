@@ -37,32 +37,34 @@ F_LN2, F_SQRT_HALF = _F32(LN2), _F32(SQRT_HALF)
 
 
 @_inline
-def _halve_into(x, e, shift):  # pragma: no cover - compiled
-    """Bring x toward [1/2^shift, 2^shift) by a factor 2^±shift, counting it in e."""
-    scale = 2.0**shift
-    big = x >= scale
-    x = x / scale if big else x
-    e = e + shift if big else e
-    small = x * scale < 1.0
-    x = x * scale if small else x
-    e = e - shift if small else e
-    return x, e
-
-
-@_inline
 def ln(x):  # pragma: no cover - compiled
-    """Natural log of 2⁻³² ≤ x ≤ 2³² (float64, error ~2 ulp), vectorisable."""
-    x, e = _halve_into(x, 0.0, 16.0)
-    x, e = _halve_into(x, e, 8.0)
-    x, e = _halve_into(x, e, 4.0)
-    x, e = _halve_into(x, e, 2.0)
-    x, e = _halve_into(x, e, 1.0)
-    small = x < SQRT_HALF  # now x in [1/√2, √2): ln x = 2 atanh((x − 1)/(x + 1))
-    x = x * 2.0 if small else x
-    e = e - 1.0 if small else e
+    """Natural log of 2⁻³² ≤ x ≤ 2³² (float64, error ~2 ulp), vectorisable: x is brought
+    into [1/√2, √2) by selects, then ln x = 2 atanh((x − 1)/(x + 1)) by its series."""
+    e = 0.0
+    big = x >= 65536.0
+    x, e = (x * 2.0**-16, e + 16.0) if big else (x, e)
+    small = x * 65536.0 < 1.0
+    x, e = (x * 65536.0, e - 16.0) if small else (x, e)
+    big = x >= 256.0
+    x, e = (x * 2.0**-8, e + 8.0) if big else (x, e)
+    small = x * 256.0 < 1.0
+    x, e = (x * 256.0, e - 8.0) if small else (x, e)
+    big = x >= 16.0
+    x, e = (x * 0.0625, e + 4.0) if big else (x, e)
+    small = x * 16.0 < 1.0
+    x, e = (x * 16.0, e - 4.0) if small else (x, e)
+    big = x >= 4.0
+    x, e = (x * 0.25, e + 2.0) if big else (x, e)
+    small = x * 4.0 < 1.0
+    x, e = (x * 4.0, e - 2.0) if small else (x, e)
+    big = x >= 2.0
+    x, e = (x * 0.5, e + 1.0) if big else (x, e)
+    small = x * 2.0 < 1.0
+    x, e = (x * 2.0, e - 1.0) if small else (x, e)
+    small = x < SQRT_HALF
+    x, e = (x * 2.0, e - 1.0) if small else (x, e)
     big = x > 1.0 / SQRT_HALF
-    x = x * 0.5 if big else x
-    e = e + 1.0 if big else e
+    x, e = (x * 0.5, e + 1.0) if big else (x, e)
     t = (x - 1.0) / (x + 1.0)
     u = t * t
     p = 1 / 13 + u * (1 / 15 + u * (1 / 17 + u * (1 / 19 + u * (1 / 21))))
@@ -71,17 +73,12 @@ def ln(x):  # pragma: no cover - compiled
 
 
 @_inline
-def _scale_bit(scale, k, bit):  # pragma: no cover - compiled
-    has = k >= bit
-    return (scale * 2.0**-bit if has else scale), (k - bit if has else k)
-
-
-@_inline
 def exp_neg(x):  # pragma: no cover - compiled
-    """exp(−x) for x ≥ 0 (float64, error ~2 ulp; 0 beyond x = 700), vectorisable."""
+    """exp(−x) for x ≥ 0 (float64, error ~2 ulp; 0 beyond x = 700), vectorisable:
+    exp(−x) = 2^−k · exp(r), |r| ≤ ln2/2 by its Taylor series, 2^−k from the bits of k."""
     x = min(x, 700.0)
     k = math.floor(x / LN2 + 0.5)
-    r = k * LN2 - x  # exp(−x) = 2^−k · exp(r), |r| ≤ ln2 / 2: Taylor to r¹³
+    r = k * LN2 - x
     p = 1 / 40320 + r * (1 / 362880 + r * (1 / 3628800 + r * (1 / 39916800)))
     p = p + r**4 * (1 / 479001600 + r * (1 / 6227020800))
     p = 1.0 + r * (
@@ -92,25 +89,28 @@ def exp_neg(x):  # pragma: no cover - compiled
             + r * (1 / 6 + r * (1 / 24 + r * (1 / 120 + r * (1 / 720 + r * (1 / 5040 + r * p)))))
         )
     )
-    scale = 1.0  # 2^−k from the bits of k (k ≤ 1010)
-    scale, k = _scale_bit(scale, k, 512.0)
-    scale, k = _scale_bit(scale, k, 256.0)
-    scale, k = _scale_bit(scale, k, 128.0)
-    scale, k = _scale_bit(scale, k, 64.0)
-    scale, k = _scale_bit(scale, k, 32.0)
-    scale, k = _scale_bit(scale, k, 16.0)
-    scale, k = _scale_bit(scale, k, 8.0)
-    scale, k = _scale_bit(scale, k, 4.0)
-    scale, k = _scale_bit(scale, k, 2.0)
-    scale, k = _scale_bit(scale, k, 1.0)
+    scale = 1.0
+    has = k >= 512.0
+    scale, k = (scale * 2.0**-512, k - 512.0) if has else (scale, k)
+    has = k >= 256.0
+    scale, k = (scale * 2.0**-256, k - 256.0) if has else (scale, k)
+    has = k >= 128.0
+    scale, k = (scale * 2.0**-128, k - 128.0) if has else (scale, k)
+    has = k >= 64.0
+    scale, k = (scale * 2.0**-64, k - 64.0) if has else (scale, k)
+    has = k >= 32.0
+    scale, k = (scale * 2.0**-32, k - 32.0) if has else (scale, k)
+    has = k >= 16.0
+    scale, k = (scale * 2.0**-16, k - 16.0) if has else (scale, k)
+    has = k >= 8.0
+    scale, k = (scale * 2.0**-8, k - 8.0) if has else (scale, k)
+    has = k >= 4.0
+    scale, k = (scale * 0.0625, k - 4.0) if has else (scale, k)
+    has = k >= 2.0
+    scale, k = (scale * 0.25, k - 2.0) if has else (scale, k)
+    has = k >= 1.0
+    scale = scale * 0.5 if has else scale
     return p * scale
-
-
-@_inline
-def _grow_f32(x, e, shift):  # pragma: no cover - compiled
-    """x·2^shift if x < 2^−shift (float32), counting it in e."""
-    small = x < _F32(2.0**-shift)
-    return (x * _F32(2.0**shift) if small else x), (e - _F32(shift) if small else e)
 
 
 @_inline
@@ -130,11 +130,17 @@ def fill_normals(rng, out, m, B):  # pragma: no cover - compiled
             out[b + j] = np.float64(_I64(z & _U64(0xFFFFFFFF))) * 2.0**-32  # u2 in [0, 1)
         for j in range(m):  # float32: radius sqrt(−2 ln u1), angle (4 u2 − ½)·π/2
             x = _F32(out[a + j])
-            x, e = _grow_f32(x, F0, 16.0)
-            x, e = _grow_f32(x, e, 8.0)
-            x, e = _grow_f32(x, e, 4.0)
-            x, e = _grow_f32(x, e, 2.0)
-            x, e = _grow_f32(x, e, 1.0)
+            e = F0
+            small = x < _F32(2.0**-16)
+            x, e = (x * _F32(2.0**16), e - _F32(16.0)) if small else (x, e)
+            small = x < _F32(2.0**-8)
+            x, e = (x * _F32(2.0**8), e - _F32(8.0)) if small else (x, e)
+            small = x < _F32(2.0**-4)
+            x, e = (x * _F32(16.0), e - _F32(4.0)) if small else (x, e)
+            small = x < _F32(0.25)
+            x, e = (x * _F32(4.0), e - _F32(2.0)) if small else (x, e)
+            small = x < F_HALF
+            x, e = (x * F2, e - F1) if small else (x, e)
             small = x < F_SQRT_HALF
             x = x * F2 if small else x
             e = e - F1 if small else e
@@ -160,6 +166,7 @@ def fill_normals(rng, out, m, B):  # pragma: no cover - compiled
 
 
 # Rows of the block's wind scratch (each B values): the normals, then intermediate results.
+# Rows that go through ln, then exp(−·), lie next to each other: one loop maps them all.
 (_STEP, _LW, _LU, _LN_PROFILE, _LN_D, _LN_LW, _E_U, _E_W, _E_P, _E_R,
  _U, _V, _W, _P, _Q, _R, _MEAN_E, _MEAN_N) = range(N_NORMALS, N_NORMALS + 18)  # fmt: skip
 N_SCRATCH = N_NORMALS + 18
@@ -213,15 +220,17 @@ def _rate_output(ws, k, j, B, rho):  # pragma: no cover - compiled
 
 
 @_inline
-def _map_ln(x, row, m, B):  # pragma: no cover - compiled
-    for j in range(m):
-        x[row * B + j] = ln(x[row * B + j])
+def _map_ln(x, first, rows, B):  # pragma: no cover - compiled
+    """ln of whole rows first..first+rows−1 (columns past m hold 1: harmless)."""
+    for i in range(first * B, (first + rows) * B):
+        x[i] = ln(x[i])
 
 
 @_inline
-def _map_exp_neg(x, row, m, B):  # pragma: no cover - compiled
-    for j in range(m):
-        x[row * B + j] = exp_neg(x[row * B + j])
+def _map_exp_neg(x, first, rows, B):  # pragma: no cover - compiled
+    """exp(−x) of whole rows first..first+rows−1."""
+    for i in range(first * B, (first + rows) * B):
+        x[i] = exp_neg(x[i])
 
 
 @_inline
@@ -231,6 +240,7 @@ def advance_block(s, p, wp, ws, rng, scratch, air, m, B, dt):  # pragma: no cove
     rows 3-5 the air's angular velocity in body axes at the step's start attitude.
     Many short loops: each is simple enough for the compiler to vectorise."""
     x = scratch
+    x[_LN_PROFILE * B : (_E_R + 1) * B] = 1.0  # columns past m: finite for ln and exp
     fill_normals(rng, x, m, B)
     for j in range(m):  # heights: the arguments of the logarithms
         ground = p[L.P_GROUND_Z * B + j]
@@ -239,9 +249,7 @@ def advance_block(s, p, wp, ws, rng, scratch, air, m, B, dt):  # pragma: no cove
         h_ft = min(max(height / D.FT, D.H_MIN_FT), D.H_MAX_FT)
         x[_LN_D * B + j] = 0.177 + 0.000823 * h_ft
         x[_LW * B + j] = x[_LN_LW * B + j] = h_ft * D.FT  # L_w = h
-    _map_ln(x, _LN_PROFILE, m, B)
-    _map_ln(x, _LN_D, m, B)
-    _map_ln(x, _LN_LW, m, B)
+    _map_ln(x, _LN_PROFILE, 3, B)  # _LN_PROFILE, _LN_D, _LN_LW
     for j in range(m):  # mean wind at this height, airspeed, distance flown
         log_factor = x[_LN_PROFILE * B + j] / LN_20_OVER_Z0
         factor = log_factor if wp[L.W_LOG_PROFILE * B + j] > 0.0 else 1.0
@@ -254,8 +262,7 @@ def advance_block(s, p, wp, ws, rng, scratch, air, m, B, dt):  # pragma: no cove
         x[_MEAN_E * B + j], x[_MEAN_N * B + j] = mean_e, mean_n
         x[_LN_D * B + j] *= -0.4  # exp(−(−0.4 ln D)) = D^0.4
         x[_LN_LW * B + j] *= 1.0 / 3.0  # exp(−ln(L_w)/3) = L_w^(−1/3)
-    _map_exp_neg(x, _LN_D, m, B)
-    _map_exp_neg(x, _LN_LW, m, B)
+    _map_exp_neg(x, _LN_D, 2, B)  # _LN_D, _LN_LW
     for j in range(m):  # scale lengths, and the arguments of the filters' decays
         d04 = x[_LN_D * B + j]
         lu = x[_LW * B + j] / (d04 * d04 * d04)
@@ -265,10 +272,7 @@ def advance_block(s, p, wp, ws, rng, scratch, air, m, B, dt):  # pragma: no cove
         x[_E_W * B + j] = step / x[_LW * B + j]
         x[_E_P * B + j] = step / (D.RATE_LENGTH_P * span)  # also the q filter's
         x[_E_R * B + j] = step / (D.RATE_LENGTH_R * span)
-    _map_exp_neg(x, _E_U, m, B)
-    _map_exp_neg(x, _E_W, m, B)
-    _map_exp_neg(x, _E_P, m, B)
-    _map_exp_neg(x, _E_R, m, B)
+    _map_exp_neg(x, _E_U, 4, B)  # _E_U, _E_W, _E_P, _E_R
     for j in range(m):  # the first-order channels u and p
         e_u, e_p = x[_E_U * B + j], x[_E_P * B + j]
         z_u = e_u * ws[L.WS_U * B + j] + math.sqrt(max(1.0 - e_u * e_u, 0.0)) * x[0 * B + j]
