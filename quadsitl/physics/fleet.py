@@ -9,15 +9,17 @@ simulator processes of the MAVLink backend) is a VehicleStates with its own ``st
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from quadsitl.physics import kernel, reference
+from quadsitl.frames import quat_to_matrix
+from quadsitl.physics import kernel, reference, wind
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe, get_airframe, hover_rotor_speed
+from quadsitl.physics.wind import Wind
 
 BACKENDS = ("compiled", "reference")
 _FLOAT64, _NDARRAY = np.dtype(np.float64), np.ndarray  # the fast path of Fleet.step
@@ -105,6 +107,11 @@ class VehicleStates:
         self.contact = np.zeros(self.n, dtype=np.int8)
         self.touchdown_speed = np.zeros(self.n)
         self.time = 0.0
+        # Still air until set_wind: the weather's parameters, state and random streams.
+        self.winds: list[Wind] = [wind.CALM] * self.n
+        self.wind_params = np.stack([wind.CALM.to_params(_span(a)) for a in airframes])
+        self.wind_state = np.zeros((self.n, L.N_WIND_STATE))
+        self.wind_streams = wind.seed_streams(0, self.n)
 
     # --- named views of the state ---------------------------------------------------
     @property
@@ -131,6 +138,17 @@ class VehicleStates:
     def rotor_speeds(self) -> NDArray[np.float64]:
         """(n, 4) rad/s."""
         return self.state[:, L.ROTORS]
+
+    @property
+    def air_velocity(self) -> NDArray[np.float64]:
+        """(n, 3) m/s, world ENU: the air's velocity at each vehicle over the last step
+        (mean wind + turbulence + gust; 0 in still air)."""
+        return self.wind_state[:, L.WS_AIR_VELOCITY]
+
+    @property
+    def windy(self) -> bool:
+        """True when any vehicle flies in something other than still air."""
+        return not all(w.calm for w in self.winds)
 
     @property
     def hover_rotor_speed(self) -> NDArray[np.float64]:
@@ -178,6 +196,49 @@ class VehicleStates:
         self.state[rows] = new
         self.contact[rows] = contact
         self.touchdown_speed[rows] = 0.0
+        self._reset_wind(rows)
+
+    def set_wind(
+        self,
+        weather: Wind | Sequence[Wind],
+        seed: int | None = None,
+        mask: ArrayLike | None = None,
+    ) -> None:
+        """Fly the vehicles (all, or those of ``mask``) in ``weather`` (one Wind, or one
+        per selected vehicle) from now on; their turbulence restarts, drawn from its
+        stationary distribution, and so does their gust clock.
+
+        ``seed``: the selected vehicles' random streams (vehicle i of the fleet gets the
+        i-th stream of this seed, so a vehicle's turbulence does not depend on which others
+        fly beside it); None keeps the streams as they are.
+        """
+        rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
+        if rows.shape != (self.n,):
+            raise ValueError(f"mask must have shape ({self.n},), got {rows.shape}")
+        index = np.flatnonzero(rows)
+        winds = [weather] * len(index) if isinstance(weather, Wind) else list(weather)
+        if len(winds) != len(index) or not all(isinstance(w, Wind) for w in winds):
+            raise ValueError(f"need one Wind for each of the {len(index)} selected vehicles")
+        for i, w in zip(index, winds, strict=True):
+            self.wind_params[i] = w.to_params(_span(self.airframes[i]))
+            self.winds[i] = w
+        if seed is not None:
+            if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool):
+                raise ValueError(f"wind seed must be an integer, got {seed!r}")
+            self.wind_streams[index] = wind.seed_streams(int(seed), self.n)[index]
+        self._reset_wind(rows)
+
+    def _reset_wind(self, rows: NDArray[np.bool_]) -> None:
+        """Restart the weather of the selected vehicles (nothing to do in still air)."""
+        if not self.windy or not rows.any():
+            return
+        streams = self.wind_streams[rows]
+        wind_state = self.wind_state[rows]
+        wind.reset_wind(
+            wind_state, self.wind_params[rows], self.state[rows], self.params[rows], streams
+        )
+        self.wind_state[rows] = wind_state
+        self.wind_streams[rows] = streams
 
 
 class Fleet(VehicleStates):
@@ -202,10 +263,29 @@ class Fleet(VehicleStates):
         self._cmd_shape = (self.n, L.N_ROTORS)
         # A fleet of one also takes a (4,) command (checked first: it is the common one).
         self._one_vehicle_shape = (L.N_ROTORS,) if self.n == 1 else self._cmd_shape
-        if backend == "reference":
-            self._step_arrays = _reference_step
-        else:
-            self._step_arrays = kernel.single_step if self.n == 1 else kernel.batch_step
+        self._choose_step()
+
+    def _choose_step(self) -> None:
+        """The still-air kernel, or the one with weather once any vehicle has some (given
+        the weather's arrays here, so that a still-air step costs what it always did)."""
+        if not self.windy:
+            still = kernel.single_step if self.n == 1 else kernel.batch_step
+            self._step_arrays = _reference_step if self.backend == "reference" else still
+            return
+        step: Callable[..., int] = _reference_step
+        if self.backend != "reference":
+            step = kernel.single_step_wind if self.n == 1 else kernel.batch_step_wind
+        weather = (self.wind_params, self.wind_state, self.wind_streams)
+        self._step_arrays = lambda *arrays: step(*arrays, *weather)
+
+    def set_wind(
+        self,
+        weather: Wind | Sequence[Wind],
+        seed: int | None = None,
+        mask: ArrayLike | None = None,
+    ) -> None:
+        super().set_wind(weather, seed, mask)
+        self._choose_step()
 
     # --- stepping -------------------------------------------------------------------
     def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
@@ -231,16 +311,39 @@ class Fleet(VehicleStates):
         self.time += n_substeps * dt
 
 
-def _reference_step(state, params, rotor_cmd, contact, touchdown_speed, dt, n_substeps) -> int:
+def _span(airframe: Airframe) -> float:
+    """m, rotor tip to rotor tip: the "wingspan" b of the angular-rate gust filters."""
+    return 2.0 * (airframe.arm_length + airframe.rotor_radius)
+
+
+def _reference_step(
+    state,
+    params,
+    rotor_cmd,
+    contact,
+    touchdown_speed,
+    dt,
+    n_substeps,
+    wind_params=None,
+    wind_state=None,
+    streams=None,
+) -> int:
     """The kernel's ``step`` contract in numpy: steps in place; returns -1, or the first
-    vehicle with a non-finite command (and then changes nothing)."""
+    vehicle with a non-finite command (and then changes nothing). The weather steps
+    before each physics step unless every vehicle is in still air."""
     cmd = rotor_cmd.reshape(len(state), L.N_ROTORS)
     bad_rows = ~np.isfinite(cmd).all(axis=1)
     if bad_rows.any():
         return int(np.argmax(bad_rows))
     for _ in range(n_substeps):
+        air = None
+        if wind_params is not None:
+            wind.advance(wind_state, wind_params, state, params, streams, dt)
+            rotation = quat_to_matrix(state[:, L.QUAT])  # (N, 3, 3) body -> world
+            rates_body = np.einsum("nji,nj->ni", rotation, wind_state[:, L.WS_AIR_RATES])
+            air = np.concatenate([wind_state[:, L.WS_AIR_VELOCITY], rates_body], axis=1)
         state[:], contact[:], touchdown_speed[:] = reference.step(
-            state, params, cmd, contact, touchdown_speed, dt
+            state, params, cmd, contact, touchdown_speed, dt, air
         )
     return -1
 
@@ -265,7 +368,28 @@ class FleetSlot(VehicleStates):
         self.params = fleet.params[rows]
         self.contact = fleet.contact[rows]
         self.touchdown_speed = fleet.touchdown_speed[rows]
+        self.wind_params = fleet.wind_params[rows]
+        self.wind_state = fleet.wind_state[rows]
+        self.wind_streams = fleet.wind_streams[rows]
         self._epoch = fleet.time
+
+    @property
+    def winds(self) -> list[Wind]:  # type: ignore[override]
+        return [self.shared.winds[self.index]]
+
+    def set_wind(
+        self,
+        weather: Wind | Sequence[Wind],
+        seed: int | None = None,
+        mask: ArrayLike | None = None,
+    ) -> None:
+        """Set this vehicle's weather in the shared fleet (its stream: the ``index``-th of
+        ``seed``)."""
+        if mask is not None and not np.asarray(mask, dtype=bool).all():
+            return
+        one = np.zeros(self.shared.n, bool)
+        one[self.index] = True
+        self.shared.set_wind(weather, seed, one)
 
     @property
     def time(self) -> float:  # type: ignore[override]

@@ -20,6 +20,7 @@ import numba
 import numpy as np
 
 from quadsitl.physics import layout as L
+from quadsitl.physics import wind_kernel
 
 BLOCK = 32  # vehicles per vectorised block (measured best of 16..256)
 THRUST, ROLL_MOMENT, PITCH_MOMENT, YAW_SUM = 0, 1, 2, 3  # rows of the rotor sums
@@ -33,10 +34,11 @@ _inline = numba.njit(inline="always", **_OPTIONS)
 
 
 @_inline
-def _derivative(s, p, cmd, out, m, sums, B):  # pragma: no cover - compiled
+def _derivative(s, p, cmd, out, m, sums, air, B, WIND):  # pragma: no cover - compiled
     """ṡ of the first m vehicles of a block: s, p and cmd hold rows of B values; ``sums``
-    (4 rows) is scratch for the rotor sums. Each loop runs over vehicles, innermost, so
-    that it is vectorised."""
+    (4 rows) is scratch for the rotor sums; ``air`` (6 rows) the air's velocity (world)
+    and angular velocity (body), read only when the compile-time flag WIND is set. Each
+    loop runs over vehicles, innermost, so that it is vectorised."""
     for j in range(m):
         for k in range(4):
             sums[k * B + j] = 0.0
@@ -62,15 +64,21 @@ def _derivative(s, p, cmd, out, m, sums, B):  # pragma: no cover - compiled
         yaw_sum = sums[YAW_SUM * B + j]
 
         mass = p[L.P_MASS * B + j]
-        drag = p[L.P_KD * B + j] * math.sqrt(vx * vx + vy * vy + vz * vz)
         out[L.I_PX * B + j] = vx
         out[L.I_PY * B + j] = vy
         out[L.I_PZ * B + j] = vz
-        out[L.I_VX * B + j] = (total_thrust * (2 * (qx * qz + qw * qy)) - drag * vx) / mass
-        out[L.I_VY * B + j] = (total_thrust * (2 * (qy * qz - qw * qx)) - drag * vy) / mass
+        if WIND:  # velocity and rates through the air
+            ax, ay, az = vx - air[0 * B + j], vy - air[1 * B + j], vz - air[2 * B + j]
+            ox, oy, oz = wx - air[3 * B + j], wy - air[4 * B + j], wz - air[5 * B + j]
+        else:
+            ax, ay, az = vx, vy, vz
+            ox, oy, oz = wx, wy, wz
+        drag = p[L.P_KD * B + j] * math.sqrt(ax * ax + ay * ay + az * az)
+        out[L.I_VX * B + j] = (total_thrust * (2 * (qx * qz + qw * qy)) - drag * ax) / mass
+        out[L.I_VY * B + j] = (total_thrust * (2 * (qy * qz - qw * qx)) - drag * ay) / mass
         gravity = p[L.P_GRAVITY * B + j]
         out[L.I_VZ * B + j] = (
-            total_thrust * (1 - 2 * (qx * qx + qy * qy)) - drag * vz
+            total_thrust * (1 - 2 * (qx * qx + qy * qy)) - drag * az
         ) / mass - gravity
 
         out[L.I_QW * B + j] = 0.5 * (-qx * wx - qy * wy - qz * wz)
@@ -79,10 +87,10 @@ def _derivative(s, p, cmd, out, m, sums, B):  # pragma: no cover - compiled
         out[L.I_QZ * B + j] = 0.5 * (qw * wz + qx * wy - qy * wx)
 
         jxx, jyy, jzz = p[L.P_JXX * B + j], p[L.P_JYY * B + j], p[L.P_JZZ * B + j]
-        km_rate = p[L.P_KM * B + j] * math.sqrt(wx * wx + wy * wy + wz * wz)
-        mx = mx - km_rate * wx - (wy * (jzz * wz) - wz * (jyy * wy))
-        my = -my - km_rate * wy - (wz * (jxx * wx) - wx * (jzz * wz))
-        mz = p[L.P_KQ * B + j] * yaw_sum - km_rate * wz - (wx * (jyy * wy) - wy * (jxx * wx))
+        km_rate = p[L.P_KM * B + j] * math.sqrt(ox * ox + oy * oy + oz * oz)
+        mx = mx - km_rate * ox - (wy * (jzz * wz) - wz * (jyy * wy))
+        my = -my - km_rate * oy - (wz * (jxx * wx) - wx * (jzz * wz))
+        mz = p[L.P_KQ * B + j] * yaw_sum - km_rate * oz - (wx * (jyy * wy) - wy * (jxx * wx))
         out[L.I_WX * B + j] = mx / jxx
         out[L.I_WY * B + j] = my / jyy
         out[L.I_WZ * B + j] = mz / jzz
@@ -155,26 +163,35 @@ def _axpy(out, x, a, y, m, B):  # pragma: no cover - compiled
             out[k * B + j] = x[k * B + j] + a * y[k * B + j]
 
 
-def compile_step(B: int, release_gil: bool):
+def compile_step(B: int, release_gil: bool, wind: bool = False):
     """The kernel's ``step`` for blocks of ``B`` vehicles (B is a compile-time constant).
 
     A batch uses ``B = BLOCK`` and releases the GIL while it computes; a single vehicle
     uses ``B = 1`` (straight-line code, scratch of a few hundred bytes) and keeps the GIL,
     since releasing it would cost more than the step. Same source, same arithmetic.
+    ``wind`` (compile-time too) adds the weather of :mod:`quadsitl.physics.wind_kernel`
+    before each physics step; without it the arithmetic is that of still air, unchanged.
     """
     jit = numba.njit(nogil=release_gil, **_OPTIONS)
+    WIND = wind
     # Block scratch: state, previous state, RK4 temp, k1..k4, parameters, commands, sums.
     scratch_size = (7 * L.STATE_SIZE + L.N_PARAMS + L.N_ROTORS + 4) * B
 
-    @jit
-    def step(
-        state, params, rotor_cmd, contact, touchdown_speed, dt, n_substeps
+    @_inline
+    def advance(
+        state,
+        params,
+        rotor_cmd,
+        contact,
+        touchdown_speed,
+        dt,
+        n_substeps,
+        wind_params,
+        wind_state,
+        streams,
     ):  # pragma: no cover
-        """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place.
-
-        Returns -1, or the index of the first
-        vehicle with a non-finite command, in which case nothing was changed.
-        """
+        """The body of ``step``; the still-air build is given stand-ins for the wind's
+        arrays, which it never touches."""
         commands = rotor_cmd.ravel()  # (n, 4), or (4,) for one vehicle: 4 per vehicle
         bad = first_invalid_command(commands)
         if bad >= 0:
@@ -189,6 +206,12 @@ def compile_step(B: int, release_gil: bool):
         p = scratch[7 * z : 7 * z + L.N_PARAMS * B]
         cmd = scratch[7 * z + L.N_PARAMS * B : 7 * z + (L.N_PARAMS + L.N_ROTORS) * B]
         sums = scratch[7 * z + (L.N_PARAMS + L.N_ROTORS) * B :]
+        # The weather's block arrays (empty in the still-air build).
+        wp = np.empty(L.N_WIND_PARAMS * B if WIND else 0)
+        ws = np.empty(L.N_WIND_STATE * B if WIND else 0)
+        wscratch = np.empty(wind_kernel.N_SCRATCH * B if WIND else 0)
+        air = np.empty(wind_kernel.AIR_ROWS * B if WIND else 0)
+        rng = np.empty(B if WIND else 0, np.uint64)
         sixth = dt / 6.0
         for first in range(0, state.shape[0], B):
             m = min(B, state.shape[0] - first)
@@ -199,18 +222,26 @@ def compile_step(B: int, release_gil: bool):
                     p[k * B + j] = params[first + j, k]
                 for k in range(L.N_ROTORS):
                     cmd[k * B + j] = commands[(first + j) * L.N_ROTORS + k]
+                if WIND:
+                    for k in range(L.N_WIND_PARAMS):
+                        wp[k * B + j] = wind_params[first + j, k]
+                    for k in range(L.N_WIND_STATE):
+                        ws[k * B + j] = wind_state[first + j, k]
+                    rng[j] = streams[first + j]
             for _ in range(n_substeps):
                 for j in range(m):  # a crashed vehicle keeps its pose: remember it
                     if contact[first + j] == L.CRASHED:
                         for k in range(size):
                             prev[k * B + j] = s[k * B + j]
-                _derivative(s, p, cmd, k1, m, sums, B)
+                if WIND:
+                    wind_kernel.advance_block(s, p, wp, ws, rng, wscratch, air, m, B, dt)
+                _derivative(s, p, cmd, k1, m, sums, air, B, WIND)
                 _axpy(tmp, s, 0.5 * dt, k1, m, B)
-                _derivative(tmp, p, cmd, k2, m, sums, B)
+                _derivative(tmp, p, cmd, k2, m, sums, air, B, WIND)
                 _axpy(tmp, s, 0.5 * dt, k2, m, B)
-                _derivative(tmp, p, cmd, k3, m, sums, B)
+                _derivative(tmp, p, cmd, k3, m, sums, air, B, WIND)
                 _axpy(tmp, s, dt, k3, m, B)
-                _derivative(tmp, p, cmd, k4, m, sums, B)
+                _derivative(tmp, p, cmd, k4, m, sums, air, B, WIND)
                 for k in range(size):
                     for j in range(m):
                         i = k * B + j
@@ -229,10 +260,75 @@ def compile_step(B: int, release_gil: bool):
             for j in range(m):
                 for k in range(size):
                     state[first + j, k] = s[k * B + j]
+                if WIND:
+                    for k in range(L.N_WIND_STATE):
+                        wind_state[first + j, k] = ws[k * B + j]
+                    streams[first + j] = rng[j]
         return -1
 
-    return step
+    if wind:
+
+        @jit
+        def step(
+            state,
+            params,
+            rotor_cmd,
+            contact,
+            touchdown_speed,
+            dt,
+            n_substeps,
+            wind_params,
+            wind_state,
+            streams,
+        ):  # pragma: no cover
+            """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place, each
+            after a step of its weather: ``wind_params`` (n, N_WIND_PARAMS), ``wind_state``
+            (n, N_WIND_STATE), random ``streams`` (n,) uint64.
+
+            Returns -1, or the index of the first
+            vehicle with a non-finite command, in which case nothing was changed.
+            """
+            return advance(
+                state,
+                params,
+                rotor_cmd,
+                contact,
+                touchdown_speed,
+                dt,
+                n_substeps,
+                wind_params,
+                wind_state,
+                streams,
+            )
+
+        return step
+
+    @jit
+    def still_step(
+        state, params, rotor_cmd, contact, touchdown_speed, dt, n_substeps
+    ):  # pragma: no cover
+        """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place.
+
+        Returns -1, or the index of the first
+        vehicle with a non-finite command, in which case nothing was changed.
+        """
+        return advance(
+            state,
+            params,
+            rotor_cmd,
+            contact,
+            touchdown_speed,
+            dt,
+            n_substeps,
+            state,
+            state,
+            contact,
+        )
+
+    return still_step
 
 
 batch_step = compile_step(BLOCK, release_gil=True)
 single_step = compile_step(1, release_gil=False)
+batch_step_wind = compile_step(BLOCK, release_gil=True, wind=True)
+single_step_wind = compile_step(1, release_gil=False, wind=True)

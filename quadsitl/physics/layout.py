@@ -65,3 +65,30 @@ AIRBORNE = 0
 ON_GROUND = 1  # resting on, or just touched down gently on, the ground
 CRASHED = 2  # a rotor disc struck the ground, or touchdown too fast or too tilted
 CONTACT_NAMES = {AIRBORNE: "airborne", ON_GROUND: "on_ground", CRASHED: "crashed"}
+
+# --- wind parameters: one row per vehicle, shape (N, N_WIND_PARAMS) ----------------------
+# Made by :meth:`quadsitl.physics.wind.Wind.to_params`; the model is in docs/physics.md.
+W_MEAN_E, W_MEAN_N = 0, 1  # m/s, world ENU: mean wind (at 20 ft with the log profile)
+W_LOG_PROFILE = 2  # 1: MIL-F-8785C logarithmic profile with height, 0: the same everywhere
+W_TOWARD_E, W_TOWARD_N = 3, 4  # unit vector the mean wind blows toward: turbulence x axis
+W_SIGMA_W = 5  # m/s, vertical turbulence intensity σ_w = 0.1·W20 (0: no turbulence)
+W_SPAN = 6  # m, b of the angular-rate gust filters: the rotor-tip to rotor-tip span
+W_GUST_E, W_GUST_N, W_GUST_U = 7, 8, 9  # m/s, 1-cosine gust amplitude, world ENU
+W_GUST_LENGTH = 10  # m, d_m: distance over which the gust builds up (inf: no gust)
+W_GUST_START = 11  # s after the vehicle's reset
+W_GUST_HOLD = 12  # m, distance the gust holds its peak before it dies away the same way
+W_ROLL_GAIN = 13  # m^(-1/6): σ_p = σ_w · W_ROLL_GAIN · L_w^(−1/3), from the span b
+N_WIND_PARAMS = 14
+
+# --- wind state: one row per vehicle, shape (N, N_WIND_STATE) -----------------------------
+WS_TURBULENCE = slice(0, 8)  # Dryden shaping-filter states, dimensionless, in this order:
+WS_U = 0  # longitudinal (first order)
+WS_V1, WS_V2, WS_R = 1, 2, 3  # lateral pair and the yaw-rate gust filter
+WS_W1, WS_W2, WS_Q = 4, 5, 6  # vertical pair and the pitch-rate gust filter
+WS_P = 7  # roll-rate gust (first order)
+WS_GUST_DISTANCE = 8  # m, distance flown through the air since the gust started
+WS_TIME = 9  # s since the vehicle's reset
+WS_AIR_VELOCITY = slice(10, 13)  # m/s, world ENU: the air's velocity at the vehicle
+WS_AIR_RATES = slice(13, 16)  # rad/s, world ENU: the air's angular velocity (rate gusts)
+WS_AIR_VE, WS_AIR_PE = 10, 13  # first columns of the two (for the compiled kernel)
+N_WIND_STATE = 16

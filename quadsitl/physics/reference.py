@@ -7,9 +7,13 @@ the same thing fast and is tested against this module.
 
 Model (world ENU, body FLU, paper Eqs. 1-9 with the moment signs of Σ r_i × F_i):
 
-* thrust T_i = kt Ω_i² along body +z; m v̇ = R e_z ΣT_i − kd |v| v − m g e_z
+* thrust T_i = kt Ω_i² along body +z; m v̇ = R e_z ΣT_i − kd |v_a| v_a − m g e_z
 * q̇ = ½ q ⊗ (0, ω)
-* J ω̇ = Σ r_i × T_i e_z + Σ s_i kq Ω_i² e_z − km |ω| ω − ω × J ω
+* J ω̇ = Σ r_i × T_i e_z + Σ s_i kq Ω_i² e_z − km |ω_a| ω_a − ω × J ω
+
+v_a = v − w and ω_a = ω − ω_w are the velocity and rates relative to the air (w, ω_w:
+the air's velocity and angular velocity, :mod:`quadsitl.physics.wind`); in still air
+they are v and ω.
 * Ω̇ = k_Ω (Ω_c − Ω), Ω_c clipped to [0, Ω_max]; the rotor speeds are integrated
   inside RK4 together with the rigid body.
 """
@@ -26,8 +30,12 @@ from quadsitl.physics import layout as L
 Array = NDArray[np.float64]
 
 
-def derivative(state: Array, params: Array, rotor_cmd: Array) -> Array:
-    """Time derivative of the (N, 17) state under commanded rotor speeds (N, 4) rad/s."""
+def derivative(state: Array, params: Array, rotor_cmd: Array, air: Array | None = None) -> Array:
+    """Time derivative of the (N, 17) state under commanded rotor speeds (N, 4) rad/s.
+
+    ``air``: None (still air) or (N, 6): the air's velocity (m/s, world ENU) and angular
+    velocity (rad/s, body FLU), held over the step.
+    """
     vel = state[:, L.VEL]  # (N, 3) m/s, world
     qw, qx, qy, qz = state[:, L.QUAT].T  # body -> world
     rates = state[:, L.RATES]  # (N, 3) rad/s, body
@@ -41,8 +49,9 @@ def derivative(state: Array, params: Array, rotor_cmd: Array) -> Array:
     body_z_in_world = np.stack(
         [2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx), 1 - 2 * (qx * qx + qy * qy)], axis=1
     )
-    speed = np.linalg.norm(vel, axis=1, keepdims=True)
-    force = total_thrust[:, None] * body_z_in_world - params[:, [L.P_KD]] * speed * vel
+    air_vel = vel if air is None else vel - air[:, 0:3]  # (N, 3) m/s, world: through the air
+    speed = np.linalg.norm(air_vel, axis=1, keepdims=True)
+    force = total_thrust[:, None] * body_z_in_world - params[:, [L.P_KD]] * speed * air_vel
     accel = force / mass[:, None]
     accel[:, 2] -= params[:, L.P_GRAVITY]
 
@@ -66,8 +75,9 @@ def derivative(state: Array, params: Array, rotor_cmd: Array) -> Array:
         ],
         axis=1,
     )
-    rate_norm = np.linalg.norm(rates, axis=1, keepdims=True)
-    moment -= params[:, [L.P_KM]] * rate_norm * rates
+    air_rates = rates if air is None else rates - air[:, 3:6]  # (N, 3) rad/s, body
+    rate_norm = np.linalg.norm(air_rates, axis=1, keepdims=True)
+    moment -= params[:, [L.P_KM]] * rate_norm * air_rates
     moment -= np.cross(rates, inertia * rates)
     rates_dot = moment / inertia
 
@@ -155,9 +165,12 @@ def step(
     contact: NDArray[np.int8],
     touchdown_speed: Array,
     dt: float,
+    air: Array | None = None,
 ) -> tuple[Array, NDArray[np.int8], Array]:
-    """One physics step of length ``dt`` (s): RK4, renormalised attitude, ground contact."""
-    new = rk4(lambda y: derivative(y, params, rotor_cmd), state, dt)
+    """One physics step of length ``dt`` (s): RK4, renormalised attitude, ground contact.
+
+    ``air``: as in :func:`derivative`, held over the step."""
+    new = rk4(lambda y: derivative(y, params, rotor_cmd, air), state, dt)
     new[:, L.QUAT] /= np.linalg.norm(new[:, L.QUAT], axis=1, keepdims=True)
     new[:, L.ROTORS] = np.clip(new[:, L.ROTORS], 0.0, params[:, [L.P_OMEGA_MAX]])
     return ground_contact(state, new, params, contact, touchdown_speed)

@@ -1,0 +1,354 @@
+"""The air each vehicle flies in: mean wind, Dryden turbulence and a 1-cosine gust.
+
+:class:`Wind` is the weather of one vehicle as data (validated; one-line errors) and makes
+the per-vehicle parameter row the physics reads. :func:`advance` is the readable numpy
+reference of one wind step for N vehicles; the compiled kernel does the same in
+:mod:`quadsitl.physics.wind_kernel` and is tested against it. Equations, parameters and
+sources: docs/physics.md, "Weather".
+
+Frames: world ENU. A wind "from" θ degrees (meteorological: 0 from the north, 90 from the
+east) blows toward θ + 180°, so its velocity is −speed·(sin θ, cos θ, 0) in (E, N, U).
+Turbulence axes (low-altitude convention): x along the mean wind, z up, y = z × x.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quadsitl.physics import dryden as D
+from quadsitl.physics import layout as L
+
+Array = NDArray[np.float64]
+
+Z0_FT = 0.15  # ft, surface roughness of the log profile, Category C flight phases
+PROFILES = ("uniform", "log")
+_U64 = np.uint64
+
+
+def _finite(value: object) -> bool:
+    return (
+        isinstance(value, (int, float, np.integer, np.floating))
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+    )
+
+
+@dataclass(frozen=True)
+class Gust:
+    """A MIL-F-8785C discrete gust: v = A/2·(1 − cos(π x / d)) over the first d metres
+    flown through the air after ``start``, then A for ``hold`` metres, then the mirror
+    image back to 0 (``hold`` = inf is the standard's ramp to a lasting A).
+
+    Attributes:
+        amplitude: (E, N, U) m/s, the gust's peak velocity A.
+        length: d, m, distance over which it builds up.
+        start: s after the vehicle's reset.
+        hold: m flown at the peak before it dies away.
+    """
+
+    amplitude: tuple[float, float, float]
+    length: float
+    start: float = 0.0
+    hold: float = 0.0
+
+    def __post_init__(self) -> None:
+        amp = tuple(self.amplitude) if isinstance(self.amplitude, Sequence) else ()
+        if len(amp) != 3 or not all(_finite(a) for a in amp):
+            raise ValueError(
+                f"gust amplitude must be 3 finite m/s (E, N, U), got {self.amplitude!r}"
+            )
+        if not (_finite(self.length) and self.length > 0):
+            raise ValueError(
+                f"gust length must be a positive number of metres, got {self.length!r}"
+            )
+        if not (_finite(self.start) and self.start >= 0):
+            raise ValueError(f"gust start must be >= 0 s, got {self.start!r}")
+        if not (_finite(self.hold) or self.hold == math.inf) or self.hold < 0:
+            raise ValueError(f"gust hold must be >= 0 m (inf: for ever), got {self.hold!r}")
+
+
+def gust_shape(distance: Array, length: Array, hold: Array) -> Array:
+    """Fraction of the gust amplitude after ``distance`` m into it (0 before it starts).
+    ``length`` must be finite."""
+    x = np.asarray(distance, dtype=np.float64)
+    fall = x - length - hold  # metres into the mirror-image decay
+    into = np.clip(np.where(fall > 0, length - fall, x), 0, length)
+    return 0.5 * (1 - np.cos(math.pi * into / length))
+
+
+@dataclass(frozen=True)
+class Wind:
+    """The weather one vehicle flies in. The default is still air (the physics unchanged).
+
+    Attributes:
+        speed: mean wind speed, m/s (at 20 ft when ``profile`` is "log").
+        from_deg: direction it blows from, degrees clockwise from north.
+        profile: "uniform" (the same at every height) or "log" (MIL-F-8785C:
+            W(h) = W20·ln(h/z0)/ln(20/z0), h in ft, z0 = 0.15 ft, h clamped to [z0, 1000]).
+        turbulence: None, a severity ("light", "moderate", "severe": W20 = 15, 30, 45 kt,
+            σ_w = 0.1·W20), or σ_w itself in m/s.
+        turbulence_model: "8785C" or "1797": the Dryden form (the same spectra at low
+            altitude; docs/physics.md).
+        gust: a :class:`Gust`, or None.
+    """
+
+    speed: float = 0.0
+    from_deg: float = 0.0
+    profile: str = "uniform"
+    turbulence: str | float | None = None
+    turbulence_model: str = "8785C"
+    gust: Gust | None = None
+
+    def __post_init__(self) -> None:
+        if not (_finite(self.speed) and self.speed >= 0):
+            raise ValueError(f"wind speed must be a finite number >= 0 m/s, got {self.speed!r}")
+        if not _finite(self.from_deg):
+            raise ValueError(f"wind direction must be finite degrees, got {self.from_deg!r}")
+        if self.profile not in PROFILES:
+            raise ValueError(f"unknown wind profile {self.profile!r}; choose one of {PROFILES}")
+        if self.turbulence_model not in D.MODELS:
+            raise ValueError(
+                f"unknown turbulence model {self.turbulence_model!r}; choose one of {D.MODELS}"
+            )
+        t = self.turbulence
+        if isinstance(t, str):
+            if t not in D.SEVERITY_W20_KT:
+                raise ValueError(
+                    f"unknown turbulence severity {t!r}; choose one of "
+                    f"{sorted(D.SEVERITY_W20_KT)} or give σ_w in m/s"
+                )
+        elif t is not None and not (_finite(t) and t >= 0):  # type: ignore[operator]
+            raise ValueError(f"turbulence σ_w must be a finite number >= 0 m/s, got {t!r}")
+        if self.gust is not None and not isinstance(self.gust, Gust):
+            raise ValueError(f"gust must be a Gust or None, got {self.gust!r}")
+
+    @property
+    def sigma_w(self) -> float:
+        """Vertical turbulence intensity σ_w, m/s (0 without turbulence)."""
+        t = self.turbulence
+        if t is None:
+            return 0.0
+        if isinstance(t, str):
+            return 0.1 * D.SEVERITY_W20_KT[t] * D.KNOT
+        return float(t)
+
+    @property
+    def calm(self) -> bool:
+        """True for still air: the physics then runs exactly as without wind."""
+        return self.speed == 0 and self.sigma_w == 0 and self.gust is None
+
+    def replace(self, **changes: object) -> Wind:
+        """A copy with some fields changed (validated)."""
+        return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
+
+    def to_params(self, span: float) -> Array:
+        """The row of the (N, N_WIND_PARAMS) wind parameters; ``span`` (m) is the airframe's
+        rotor-tip to rotor-tip span b, used by the angular-rate gust filters."""
+        if self.sigma_w > 0 and D.RATE_LENGTH_P * span >= 0.9 * D.H_MIN_FT * D.FT:
+            raise ValueError(
+                f"airframe span {span:.3g} m is too large for the low-altitude rate gusts "
+                f"(4b/π must stay below the smallest scale length, {D.H_MIN_FT * D.FT:.2f} m)"
+            )
+        row = np.zeros(L.N_WIND_PARAMS)
+        theta = math.radians(self.from_deg)
+        toward = (-math.sin(theta), -math.cos(theta))  # (E, N), unit
+        row[L.W_MEAN_E], row[L.W_MEAN_N] = self.speed * toward[0], self.speed * toward[1]
+        row[L.W_LOG_PROFILE] = self.profile == "log"
+        row[L.W_TOWARD_E], row[L.W_TOWARD_N] = toward
+        row[L.W_SIGMA_W] = self.sigma_w
+        row[L.W_SPAN] = span
+        row[L.W_ROLL_GAIN] = D.roll_rate_gain(span)
+        gust = self.gust
+        if gust is None:
+            row[L.W_GUST_LENGTH] = math.inf
+        else:
+            row[L.W_GUST_E : L.W_GUST_U + 1] = gust.amplitude
+            row[L.W_GUST_LENGTH], row[L.W_GUST_START] = gust.length, gust.start
+            row[L.W_GUST_HOLD] = gust.hold
+        return row
+
+
+CALM = Wind()
+
+
+def profile_factor(height_m: Array, log_profile: Array) -> Array:
+    """W(h)/W20 of the log profile (1 where the profile is uniform)."""
+    h = np.clip(np.asarray(height_m) / D.FT, Z0_FT, D.H_MAX_FT)
+    return np.where(log_profile > 0, np.log(h / Z0_FT) / math.log(20.0 / Z0_FT), 1.0)
+
+
+def height_above_ground(state: Array, params: Array) -> Array:
+    """(N,) m: height over the ground plane, or over z = 0 where there is no ground."""
+    ground = params[:, L.P_GROUND_Z]
+    return state[:, L.I_PZ] - np.where(np.isfinite(ground), ground, 0.0)
+
+
+# --- random numbers: one splitmix64 stream per vehicle ---------------------------------
+
+
+def seed_streams(seed: int, n: int) -> NDArray[np.uint64]:
+    """(n,) stream states for vehicles 0..n−1 of a fleet seeded with ``seed``."""
+    base = _U64(seed * 0xD1B54A32D192ED03 % 2**64)
+    return base + np.arange(n, dtype=np.uint64) * _U64(0x9E3779B97F4A7C15 * 0x632BE5AB % 2**64)
+
+
+def splitmix64(streams: NDArray[np.uint64]) -> NDArray[np.uint64]:
+    """Advance each stream in place and return its next 64 random bits."""
+    streams += _U64(0x9E3779B97F4A7C15)
+    z = streams.copy()
+    z = (z ^ (z >> _U64(30))) * _U64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> _U64(27))) * _U64(0x94D049BB133111EB)
+    return z ^ (z >> _U64(31))
+
+
+def normal_pair(streams: NDArray[np.uint64]) -> tuple[Array, Array]:
+    """Two independent N(0, 1) per stream (Box-Muller on one draw: its high 32 bits give
+    u1 in (0, 1], its low 32 bits u2 in [0, 1)), as the compiled kernel draws them."""
+    bits = splitmix64(streams)
+    u1 = ((bits >> _U64(32)) + _U64(1)).astype(np.float64) * 2.0**-32
+    u2 = (bits & _U64(0xFFFFFFFF)).astype(np.float64) * 2.0**-32
+    radius = np.sqrt(-2.0 * np.log(u1))
+    angle = (4 * u2 - 0.5) * (math.pi / 2)
+    return radius * np.cos(angle), radius * np.sin(angle)
+
+
+def normals(streams: NDArray[np.uint64], count: int) -> Array:
+    """(N, count) N(0, 1), ``count`` even, in pairs from :func:`normal_pair`."""
+    pairs = [normal_pair(streams) for _ in range(count // 2)]
+    return np.stack([x for pair in pairs for x in pair], axis=1)
+
+
+# --- the reference wind step ------------------------------------------------------------
+
+N_NORMALS = 8  # per vehicle and physics step: u, lateral (3), vertical (3), p
+
+
+def _turbulence_frame(wind_params: Array) -> tuple[Array, Array]:
+    """(N, 3) x and y axes of the turbulence frame in world ENU (z is up)."""
+    east, north = wind_params[:, L.W_TOWARD_E], wind_params[:, L.W_TOWARD_N]
+    zero = np.zeros_like(east)
+    return np.stack([east, north, zero], axis=1), np.stack([-north, east, zero], axis=1)
+
+
+def _channel_lengths(height: Array, wind_params: Array) -> tuple[Array, Array, Array, Array]:
+    """(L_u, L_w, ρ_r, ρ_q) per vehicle: the scale lengths, m, and the rate filters'
+    lengths 3b/π and 4b/π over the lateral and vertical scale lengths."""
+    lu, lw = D.spectral_lengths(height)
+    span = wind_params[:, L.W_SPAN]
+    return lu, lw, D.RATE_LENGTH_R * span / lu, D.RATE_LENGTH_P * span / lw
+
+
+def air_outputs(wind_state: Array, wind_params: Array, state: Array, params: Array) -> None:
+    """Write the air's velocity and angular velocity (world ENU) from the wind state."""
+    height = height_above_ground(state, params)
+    factor = profile_factor(height, wind_params[:, L.W_LOG_PROFILE])
+    sigma_w = wind_params[:, L.W_SIGMA_W]
+    su, _, _ = D.intensities(height, sigma_w)
+    lu, lw, rho_r, rho_q = _channel_lengths(height, wind_params)
+    sp = D.roll_rate_sigma(height, sigma_w, wind_params[:, L.W_SPAN])
+    z = wind_state[:, L.WS_TURBULENCE]
+    turb = np.zeros((len(state), 6))  # (u, v, w, p, q, r), turbulence frame
+    for n in range(len(state)):
+        row, gain_r = D.output_rows(rho_r[n])
+        _, gain_q = D.output_rows(rho_q[n])
+        zv, zw = z[n, L.WS_V1 : L.WS_R + 1], z[n, L.WS_W1 : L.WS_Q + 1]
+        turb[n] = (
+            su[n] * z[n, L.WS_U],
+            su[n] * (row @ zv),
+            sigma_w[n] * (row @ zw),
+            sp[n] * z[n, L.WS_P],
+            sigma_w[n] / lw[n] * (gain_q @ zw),
+            -su[n] / lu[n] * (gain_r @ zv),  # r = −dv/dξ: see docs/physics.md
+        )
+    x_axis, y_axis = _turbulence_frame(wind_params)
+    z_axis = np.array([0.0, 0.0, 1.0])
+    mean = np.zeros((len(state), 3))
+    mean[:, :2] = wind_params[:, [L.W_MEAN_E, L.W_MEAN_N]] * factor[:, None]
+    gust = wind_params[:, L.W_GUST_E : L.W_GUST_U + 1]
+    length, hold = wind_params[:, L.W_GUST_LENGTH], wind_params[:, L.W_GUST_HOLD]
+    started = np.isfinite(length) & (wind_state[:, L.WS_TIME] >= wind_params[:, L.W_GUST_START])
+    shape = np.zeros(len(state))
+    shape[started] = gust_shape(
+        wind_state[started, L.WS_GUST_DISTANCE], length[started], hold[started]
+    )
+    for block, target in ((slice(0, 3), L.WS_AIR_VELOCITY), (slice(3, 6), L.WS_AIR_RATES)):
+        t = turb[:, block]
+        wind_state[:, target] = x_axis * t[:, :1] + y_axis * t[:, 1:2] + z_axis * t[:, 2:3]
+    wind_state[:, L.WS_AIR_VELOCITY] += mean + shape[:, None] * gust
+
+
+def airspeed(state: Array, params: Array, wind_params: Array) -> Array:
+    """(N,) m/s the vehicle moves through the turbulence field: max(|v − W(h)|, |W(h)|,
+    the floor), W(h) the mean wind at its height."""
+    height = height_above_ground(state, params)
+    factor = profile_factor(height, wind_params[:, L.W_LOG_PROFILE])
+    mean = np.zeros((len(state), 3))
+    mean[:, :2] = wind_params[:, [L.W_MEAN_E, L.W_MEAN_N]] * factor[:, None]
+    relative = np.linalg.norm(state[:, L.VEL] - mean, axis=1)
+    return np.maximum(np.maximum(relative, np.linalg.norm(mean, axis=1)), D.AIRSPEED_FLOOR)
+
+
+def reset_wind(
+    wind_state: Array,
+    wind_params: Array,
+    state: Array,
+    params: Array,
+    streams: NDArray[np.uint64],
+) -> None:
+    """Start the given vehicles' weather: turbulence drawn from its stationary distribution
+    (no start-up transient), the gust clock at 0, the air outputs filled in."""
+    height = height_above_ground(state, params)
+    _, _, rho_r, rho_q = _channel_lengths(height, wind_params)
+    n = normals(streams, N_NORMALS)
+    z = np.zeros((len(state), 8))
+    for k in range(len(state)):
+        z[k, L.WS_U], z[k, L.WS_P] = n[k, 0], n[k, 7]
+        z[k, L.WS_V1 : L.WS_R + 1] = D.lower_cholesky(D.stationary_covariance(rho_r[k])) @ n[k, 1:4]
+        z[k, L.WS_W1 : L.WS_Q + 1] = D.lower_cholesky(D.stationary_covariance(rho_q[k])) @ n[k, 4:7]
+    wind_state[:] = 0.0
+    wind_state[:, L.WS_TURBULENCE] = z
+    air_outputs(wind_state, wind_params, state, params)
+
+
+def advance(
+    wind_state: Array,
+    wind_params: Array,
+    state: Array,
+    params: Array,
+    streams: NDArray[np.uint64],
+    dt: float,
+) -> None:
+    """One physics step of the weather, in place: the shaping filters move on by the
+    distance flown through the air, V·dt, exactly; the gust by the same distance once it
+    has started; then the air outputs for this step are written (held over the step)."""
+    height = height_above_ground(state, params)
+    step = airspeed(state, params, wind_params) * dt  # m flown through the air
+    lu, lw, rho_r, rho_q = _channel_lengths(height, wind_params)
+    lp = D.RATE_LENGTH_P * wind_params[:, L.W_SPAN]
+    n = normals(streams, N_NORMALS)
+    z = wind_state[:, L.WS_TURBULENCE]
+    for k in range(len(state)):
+        e_u = math.exp(-step[k] / lu[k])
+        z[k, L.WS_U] = e_u * z[k, L.WS_U] + math.sqrt(1 - e_u * e_u) * n[k, 0]
+        for first, length, rho, noise in (
+            (L.WS_V1, lu[k], rho_r[k], n[k, 1:4]),
+            (L.WS_W1, lw[k], rho_q[k], n[k, 4:7]),
+        ):
+            dtau = step[k] / length
+            channel = slice(first, first + 3)
+            z[k, channel] = (
+                D.transition(dtau, rho) @ z[k, channel] + D.noise_factor(dtau, rho) @ noise
+            )
+        e_p = math.exp(-step[k] / lp[k]) if lp[k] > 0 else 0.0
+        z[k, L.WS_P] = e_p * z[k, L.WS_P] + math.sqrt(1 - e_p * e_p) * n[k, 7]
+    wind_state[:, L.WS_TURBULENCE] = z
+    air_outputs(wind_state, wind_params, state, params)
+    started = wind_state[:, L.WS_TIME] >= wind_params[:, L.W_GUST_START]
+    wind_state[:, L.WS_GUST_DISTANCE] += np.where(started, step, 0.0)
+    wind_state[:, L.WS_TIME] += dt
