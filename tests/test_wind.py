@@ -358,3 +358,38 @@ def test_turbulence_is_reproducible_per_vehicle_and_seed():
     np.testing.assert_array_equal(a, b)
     assert not np.allclose(a, c)
     assert not np.allclose(a[:, 0], a[:, 1])  # each vehicle has its own stream
+
+
+def test_envs_fly_in_the_wind_option_reproducibly_and_refuse_bad_weather():
+    """``wind=`` as an env option: a steady wind from the west carries a vehicle on
+    hover thrust east; turbulence repeats with the seed; bad weather is one line."""
+    import gymnasium as gym
+
+    import quadsitl  # noqa: F401
+
+    def fly(wind, seed=3):
+        env = gym.make("QuadSITL/Hover-v0", wind=wind)
+        env.reset(seed=seed)
+        for _ in range(20):
+            env.step(np.zeros(4, np.float32))
+        position = env.unwrapped.engine.fleet.state[0, L.POS].copy()
+        env.close()
+        return position
+
+    still = fly(None)
+    westerly = fly({"speed": 6.0, "from_deg": 270.0})
+    assert np.allclose(still, 0.0, atol=1e-6)
+    assert westerly[0] > 0.1 and abs(westerly[1]) < 1e-6  # carried east, not north
+    gusty = {"speed": 6.0, "from_deg": 270.0, "turbulence": "moderate"}
+    np.testing.assert_array_equal(fly(gusty), fly(gusty))
+    assert not np.allclose(fly(gusty), fly(gusty, seed=4))
+    for bad, says in (
+        ({"speed": -1}, "wind speed"),
+        ({"sped": 3}, "unknown wind field"),
+        ([1], "wind must be a Wind or a dict"),
+        ({"speed": 3, "turbulence": "storm"}, "severity"),
+    ):
+        with pytest.raises(ValueError, match=says):
+            gym.make("QuadSITL/Hover-v0", wind=bad)
+    with pytest.raises(ValueError, match="backend='mavlink'"):
+        gym.make("QuadSITL/Hover-v0", wind=gusty, backend="mavlink")

@@ -208,6 +208,11 @@ class MavlinkBackend:
     ) -> None:
         if options.param_randomization:
             raise ValueError("param_randomization is not available with backend='mavlink'")
+        if options.wind is not None:
+            raise ValueError(
+                "wind is not available with backend='mavlink' yet (the simulator process "
+                "flies in still air); use the in-process backend"
+            )
         airframe = get_airframe(options.airframe)  # type: ignore[arg-type]
         if AIRFRAMES.get(airframe.name) != airframe:
             raise ValueError(

@@ -177,7 +177,6 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
     # Block scratch: state, previous state, RK4 temp, k1..k4, parameters, commands, sums.
     scratch_size = (7 * L.STATE_SIZE + L.N_PARAMS + L.N_ROTORS + 4) * B
 
-    @_inline
     def advance(
         state,
         params,
@@ -190,8 +189,12 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
         wind_state,
         streams,
     ):  # pragma: no cover
-        """The body of ``step``; the still-air build is given stand-ins for the wind's
-        arrays, which it never touches."""
+        """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place, each
+        after a step of its weather: ``wind_params`` (n, N_WIND_PARAMS), ``wind_state``
+        (n, N_WIND_STATE), random ``streams`` (n,) uint64.
+
+        Returns -1, or the index of the first vehicle with a non-finite command, in
+        which case nothing was changed."""
         commands = rotor_cmd.ravel()  # (n, 4), or (4,) for one vehicle: 4 per vehicle
         bad = first_invalid_command(commands)
         if bad >= 0:
@@ -267,42 +270,14 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
         return -1
 
     if wind:
+        return jit(advance)
 
-        @jit
-        def step(
-            state,
-            params,
-            rotor_cmd,
-            contact,
-            touchdown_speed,
-            dt,
-            n_substeps,
-            wind_params,
-            wind_state,
-            streams,
-        ):  # pragma: no cover
-            """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place, each
-            after a step of its weather: ``wind_params`` (n, N_WIND_PARAMS), ``wind_state``
-            (n, N_WIND_STATE), random ``streams`` (n,) uint64.
-
-            Returns -1, or the index of the first
-            vehicle with a non-finite command, in which case nothing was changed.
-            """
-            return advance(
-                state,
-                params,
-                rotor_cmd,
-                contact,
-                touchdown_speed,
-                dt,
-                n_substeps,
-                wind_params,
-                wind_state,
-                streams,
-            )
-
-        return step
-
+    # Still air: the same steps without the weather's, written out again because a
+    # compiled function calling ``advance`` would hold it as a closure variable, and
+    # numba's cache key pickles those (a dispatcher by a random UUID): every process
+    # then missed the cache and compiled the kernel again (15–30 s). Three arguments
+    # fewer also matter here: numba's call costs ~0.35 µs with 7 arrays and scalars,
+    # ~1 µs with 10, against a single vehicle's step of about 1 µs.
     @jit
     def still_step(
         state, params, rotor_cmd, contact, touchdown_speed, dt, n_substeps
@@ -312,18 +287,61 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
         Returns -1, or the index of the first
         vehicle with a non-finite command, in which case nothing was changed.
         """
-        return advance(
-            state,
-            params,
-            rotor_cmd,
-            contact,
-            touchdown_speed,
-            dt,
-            n_substeps,
-            state,
-            state,
-            contact,
-        )
+        commands = rotor_cmd.ravel()  # (n, 4), or (4,) for one vehicle: 4 per vehicle
+        bad = first_invalid_command(commands)
+        if bad >= 0:
+            return bad
+        size = L.STATE_SIZE
+        # One allocation cut into the block arrays (each a run of rows of B values).
+        z = size * B
+        scratch = np.empty(scratch_size)
+        s, prev, tmp = scratch[0:z], scratch[z : 2 * z], scratch[2 * z : 3 * z]
+        k1, k2 = scratch[3 * z : 4 * z], scratch[4 * z : 5 * z]
+        k3, k4 = scratch[5 * z : 6 * z], scratch[6 * z : 7 * z]
+        p = scratch[7 * z : 7 * z + L.N_PARAMS * B]
+        cmd = scratch[7 * z + L.N_PARAMS * B : 7 * z + (L.N_PARAMS + L.N_ROTORS) * B]
+        sums = scratch[7 * z + (L.N_PARAMS + L.N_ROTORS) * B :]
+        sixth = dt / 6.0
+        for first in range(0, state.shape[0], B):
+            m = min(B, state.shape[0] - first)
+            for j in range(m):
+                for k in range(size):
+                    s[k * B + j] = state[first + j, k]
+                for k in range(L.N_PARAMS):
+                    p[k * B + j] = params[first + j, k]
+                for k in range(L.N_ROTORS):
+                    cmd[k * B + j] = commands[(first + j) * L.N_ROTORS + k]
+            for _ in range(n_substeps):
+                for j in range(m):  # a crashed vehicle keeps its pose: remember it
+                    if contact[first + j] == L.CRASHED:
+                        for k in range(size):
+                            prev[k * B + j] = s[k * B + j]
+                _derivative(s, p, cmd, k1, m, sums, sums, B, False)
+                _axpy(tmp, s, 0.5 * dt, k1, m, B)
+                _derivative(tmp, p, cmd, k2, m, sums, sums, B, False)
+                _axpy(tmp, s, 0.5 * dt, k2, m, B)
+                _derivative(tmp, p, cmd, k3, m, sums, sums, B, False)
+                _axpy(tmp, s, dt, k3, m, B)
+                _derivative(tmp, p, cmd, k4, m, sums, sums, B, False)
+                for k in range(size):
+                    for j in range(m):
+                        i = k * B + j
+                        s[i] = s[i] + sixth * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+                for j in range(m):
+                    qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
+                    qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
+                    norm = math.sqrt(qw**2 + qx**2 + qy**2 + qz**2)
+                    for k in range(L.I_QW, L.I_QZ + 1):
+                        s[k * B + j] /= norm
+                    omega_max = p[L.P_OMEGA_MAX * B + j]
+                    for k in range(L.I_ROTOR0, size):
+                        s[k * B + j] = min(max(s[k * B + j], 0.0), omega_max)
+                for j in range(m):
+                    _ground_contact(prev, s, p, j, contact, touchdown_speed, first + j, B)
+            for j in range(m):
+                for k in range(size):
+                    state[first + j, k] = s[k * B + j]
+        return -1
 
     return still_step
 

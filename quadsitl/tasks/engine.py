@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -21,6 +22,7 @@ from quadsitl.frames import quat_from_euler
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import FleetLike
+from quadsitl.physics.wind import Wind
 from quadsitl.tasks import features as F
 from quadsitl.tasks import spec as S
 from quadsitl.tasks.reward import jit
@@ -75,6 +77,10 @@ class TaskOptions:
         param_randomization: {parameter: fraction}: each episode, scale that airframe
             parameter by U(1 − f, 1 + f) (names: mass, inertia, thrust_coeff,
             torque_coeff, drag_coeff, aero_moment_coeff, motor_rate).
+        wind: the weather every episode is flown in: a
+            :class:`~quadsitl.physics.wind.Wind` or a dict of its fields (e.g.
+            ``{"speed": 6, "from_deg": 270, "turbulence": "moderate"}``); None: still
+            air. Each episode's turbulence is drawn from the env's own generator.
     """
 
     airframe: object = "paper"
@@ -87,6 +93,7 @@ class TaskOptions:
     init_velocity_noise: float = 0.0
     init_rate_noise: float = 0.0
     param_randomization: dict[str, float] | None = None
+    wind: Wind | dict[str, Any] | None = None
 
     @classmethod
     def from_kwargs(cls, **options: object) -> TaskOptions:
@@ -126,6 +133,24 @@ class TaskOptions:
             if not (_is_real(value) and 0 <= value <= limit):
                 raise ValueError(f"{name} must be in [0, {limit:.4g}] {unit}, got {value!r}")
         self._check_param_randomization()
+        object.__setattr__(self, "wind", self._weather())
+
+    def _weather(self) -> Wind | None:
+        """The ``wind`` option as a checked Wind (None: still air)."""
+        wind = self.wind
+        if wind is None or isinstance(wind, Wind):
+            return None if wind is None or wind.calm else wind
+        if not isinstance(wind, dict):
+            raise ValueError(
+                "wind must be a Wind or a dict of its fields, e.g. "
+                f"{{'speed': 6, 'from_deg': 270, 'turbulence': 'moderate'}}, got {wind!r}"
+            )
+        known = {f.name for f in dataclasses.fields(Wind)}
+        unknown = sorted(set(wind) - known)
+        if unknown:
+            raise ValueError(f"unknown wind field(s) {unknown}; known: {sorted(known)}")
+        weather = Wind(**wind)
+        return None if weather.calm else weather
 
     def _check_param_randomization(self) -> None:
         randomization = self.param_randomization
@@ -309,6 +334,11 @@ class TaskEngine:
         hover = self.fleet.hover_rotor_speed[rows]  # of each vehicle's (randomised) airframe
         states[:, L.ROTORS] = np.minimum(hover, self.fleet.params[rows, L.P_OMEGA_MAX])[:, None]
         self.fleet.reset(states, mask=mask)
+        if o.wind is not None:  # each env's turbulence from its own generator
+            for i in rows:
+                one = np.zeros(self.n, bool)
+                one[i] = True
+                self.fleet.set_wind(o.wind, seed=int(self.rngs[i].integers(2**62)), mask=one)
         self.steps[rows] = 0
         self.outcome[rows] = S.RUNNING
         self.time_within[rows] = 0.0
