@@ -45,7 +45,8 @@ def initial_state(
 
 
 class FleetLike(Protocol):
-    """What the task engine needs of a fleet: its arrays, a reset and a step."""
+    """What the task engine needs of a fleet: its arrays, a reset, a step and its
+    weather."""
 
     state: NDArray[np.float64]
     params: NDArray[np.float64]
@@ -63,6 +64,13 @@ class FleetLike(Protocol):
     ) -> None: ...
 
     def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None: ...
+
+    def set_wind(
+        self,
+        weather: Wind | Sequence[Wind],
+        seed: int | None = None,
+        mask: ArrayLike | None = None,
+    ) -> None: ...
 
 
 class VehicleStates:

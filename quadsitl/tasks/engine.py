@@ -334,7 +334,7 @@ class TaskEngine:
         hover = self.fleet.hover_rotor_speed[rows]  # of each vehicle's (randomised) airframe
         states[:, L.ROTORS] = np.minimum(hover, self.fleet.params[rows, L.P_OMEGA_MAX])[:, None]
         self.fleet.reset(states, mask=mask)
-        if o.wind is not None:  # each env's turbulence from its own generator
+        if isinstance(o.wind, Wind):  # (a dict was made a Wind) each env's own turbulence
             for i in rows:
                 one = np.zeros(self.n, bool)
                 one[i] = True
