@@ -118,6 +118,18 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         "complete MAVLink vehicle on every link (default: 1)",
     )
     sim.add_argument(
+        "--wind",
+        metavar="SPEED,FROM",
+        help="mean wind: SPEED m/s blowing from FROM degrees (clockwise from north, as "
+        "weather reports give it), e.g. 5,270 (default: still air)",
+    )
+    sim.add_argument(
+        "--turbulence",
+        metavar="SEVERITY",
+        help="Dryden turbulence (MIL-F-8785C): light, moderate, severe, or its sigma in "
+        "m/s (default: none)",
+    )
+    sim.add_argument(
         "--spacing",
         type=float,
         default=2.0,
@@ -300,6 +312,7 @@ def _sim_config(args: argparse.Namespace) -> object:
             raise ValueError(
                 f"--param {item!r}: the value {value!r} of {name.strip()} is not a number"
             ) from None
+    wind = _weather(args.wind, args.turbulence)
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be a positive number of seconds, got {args.duration}")
     return SimConfig(
@@ -323,7 +336,30 @@ def _sim_config(args: argparse.Namespace) -> object:
         params=params,
         quiet=args.quiet,
         flown_by=f"the policy in {args.autopilot}" if args.autopilot else None,
+        wind=wind,
     )
+
+
+def _weather(wind: str | None, turbulence: str | None) -> object:
+    """``--wind SPEED,FROM`` and ``--turbulence SEVERITY|SIGMA`` as a Wind (None: still
+    air); a one-line ValueError for what does not parse or is not weather."""
+    from quadsitl.physics.wind import Wind
+
+    if wind is None and turbulence is None:
+        return None
+    speed, from_deg = 0.0, 0.0
+    if wind is not None:
+        try:
+            speed, from_deg = (float(x) for x in wind.split(","))
+        except ValueError:
+            raise ValueError(f"--wind must be SPEED,FROM (m/s, degrees), got {wind!r}") from None
+    level: str | float | None = turbulence
+    if turbulence is not None:
+        try:
+            level = float(turbulence)
+        except ValueError:
+            level = turbulence.lower()
+    return Wind(speed=speed, from_deg=from_deg, turbulence=level)
 
 
 def _sim_collaborators(args: argparse.Namespace) -> tuple[Any, Any]:

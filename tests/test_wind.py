@@ -393,3 +393,54 @@ def test_envs_fly_in_the_wind_option_reproducibly_and_refuse_bad_weather():
             gym.make("QuadSITL/Hover-v0", wind=bad)
     with pytest.raises(ValueError, match="backend='mavlink'"):
         gym.make("QuadSITL/Hover-v0", wind=gusty, backend="mavlink")
+
+
+def _hover_lean(*options: str) -> tuple[np.ndarray, str]:
+    """Take off to 2 m in ``quadsitl sim OPTIONS`` (through MAVLink) and hold for three
+    simulated seconds; the mean horizontal part of the thrust direction over the hold
+    (north, east: the sine of the lean towards each), and the console."""
+    import subprocess
+
+    from gcs_tools.client import VehicleClient
+    from tests.conftest import cli, free_udp_port
+
+    port = free_udp_port()
+    process = subprocess.Popen(
+        cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --speed 4 --logs none", *options),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    client = VehicleClient(f"udpout:127.0.0.1:{port}")
+    try:
+        client.connect(timeout=60)
+        client.arm()
+        client.takeoff(2.0)
+        client.wait(lambda: client.position_enu()[2] > 1.9, 60, "take-off")
+        first = client.wait_message("ATTITUDE_QUATERNION").time_boot_ms
+        leans = []
+        while True:  # three simulated seconds
+            q = client.wait_message("ATTITUDE_QUATERNION")
+            # Thrust along body −z (FRD): its world (NED) direction is −R·(0, 0, 1).
+            north = -2 * (q.q2 * q.q4 + q.q1 * q.q3)
+            east = -2 * (q.q3 * q.q4 - q.q1 * q.q2)
+            leans.append((north, east))
+            if q.time_boot_ms - first > 3000:
+                break
+    finally:
+        client.close()
+        process.terminate()
+        out = process.communicate(timeout=20)[0]
+    return np.mean(leans, axis=0), out
+
+
+def test_sim_flies_in_the_wind_it_is_given():
+    """``quadsitl sim --wind 8,270``: a west wind blows east; holding position, the
+    vehicle leans into it, west (its thrust has a westward part). In still air it
+    hovers level."""
+    still, _ = _hover_lean()
+    windy, out = _hover_lean("--wind", "8,270")
+    assert "wind 8 m/s from 270°" in out
+    assert np.all(np.abs(still) < 0.005), still
+    north, east = windy
+    assert east < -0.02 and abs(north) < 0.2 * abs(east), windy

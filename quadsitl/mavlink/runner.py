@@ -35,6 +35,7 @@ from quadsitl.mavlink.links import Link, is_loopback, parse_url
 from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.physics import Airframe, get_airframe
+from quadsitl.physics.wind import Wind
 from quadsitl.vehicle.controller import Autopilot, Setpoint
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.group import VehicleGroup
@@ -71,6 +72,8 @@ class SimConfig:
     params: dict[str, float] = field(default_factory=dict)
     quiet: bool = False
     flown_by: str | None = None  # what flies instead of the cascaded controller (banner)
+    wind: Wind | None = None  # the weather every vehicle flies in (None: still air)
+    wind_seed: int = 0  # of the turbulence (vehicle i: the i-th stream of this seed)
 
     def validate(self) -> None:
         get_identity(self.autopilot_id)
@@ -112,10 +115,12 @@ class SimConfig:
                 )
 
 
-def _compile(vehicles: int, airframe: str) -> None:
+def _compile(vehicles: int, airframe: str, wind: Wind | None = None) -> None:
     """Load (or compile) the physics and the controller before the clock starts: their
     first calls take milliseconds to seconds, which real time cannot absorb."""
     group = VehicleGroup(vehicles, airframe)
+    if wind is not None and not wind.calm:
+        group.physics.set_wind(wind)
     group.step()
     vehicle = group.vehicles[0]
     vehicle.cascade.rotor_command(vehicle.state, Setpoint(position=np.zeros(3)), 0.004)
@@ -191,7 +196,9 @@ class Simulator:
             make_autopilot=(lambda: make_autopilot(airframe)) if make_autopilot else None,
         )
         self.vehicle = self.group.vehicles[0]
-        _compile(config.vehicles, config.airframe)
+        if config.wind is not None and not config.wind.calm:
+            self.group.physics.set_wind(config.wind, seed=config.wind_seed)
+        _compile(config.vehicles, config.airframe, config.wind)
         for vehicle in self.group.vehicles:
             for name, value in config.params.items():
                 vehicle.set_param(name, value)
@@ -395,6 +402,11 @@ def run_simulator(
     )
     if config.flown_by is not None:
         sim._print(f"quadsitl sim: flown by {config.flown_by}, not the cascaded controller")
+    if config.wind is not None and not config.wind.calm:
+        wind = config.wind
+        form = "MIL-F-8785C" if wind.turbulence_model == "8785C" else "MIL-HDBK-1797"
+        gusts = "" if wind.turbulence is None else f", {wind.turbulence} turbulence ({form})"
+        sim._print(f"quadsitl sim: wind {wind.speed:g} m/s from {wind.from_deg:g}°{gusts}")
     exposed = [link for link in sim.links if link.exposed]
     if exposed and config.signing_key is None:
         names = ", ".join(f"{link.name} ({link.url})" for link in exposed)
