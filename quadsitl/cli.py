@@ -340,7 +340,7 @@ def _sim_config(args: argparse.Namespace) -> object:
     )
 
 
-def _weather(wind: str | None, turbulence: str | None) -> object:
+def _weather(wind: str | None, turbulence: str | None) -> Any:
     """``--wind SPEED,FROM`` and ``--turbulence SEVERITY|SIGMA`` as a Wind (None: still
     air); a one-line ValueError for what does not parse or is not weather."""
     from quadsitl.physics.wind import Wind
