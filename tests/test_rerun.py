@@ -508,6 +508,8 @@ def test_episodes_sent_row_by_row_equal_episodes_sent_at_once(tmp_path, monkeypa
         assert rows["/events"] == 2
     for entity in ("/plots/distance_to_goal/distance", "/plots/reward/reward"):
         np.testing.assert_array_equal(scalars(whole, entity), scalars(cut, entity))
+    events = [_texts(rrd) for rrd in (whole, cut)]  # lengths and returns, however cut
+    assert events[0] == events[1] and all("return" in text for text in events[0])
     whole_paths, cut_paths, vehicle = _paths(whole), _paths(cut), _poses(whole)
     assert {e for e, _ in whole_paths} == {e for e, _ in vehicle} == {0, 1}
     assert whole_paths.keys() == cut_paths.keys()  # logged at the same steps
@@ -542,6 +544,14 @@ def _per_row(rrd: Path, entity: str, column: str) -> dict[tuple[int, int], list]
             ):
                 found[episode, step] = value[0]
     return found
+
+
+def _texts(rrd: Path) -> list[str]:
+    texts = []
+    for chunk in rrc.RrdReader(rrd).store().stream():
+        if chunk.entity_path == "/events":
+            texts += [t[0] for t in chunk.to_record_batch().column("TextLog:text").to_pylist()]
+    return texts
 
 
 def _paths(rrd: Path) -> dict[tuple[int, int], list]:
