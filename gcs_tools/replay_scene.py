@@ -15,6 +15,7 @@ from quadsitl.viz.flight_view import FlightView, Sample
 from quadsitl.viz.scene import (
     STATE_PANEL,
     TIMELINE,
+    WIND_COLOR,
     blueprint,
     framing,
     model_scale,
@@ -135,6 +136,11 @@ def column(kind: str, values: list[Any], levels: list[str]) -> Any:
         return rr.Points3D.columns(positions=np.asarray(values, dtype=np.float64))
     if kind == "geo":
         return rr.GeoPoints.columns(positions=np.asarray(values, dtype=np.float64))
+    if kind == "arrow":
+        arrows = np.asarray(values, dtype=np.float64)
+        return rr.Arrows3D.columns(
+            origins=arrows[:, :3], vectors=arrows[:, 3:], colors=[WIND_COLOR] * len(arrows)
+        )
     return rr.TextLog.columns(text=[str(v) for v in values], level=levels)
 
 

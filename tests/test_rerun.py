@@ -22,6 +22,7 @@ from gcs_tools.replay import convert, main
 from gcs_tools.tlog_reader import ReadStats, read_tlog
 from quadsitl.mavlink.links import free_udp_port
 from quadsitl.mavlink.tlog import TlogWriter
+from quadsitl.viz.flight_view import WIND_ARROW_SCALE
 from tests.conftest import cli, run_cli, start_sim
 
 
@@ -397,6 +398,48 @@ def test_sim_streams_itself_to_a_recording(tmp_path):
     )
     check_attitude(out)
     assert "/plots/state/mode/LOITER" in rows  # the heartbeat's flight mode band
+    assert "plots/wind" not in {origin for _, origin in views(out).values()}  # still air
+
+
+def arrows(rrd: Path, entity: str) -> np.ndarray:
+    """(n, 6) origins and vectors of an Arrows3D entity, one arrow a row."""
+    found = []
+    for chunk in rrc.RrdReader(rrd).store().stream():
+        if chunk.entity_path != entity or chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        for origin, vector in zip(
+            batch.column("Arrows3D:origins").to_pylist(),
+            batch.column("Arrows3D:vectors").to_pylist(),
+            strict=True,
+        ):
+            found.append([*origin[0], *vector[0]])
+    return np.asarray(found, dtype=np.float64).reshape(-1, 6)
+
+
+def test_the_wind_shows_live_and_in_the_replay(tmp_path):
+    """``sim --wind 6,270``: the recording has the wind panel (speed about 6 m/s) and an
+    arrow at the vehicle pointing east, the way a west wind blows; the .tlog's WIND_COV
+    replays as the same panel and arrow."""
+    out = tmp_path / "sim.rrd"
+    result = subprocess.run(
+        cli(
+            "sim --gcs udpin:127.0.0.1:0 --api none --duration 3 --wind 6,270",
+            "--logs", tmp_path, "--rerun-save", out,
+        ),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    replayed = tmp_path / "replay.rrd"
+    convert(next(tmp_path.glob("*.tlog")), replayed)
+    for rrd in (out, replayed):
+        check_panels(rrd, {"plots/wind", "plots/altitude"})
+        assert np.allclose(scalars(rrd, "/plots/wind/speed"), 6.0)
+        wind = arrows(rrd, "/world/wind")
+        assert len(wind) >= 2, rrd
+        assert np.allclose(wind[:, 3:], [6.0 * WIND_ARROW_SCALE, 0.0, 0.0])  # toward east
 
 
 def test_sim_rerun_without_a_display_says_so_in_one_plain_line(tmp_path):

@@ -444,3 +444,57 @@ def test_sim_flies_in_the_wind_it_is_given():
     assert np.all(np.abs(still) < 0.005), still
     north, east = windy
     assert east < -0.02 and abs(north) < 0.2 * abs(east), windy
+
+
+def test_ground_station_sees_and_sets_the_weather():
+    """The weather of ``quadsitl sim --wind 5,270 --turbulence moderate`` reads back as
+    the SIM_WIND_* parameters and is sent as WIND_COV (the air blowing east, the
+    turbulence's variance); a ground station that sets SIM_WIND_SPD to 0 and
+    SIM_WIND_TURB to 0 in flight calms the air, and VFR_HUD's airspeed then equals the
+    speed over the ground (horizontal and climb)."""
+    import subprocess
+
+    from gcs_tools.client import VehicleClient
+    from tests.conftest import cli, free_udp_port
+
+    port = free_udp_port()
+    process = subprocess.Popen(
+        cli(
+            f"sim --gcs udpin:127.0.0.1:{port} --api none --speed 4 --logs none",
+            "--wind", "5,270", "--turbulence", "moderate",
+        ),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )  # fmt: skip
+    client = VehicleClient(f"udpout:127.0.0.1:{port}")
+    try:
+        client.connect(timeout=60)
+        params = client.get_params(timeout=30)
+        assert params["SIM_WIND_SPD"] == 5 and params["SIM_WIND_DIR"] == 270
+        moderate_sigma_w = 0.1 * D.SEVERITY_W20_KT["moderate"] * D.KNOT
+        assert params["SIM_WIND_TURB"] == pytest.approx(moderate_sigma_w, rel=1e-6)
+        east = []
+        while len(east) < 5:  # one a second: the air blows east, 5 m/s on average
+            wind = client.wait_message("WIND_COV", timeout=30)
+            east.append(wind.wind_y)
+            assert wind.var_vert == pytest.approx(moderate_sigma_w**2, rel=1e-5)
+            assert wind.var_horiz > 2 * wind.var_vert  # σ_u, σ_v > σ_w near the ground
+        assert 2.0 < np.mean(east) < 8.0, east
+        client.arm()
+        client.takeoff(2.0)
+        client.wait(lambda: client.position_enu()[2] > 1.9, 60, "take-off")
+        hud = client.wait_message("VFR_HUD", timeout=10)
+        assert hud.airspeed > hud.groundspeed + 1.0  # holding position against the wind
+        assert client.set_param("SIM_WIND_SPD", 0.0) == 0.0
+        assert client.set_param("SIM_WIND_TURB", 0.0) == 0.0
+        client.wait_message(
+            "WIND_COV", 30, lambda w: w.wind_x == w.wind_y == w.wind_z == w.var_horiz == 0
+        )
+        assert any(t.startswith("wind 0 m/s from 270 deg") for t in client.texts), client.texts
+        hud = client.wait_message("VFR_HUD", timeout=10)
+        assert hud.airspeed == pytest.approx(math.hypot(hud.groundspeed, hud.climb), abs=1e-4)
+    finally:
+        client.close()
+        process.terminate()
+        process.communicate(timeout=20)

@@ -39,6 +39,7 @@ from quadsitl.physics.wind import Wind
 from quadsitl.vehicle.controller import Autopilot, Setpoint
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.group import VehicleGroup
+from quadsitl.vehicle.param_binding import show_weather
 from quadsitl.vehicle.results import Severity
 from quadsitl.vehicle.vehicle import Vehicle
 
@@ -200,6 +201,7 @@ class Simulator:
             self.group.physics.set_wind(config.wind, seed=config.wind_seed)
         _compile(config.vehicles, config.airframe, config.wind)
         for vehicle in self.group.vehicles:
+            show_weather(vehicle)
             for name, value in config.params.items():
                 vehicle.set_param(name, value)
         self.links: list[Link] = []

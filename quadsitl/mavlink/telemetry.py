@@ -32,6 +32,7 @@ from quadsitl.mavlink.identity import (
     Identity,
 )
 from quadsitl.mavlink.motor_path import STANDARD_GRAVITY, odometry_values
+from quadsitl.physics import dryden as D
 from quadsitl.physics import layout as L
 from quadsitl.vehicle.modes import MAIN_AUTO, MAIN_OFFBOARD, MAIN_POSCTL, Mode
 from quadsitl.vehicle.vehicle import Vehicle
@@ -133,15 +134,26 @@ class Snapshot:
         return frames.quat_rotate(frames.quat_conjugate(self.q_ned_frd), MAGNETIC_FIELD_NED)
 
     @cached_property
+    def wind_ned(self) -> np.ndarray:
+        """The air's velocity at the vehicle, m/s, local NED (mean wind, turbulence and
+        gust; 0 in still air)."""
+        return frames.enu_to_ned(self.vehicle.fleet.air_velocity[0])
+
+    @cached_property
+    def airspeed(self) -> float:
+        """Speed through the air, m/s (the ground speed in still air)."""
+        return float(np.linalg.norm(self.velocity_ned - self.wind_ned))
+
+    @cached_property
     def air(self) -> tuple[float, float, float]:
         """(static pressure hPa, differential pressure hPa, temperature °C) of the ISA
-        at the vehicle's altitude; the differential pressure of its speed through still
+        at the vehicle's altitude; the differential pressure of its speed through the
         air."""
         sea_pressure, sea_temperature = ISA_SEA_LEVEL
         temperature = sea_temperature - ISA_LAPSE * self.alt_amsl  # K
         pressure = sea_pressure * (temperature / sea_temperature) ** ISA_EXPONENT
         density = pressure * 100 / (AIR_GAS_CONSTANT * temperature)  # kg/m³
-        dynamic = 0.5 * density * float(np.dot(self.velocity_ned, self.velocity_ned)) / 100
+        dynamic = 0.5 * density * self.airspeed**2 / 100
         return pressure, dynamic, temperature - 273.15
 
 
@@ -267,7 +279,7 @@ def build_vfr_hud(s: Snapshot) -> Any:
     v = s.vehicle
     throttle = round(100 * float(np.mean(v.rotor_cmd)) / v.airframe.max_rotor_speed)
     return _encoder.vfr_hud_encode(
-        s.ground_speed,
+        s.airspeed,
         s.ground_speed,
         round(s.heading_deg) % 360,
         throttle,
@@ -393,6 +405,27 @@ def build_raw_imu(s: Snapshot) -> Any:
     return _encoder.raw_imu_encode(s.time_usec, *_imu_integers(s), 0, round(s.air[2] * 100))
 
 
+def build_wind_cov(s: Snapshot) -> Any:
+    """The wind at the vehicle, as PX4 sends its estimate (QGroundControl shows its speed
+    and the direction it blows from). Here it is the truth: the air's velocity (NED, m/s)
+    and the turbulence's variance about the mean wind (m²/s²) at the vehicle's height."""
+    weather = s.vehicle.fleet.winds[0]
+    height = max(-float(s.position_ned[2]), 0.0)
+    sigma_u, sigma_v, sigma_w = (float(x) for x in D.intensities(height, weather.sigma_w))
+    north, east, down = (float(x) for x in s.wind_ned)
+    return _encoder.wind_cov_encode(
+        s.time_usec,
+        north,
+        east,
+        down,
+        sigma_u**2 + sigma_v**2,
+        sigma_w**2,
+        s.alt_amsl,
+        0.0,
+        0.0,
+    )
+
+
 def build_current_mode(s: Snapshot) -> Any:
     v = s.vehicle
     standard = next((e.standard_mode for e in AVAILABLE_MODES if e.mode is v.mode), 0)
@@ -416,6 +449,7 @@ BUILDERS: dict[int, Callable[[Snapshot], Any]] = {
     mav.MAVLINK_MSG_ID_MISSION_CURRENT: build_mission_current,
     mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: build_autopilot_version,
     mav.MAVLINK_MSG_ID_CURRENT_MODE: build_current_mode,
+    mav.MAVLINK_MSG_ID_WIND_COV: build_wind_cov,
     # On request only (SET_MESSAGE_INTERVAL, REQUEST_MESSAGE): not in DEFAULT_RATES.
     mav.MAVLINK_MSG_ID_ODOMETRY: build_odometry,
     mav.MAVLINK_MSG_ID_HIGHRES_IMU: build_highres_imu,
@@ -439,6 +473,7 @@ DEFAULT_RATES: dict[int, float] = {
     mav.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: 10.0,
     mav.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,
     mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
+    mav.MAVLINK_MSG_ID_WIND_COV: 1.0,
 }
 
 FASTEST_INTERVAL = 1.0 / max(DEFAULT_RATES.values())  # s, of the fastest default stream

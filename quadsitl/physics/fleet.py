@@ -237,8 +237,11 @@ class VehicleStates:
         self._reset_wind(rows)
 
     def _reset_wind(self, rows: NDArray[np.bool_]) -> None:
-        """Restart the weather of the selected vehicles (nothing to do in still air)."""
-        if not self.windy or not rows.any():
+        """Restart the weather of the selected vehicles (in still air: no air moves)."""
+        if not rows.any():
+            return
+        if not self.windy:
+            self.wind_state[rows] = 0.0
             return
         streams = self.wind_streams[rows]
         wind_state = self.wind_state[rows]

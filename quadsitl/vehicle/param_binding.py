@@ -1,13 +1,14 @@
 """Where each parameter goes: gains to the cascaded controller, capacity and cells to the
-battery, the airframe to the physics; and the checks that depend on the vehicle (an
+battery, the airframe and the weather to the physics; and the checks that depend on the vehicle (an
 airframe change in flight, voltages that cross)."""
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 from quadsitl.physics import get_airframe
-from quadsitl.vehicle.params import AIRFRAME_NAMES, SPECS, ParamError
+from quadsitl.vehicle.params import AIRFRAME_NAMES, SPECS, WEATHER_PARAMS, ParamError
 from quadsitl.vehicle.results import Severity
 
 if TYPE_CHECKING:
@@ -58,3 +59,30 @@ def apply(v: Vehicle, name: str) -> None:
             v.fleet.airframes = [airframe]
             v.cascade.set_airframe(airframe)
             v.event(Severity.INFO, f"airframe {airframe.name}")
+    elif name in WEATHER_PARAMS:
+        _set_weather(v)
+
+
+def _set_weather(v: Vehicle) -> None:
+    """Fly ``v`` in the weather its SIM_WIND_* parameters describe (its turbulence
+    restarts; a gust set through the Python API stays). A σ_w equal to the current one
+    keeps the turbulence as it was named (a severity stays a severity)."""
+    current = v.fleet.winds[0]
+    sigma = v.params["SIM_WIND_TURB"]
+    turbulence = current.turbulence if math.isclose(sigma, current.sigma_w) else sigma or None
+    weather = current.replace(
+        speed=v.params["SIM_WIND_SPD"], from_deg=v.params["SIM_WIND_DIR"], turbulence=turbulence
+    )
+    if weather != current:
+        v.fleet.set_wind(weather)
+        text = f"wind {weather.speed:g} m/s from {weather.from_deg:g} deg, turbulence "
+        v.event(Severity.INFO, text + f"sigma_w {weather.sigma_w:.2f} m/s")  # ASCII: STATUSTEXT
+
+
+def show_weather(v: Vehicle) -> None:
+    """Write the weather ``v`` flies in (set through the Python API or ``quadsitl sim
+    --wind``) into its SIM_WIND_* parameters, so that a ground station reads it."""
+    weather = v.fleet.winds[0]
+    v.params.values["SIM_WIND_SPD"] = float(weather.speed)
+    v.params.values["SIM_WIND_DIR"] = float(weather.from_deg % 360.0)
+    v.params.values["SIM_WIND_TURB"] = float(weather.sigma_w)

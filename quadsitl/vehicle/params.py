@@ -126,7 +126,15 @@ PARAMETERS: tuple[ParamSpec, ...] = (
          read_only=True),
     _int("SIM_AIRFRAME", 0, 0, len(AIRFRAME_NAMES) - 1, "-",
          "airframe preset: " + ", ".join(f"{i} {n}" for i, n in enumerate(AIRFRAME_NAMES))),
+    # The weather (ArduPilot's SIM_WIND_* names and units; PX4's SIH has only a constant
+    # wind, as north and east parts). Takes effect at the next physics step.
+    ParamSpec("SIM_WIND_SPD", 0.0, 0.0, 50.0, "m/s", "mean wind speed"),
+    ParamSpec("SIM_WIND_DIR", 0.0, 0.0, 360.0, "deg", "direction the wind blows from, "
+              "clockwise from north"),
+    ParamSpec("SIM_WIND_TURB", 0.0, 0.0, 10.0, "m/s", "Dryden turbulence intensity σ_w "
+              "(0: none; light 0.77, moderate 1.54, severe 2.31)"),
 )  # fmt: skip
+WEATHER_PARAMS = ("SIM_WIND_SPD", "SIM_WIND_DIR", "SIM_WIND_TURB")
 
 SPECS: dict[str, ParamSpec] = {p.name: p for p in PARAMETERS}
 assert all(len(name) <= 16 for name in SPECS)

@@ -6,9 +6,10 @@ GLOBAL_POSITION_INT until a local one appears), attitude from ATTITUDE_QUATERNIO
 ODOMETRY, HIL_STATE_QUATERNION, ATTITUDE), rotors from ACTUATOR_OUTPUT_STATUS or
 SERVO_OUTPUT_RAW, battery from BATTERY_STATUS or SYS_STATUS, setpoints from
 POSITION_TARGET_LOCAL_NED / SET_POSITION_TARGET_LOCAL_NED and ATTITUDE_TARGET, GPS from
-GPS_RAW_INT and GLOBAL_POSITION_INT (``map/track``), the flight state from HEARTBEAT and
-MISSION_CURRENT; messages it does not know are ignored. Angles are in degrees, unwrapped
-(continuous through ±180°). Frames: see :mod:`quadsitl.viz.scene` (ENU on screen).
+GPS_RAW_INT and GLOBAL_POSITION_INT (``map/track``), the wind from WIND_COV, the flight
+state from HEARTBEAT and MISSION_CURRENT; messages it does not know are ignored. Angles
+are in degrees, unwrapped (continuous through ±180°). Frames: see
+:mod:`quadsitl.viz.scene` (ENU on screen).
 """
 
 from __future__ import annotations
@@ -26,13 +27,14 @@ from quadsitl.vehicle.modes import Mode
 from quadsitl.viz.scene import pose_from_ned, quat_xyzw
 
 GCS_TYPE = 6  # MAV_TYPE_GCS
+WIND_ARROW_SCALE = 0.25  # m of arrow in the 3-D view per m/s of wind
 SEVERITY = ["CRITICAL"] * 3 + ["ERROR", "WARN", "INFO", "INFO", "DEBUG"]  # MAV_SEVERITY 0..7
 
 
 @dataclass
 class Sample:
-    """``kind``: translation (3,), rotation (xyzw), scalar, point (3,), geo (lat, lon in
-    degrees) or text."""
+    """``kind``: translation (3,), rotation (xyzw), scalar, point (3,), arrow (origin and
+    vector, (6,)), geo (lat, lon in degrees) or text."""
 
     entity: str
     kind: str
@@ -51,6 +53,8 @@ class FlightView:
     last_mode: tuple[bool, str] | None = None
     hover_rotor: float = 1.0  # rotor value at hover (rad/s for quadsitl); 1: raw values
     last_angle: dict[str, float] = field(default_factory=dict)  # entity -> last degrees
+    position: np.ndarray = field(default_factory=lambda: np.zeros(3))  # m, ENU: the latest
+    windy: bool = False  # a WIND_COV with moving air has been seen
 
     def samples(self, msg: Any, own: bool = False) -> list[Sample]:
         """Samples of one message; ``own``: built by the simulator itself (no header)."""
@@ -65,7 +69,11 @@ class FlightView:
         if handler is None:
             return []
         self.seen.add(kind)
-        return list(handler(msg))
+        out = list(handler(msg))
+        for sample in out:
+            if sample.kind == "translation":
+                self.position = sample.value
+        return out
 
     # --- whose message ----------------------------------------------------------------
     def _from_vehicle(self, msg: Any) -> bool:
@@ -259,6 +267,23 @@ class FlightView:
         if "BATTERY_STATUS" in self.seen or msg.voltage_battery in (0, 65535):
             return []
         return [Sample("plots/battery_voltage/voltage", "scalar", msg.voltage_battery / 1000)]
+
+    def _wind_cov(self, msg: Any) -> list[Sample]:
+        """The air's velocity at the vehicle: its speed and parts (ENU) in the wind panel,
+        and an arrow at the vehicle, WIND_ARROW_SCALE m per m/s, the way the air blows.
+        Nothing until the air moves (PX4 and quadsitl send WIND_COV in still air too)."""
+        east, north, up = frames.ned_to_enu([msg.wind_x, msg.wind_y, msg.wind_z])
+        if not self.windy and east == north == up == 0.0:
+            return []
+        self.windy = True
+        air = np.array([east, north, up], dtype=np.float64)
+        return [
+            Sample("plots/wind/speed", "scalar", float(np.linalg.norm(air))),
+            Sample("plots/wind/east", "scalar", float(east)),
+            Sample("plots/wind/north", "scalar", float(north)),
+            Sample("plots/wind/up", "scalar", float(up)),
+            Sample("world/wind", "arrow", np.concatenate([self.position, air * WIND_ARROW_SCALE])),
+        ]
 
     def _statustext(self, msg: Any) -> list[Sample]:
         level = SEVERITY[min(max(msg.severity, 0), 7)]

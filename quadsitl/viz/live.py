@@ -16,7 +16,7 @@ import rerun as rr
 
 from quadsitl.viz.fleet import Member
 from quadsitl.viz.flight_view import FlightView, Sample
-from quadsitl.viz.scene import TIMELINE, series_style
+from quadsitl.viz.scene import TIMELINE, WIND_COLOR, series_style
 
 TRACK_REDRAW = 0.5  # s of wall time between trajectory redraws
 MAX_TRACK = 20_000  # points kept for the trajectory (about 7 min at 50 Hz)
@@ -103,5 +103,10 @@ class LiveLogger:
                 del self.track[:-MAX_TRACK]
         elif sample.kind == "point":
             self.rec.log(sample.entity, rr.Points3D([sample.value], radii=0.06))
+        elif sample.kind == "arrow":
+            origin, vector = sample.value[:3], sample.value[3:]
+            self.rec.log(
+                sample.entity, rr.Arrows3D(origins=[origin], vectors=[vector], colors=WIND_COLOR)
+            )
         else:
             self.rec.log(sample.entity, rr.TextLog(str(sample.value), level=sample.level))

@@ -138,7 +138,9 @@ PANELS = {
     "reward_terms": "goal errors (reward terms)",
     "distance_to_goal": "distance to goal (m)",
     "speed": "speed (m/s)",
+    "wind": "wind at the vehicle (m/s, ENU)",
 }
+WIND_COLOR = [70, 150, 230]  # the wind arrow in the 3-D view
 STATE_PANEL = "state"  # flight mode (a coloured band per mode) and armed (0/1)
 LIVE_PANELS = (
     "altitude",

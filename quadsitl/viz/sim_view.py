@@ -1,17 +1,18 @@
 """``quadsitl sim --rerun``: the simulated vehicles streamed to Rerun as they fly.
 
 At most 30 times a wall-clock second, the telemetry each vehicle would send (attitude,
-local position, rotor speeds, battery, mission item) is built by the same builders as
-the MAVLink telemetry and logged through :class:`LiveLogger`, and once a second its
-heartbeat (flight mode and armed state); vehicle events go to the text log. Rotor
-speeds are shown as multiples of the airframe's hover speed. One vehicle: the 3-D
-camera follows it. A fleet (``sim --vehicles N``): each vehicle under its system id
-(:mod:`quadsitl.viz.fleet`), the camera framing the fleet's start grid and the air
-above it. The vehicles are logged in turn, one per tick (a tick then costs what one
-vehicle's does, never a burst for the whole fleet), at most FLEET_SNAPSHOTS ticks a
-second: 30 Hz each for 2 vehicles, 15 Hz each for 4, less for more (recording more
-stole the real-time loop's time on a 2-core machine). A vehicle's messages are logged
-one per pass of the simulator's loop, in the time a physics step leaves.
+local position, rotor speeds, battery, mission item, and the wind when the air moves) is
+built by the same builders as the MAVLink telemetry and logged through
+:class:`LiveLogger`, and once a second its heartbeat (flight mode and armed state);
+vehicle events go to the text log. Rotor speeds are shown as multiples of the airframe's
+hover speed. One vehicle: the 3-D camera follows it. A fleet (``sim --vehicles N``):
+each vehicle under its system id (:mod:`quadsitl.viz.fleet`), the camera framing the
+fleet's start grid and the air above it. The vehicles are logged in turn, one per tick
+(a tick then costs what one vehicle's does, never a burst for the whole fleet), at most
+FLEET_SNAPSHOTS ticks a second: 30 Hz each for 2 vehicles, 15 Hz each for 4, less for
+more (recording more stole the real-time loop's time on a 2-core machine). A vehicle's
+messages are logged one per pass of the simulator's loop, in the time a physics step
+leaves.
 """
 
 from __future__ import annotations
@@ -61,12 +62,14 @@ class SimView:
             raise ValueError("SimView needs at least one vehicle")
         self.vehicles = dict(vehicles)
         members = fleet_members(self.vehicles) if len(self.vehicles) > 1 else []
+        windy = any(v.fleet.windy for v in self.vehicles.values())
+        panels = (*PANELS, "wind") if windy else PANELS
         if members:
             grid = np.array([m.offset for m in members])
             frame = framing(np.concatenate([grid, grid + np.array([0.0, 0.0, FRAMED_HEIGHT])]))
-            layout = fleet_blueprint(members, PANELS, frame=frame, whole_range=False)
+            layout = fleet_blueprint(members, panels, frame=frame, whole_range=False)
         else:
-            layout = blueprint(PANELS, follow=True, whole_range=False)
+            layout = blueprint(panels, follow=True, whole_range=False)
         self.rec = open_recording(
             "quadsitl_sim",
             save,
@@ -115,6 +118,8 @@ class SimView:
         stamp = time.time()
         snapshot = T.Snapshot(vehicle)
         messages = [build(snapshot) for build in BUILDERS]
+        if vehicle.fleet.windy:
+            messages.append(T.build_wind_cov(snapshot))
         if wall_now >= self.next_heartbeat[index]:
             self.next_heartbeat[index] = wall_now + 1.0
             messages.insert(0, T.build_heartbeat(vehicle))
