@@ -70,6 +70,7 @@ class FleetLike(Protocol):
         weather: Wind | Sequence[Wind],
         seed: int | None = None,
         mask: ArrayLike | None = None,
+        stream: int | None = None,
     ) -> None: ...
 
 
@@ -211,6 +212,7 @@ class VehicleStates:
         weather: Wind | Sequence[Wind],
         seed: int | None = None,
         mask: ArrayLike | None = None,
+        stream: int | None = None,
     ) -> None:
         """Fly the vehicles (all, or those of ``mask``) in ``weather`` (one Wind, or one
         per selected vehicle) from now on; their turbulence restarts, drawn from its
@@ -218,7 +220,9 @@ class VehicleStates:
 
         ``seed``: the selected vehicles' random streams (vehicle i of the fleet gets the
         i-th stream of this seed, so a vehicle's turbulence does not depend on which others
-        fly beside it); None keeps the streams as they are.
+        fly beside it); None keeps the streams as they are. ``stream``: instead, every
+        selected vehicle takes that stream of ``seed`` (a task env seeds each vehicle on
+        its own: env i of a vector env then flies the single env's turbulence).
         """
         rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
         if rows.shape != (self.n,):
@@ -233,7 +237,10 @@ class VehicleStates:
         if seed is not None:
             if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool):
                 raise ValueError(f"wind seed must be an integer, got {seed!r}")
-            self.wind_streams[index] = wind.seed_streams(int(seed), self.n)[index]
+            if stream is None:
+                self.wind_streams[index] = wind.seed_streams(int(seed), self.n)[index]
+            else:
+                self.wind_streams[index] = wind.seed_streams(int(seed), stream + 1)[stream]
         self._reset_wind(rows)
 
     def _reset_wind(self, rows: NDArray[np.bool_]) -> None:
@@ -291,8 +298,9 @@ class Fleet(VehicleStates):
         weather: Wind | Sequence[Wind],
         seed: int | None = None,
         mask: ArrayLike | None = None,
+        stream: int | None = None,
     ) -> None:
-        super().set_wind(weather, seed, mask)
+        super().set_wind(weather, seed, mask, stream)
         self._choose_step()
 
     # --- stepping -------------------------------------------------------------------
@@ -390,6 +398,7 @@ class FleetSlot(VehicleStates):
         weather: Wind | Sequence[Wind],
         seed: int | None = None,
         mask: ArrayLike | None = None,
+        stream: int | None = None,
     ) -> None:
         """Set this vehicle's weather in the shared fleet (its stream: the ``index``-th of
         ``seed``)."""
@@ -397,7 +406,7 @@ class FleetSlot(VehicleStates):
             return
         one = np.zeros(self.shared.n, bool)
         one[self.index] = True
-        self.shared.set_wind(weather, seed, one)
+        self.shared.set_wind(weather, seed, one, stream)
 
     @property
     def time(self) -> float:  # type: ignore[override]

@@ -22,9 +22,9 @@ from quadsitl.physics.fleet import FleetLike
 from quadsitl.physics.wind import Wind
 from quadsitl.tasks import features as F
 from quadsitl.tasks import spec as S
-from quadsitl.tasks.delay import DelayLine
+from quadsitl.tasks.delay import Delay, DelayLine
 from quadsitl.tasks.options import TaskOptions
-from quadsitl.tasks.randomization import airframe_scale_row
+from quadsitl.tasks.randomization import Randomization, airframe_scale_row
 from quadsitl.tasks.reward import jit
 
 
@@ -119,7 +119,7 @@ class TaskEngine:
         if scale is not None:
             self.base_params *= scale
             self.fleet.params[:] = self.base_params
-        self.randomization = options.randomize
+        self.randomization = Randomization.parse(options.randomize)  # (checked already)
         self.substeps = round(options.control_period / options.physics_dt)
         self.control_period = options.control_period
         seconds = options.episode_seconds or task.episode_seconds
@@ -148,7 +148,9 @@ class TaskEngine:
         self._action_shape = (num_envs, L.N_ROTORS)
         # Whatever state the task keeps per env beyond the goal (its own typed object).
         self.task_state = task.new_state(num_envs) if task.new_state is not None else None
-        delay = options.delay or (self.randomization.delay if self.randomization else None)
+        delay = Delay.parse(options.delay)  # fixed, or drawn by randomize (not both)
+        if delay is None and self.randomization is not None:
+            delay = self.randomization.delay
         self.delay: DelayLine | None = None
         if delay is not None:
             delay.check_episode(self.max_steps * self.control_period)
@@ -213,7 +215,7 @@ class TaskEngine:
                 one[i] = True
                 weather = drawn_wind.draw(self.rngs[i]) if drawn_wind else o.wind
                 seed = int(self.rngs[i].integers(2**62))
-                self.fleet.set_wind(weather, seed=seed, mask=one)  # type: ignore[arg-type]
+                self.fleet.set_wind(weather, seed, one, stream=0)  # type: ignore[arg-type]
         if self.delay is not None:
             self.delay.draw(rows, self.rngs)
         self.steps[rows] = 0
