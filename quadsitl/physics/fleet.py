@@ -68,9 +68,9 @@ class FleetLike(Protocol):
     def set_wind(
         self,
         weather: Wind | Sequence[Wind],
-        seed: int | None = None,
+        seed: int | Sequence[int] | None = None,
         mask: ArrayLike | None = None,
-        stream: int | None = None,
+        restart: bool = True,
     ) -> None: ...
 
 
@@ -210,9 +210,9 @@ class VehicleStates:
     def set_wind(
         self,
         weather: Wind | Sequence[Wind],
-        seed: int | None = None,
+        seed: int | Sequence[int] | None = None,
         mask: ArrayLike | None = None,
-        stream: int | None = None,
+        restart: bool = True,
     ) -> None:
         """Fly the vehicles (all, or those of ``mask``) in ``weather`` (one Wind, or one
         per selected vehicle) from now on; their turbulence restarts, drawn from its
@@ -220,9 +220,10 @@ class VehicleStates:
 
         ``seed``: the selected vehicles' random streams (vehicle i of the fleet gets the
         i-th stream of this seed, so a vehicle's turbulence does not depend on which others
-        fly beside it); None keeps the streams as they are. ``stream``: instead, every
-        selected vehicle takes that stream of ``seed`` (a task env seeds each vehicle on
-        its own: env i of a vector env then flies the single env's turbulence).
+        fly beside it); or one seed per selected vehicle, each taking the first stream of
+        its own seed (as a fleet of one would: env i of a vector env flies the turbulence
+        of the single env); None keeps the streams as they are. ``restart=False``: the
+        caller resets these vehicles next, and their weather restarts then.
         """
         rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
         if rows.shape != (self.n,):
@@ -235,13 +236,18 @@ class VehicleStates:
             self.wind_params[i] = w.to_params(_span(self.airframes[i]))
             self.winds[i] = w
         if seed is not None:
-            if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool):
+            seeds = [seed] if isinstance(seed, (int, np.integer, bool)) else list(seed)
+            if not all(isinstance(s, (int, np.integer)) and not isinstance(s, bool) for s in seeds):
                 raise ValueError(f"wind seed must be an integer, got {seed!r}")
-            if stream is None:
+            if isinstance(seed, (int, np.integer)):
                 self.wind_streams[index] = wind.seed_streams(int(seed), self.n)[index]
+            elif len(seeds) == len(index):
+                own = [wind.seed_streams(int(s), 1)[0] for s in seeds]
+                self.wind_streams[index] = np.array(own, dtype=np.uint64)
             else:
-                self.wind_streams[index] = wind.seed_streams(int(seed), stream + 1)[stream]
-        self._reset_wind(rows)
+                raise ValueError(f"need one wind seed for each of the {len(index)} vehicles")
+        if restart:
+            self._reset_wind(rows)
 
     def _reset_wind(self, rows: NDArray[np.bool_]) -> None:
         """Restart the weather of the selected vehicles (nothing to do in still air)."""
@@ -296,11 +302,11 @@ class Fleet(VehicleStates):
     def set_wind(
         self,
         weather: Wind | Sequence[Wind],
-        seed: int | None = None,
+        seed: int | Sequence[int] | None = None,
         mask: ArrayLike | None = None,
-        stream: int | None = None,
+        restart: bool = True,
     ) -> None:
-        super().set_wind(weather, seed, mask, stream)
+        super().set_wind(weather, seed, mask, restart)
         self._choose_step()
 
     # --- stepping -------------------------------------------------------------------
@@ -396,9 +402,9 @@ class FleetSlot(VehicleStates):
     def set_wind(
         self,
         weather: Wind | Sequence[Wind],
-        seed: int | None = None,
+        seed: int | Sequence[int] | None = None,
         mask: ArrayLike | None = None,
-        stream: int | None = None,
+        restart: bool = True,
     ) -> None:
         """Set this vehicle's weather in the shared fleet (its stream: the ``index``-th of
         ``seed``)."""
@@ -406,7 +412,7 @@ class FleetSlot(VehicleStates):
             return
         one = np.zeros(self.shared.n, bool)
         one[self.index] = True
-        self.shared.set_wind(weather, seed, one, stream)
+        self.shared.set_wind(weather, seed, one, restart)
 
     @property
     def time(self) -> float:  # type: ignore[override]

@@ -194,11 +194,18 @@ class TaskEngine:
             draws.append(rng.random(12))
             if callable(goal):
                 goals[k] = goal(rng)
-            if randomization is not None and randomization.airframe:
-                params = self.base_params.copy()
-                randomization.draw_airframe(rng, params)
-                self.fleet.params[i] = params
         self.goal[rows] = goals
+        if randomization is not None and randomization.airframe:
+            rngs = [self.rngs[i] for i in rows]
+            self.fleet.params[rows] = randomization.draw_airframes(rngs, self.base_params)
+        drawn_wind = randomization.wind if randomization is not None else None
+        if isinstance(o.wind, Wind) or drawn_wind is not None:  # each env's own turbulence
+            weathers, seeds = [], []
+            for i in rows:
+                weathers.append(drawn_wind.draw(self.rngs[i]) if drawn_wind else o.wind)
+                seeds.append(int(self.rngs[i].integers(2**62)))
+            # The weather first: the reset below starts it from each vehicle's new state.
+            self.fleet.set_wind(weathers, seeds, mask, restart=False)  # type: ignore[arg-type]
         noise = -spread + (spread - -spread) * np.array(draws)
         states = np.zeros((rows.size, L.STATE_SIZE))
         states[:, L.POS] = starts + noise[:, 0:3]
@@ -208,14 +215,6 @@ class TaskEngine:
         hover = self.fleet.hover_rotor_speed[rows]  # of each vehicle's (randomised) airframe
         states[:, L.ROTORS] = np.minimum(hover, self.fleet.params[rows, L.P_OMEGA_MAX])[:, None]
         self.fleet.reset(states, mask=mask)
-        drawn_wind = randomization.wind if randomization is not None else None
-        if isinstance(o.wind, Wind) or drawn_wind is not None:  # each env's own turbulence
-            for i in rows:
-                one = np.zeros(self.n, bool)
-                one[i] = True
-                weather = drawn_wind.draw(self.rngs[i]) if drawn_wind else o.wind
-                seed = int(self.rngs[i].integers(2**62))
-                self.fleet.set_wind(weather, seed, one, stream=0)  # type: ignore[arg-type]
         if self.delay is not None:
             self.delay.draw(rows, self.rngs)
         self.steps[rows] = 0

@@ -140,10 +140,15 @@ class Randomization:
             raise ValueError("randomize['sensor_noise']: this version has no sensor models")
         return cls(airframe, wind, delay)
 
-    def draw_airframe(self, rng: np.random.Generator, params: np.ndarray) -> None:
-        """Scale the row ``params`` in place, parameter by parameter in the dict's order."""
-        for name, fraction in self.airframe.items():
-            params[AIRFRAME_COLUMNS[name]] *= rng.uniform(1 - fraction, 1 + fraction)
+    def draw_airframes(self, rngs: list[np.random.Generator], base: np.ndarray) -> np.ndarray:
+        """(len(rngs), N_PARAMS) rows: ``base`` scaled, each row by its generator's
+        draws, one ``uniform(1 − f, 1 + f)`` per parameter in the dict's order."""
+        spread = np.array(list(self.airframe.values()))
+        scales = np.array([rng.uniform(1 - spread, 1 + spread) for rng in rngs])
+        factors = np.ones((len(rngs), L.N_PARAMS))
+        for k, name in enumerate(self.airframe):
+            factors[:, AIRFRAME_COLUMNS[name]] *= scales[:, k : k + 1]
+        return base * factors
 
 
 def _is_real(value: object) -> bool:
