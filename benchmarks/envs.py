@@ -3,9 +3,9 @@
 Targets, one core: ≥ 1,800,000 env steps/s for the vector env, ≥ 80,000 for the
 single env; the vector env with domain randomisation (``randomize=True``: airframes,
 wind with light turbulence half the time, observation and actuation delays drawn per
-episode) ≥ 0.7 × the plain one, timed in the same run. Each env step is one 0.05 s control period = 5 RK4 physics substeps. Actions
-are small random perturbations around hover, so episodes run their course and
-autoresets happen at the task's own rate.
+episode) ≥ 0.7 × the plain one, timed in the same run. Each env step is one 0.05 s
+control period = 5 RK4 physics substeps. Actions are small random perturbations around
+hover, so episodes run their course and autoresets happen at the task's own rate.
 """
 
 from __future__ import annotations
