@@ -143,8 +143,10 @@ class Randomization:
     def draw_airframes(self, rngs: list[np.random.Generator], base: np.ndarray) -> np.ndarray:
         """(len(rngs), N_PARAMS) rows: ``base`` scaled, each row by its generator's
         draws, one ``uniform(1 − f, 1 + f)`` per parameter in the dict's order."""
-        spread = np.array(list(self.airframe.values()))
-        scales = np.array([rng.uniform(1 - spread, 1 + spread) for rng in rngs])
+        spread, k = np.array(list(self.airframe.values())), len(self.airframe)
+        # low + (high − low)·u is what rng.uniform(low, high) computes, from the same u.
+        low, high = 1 - spread, 1 + spread
+        scales = low + (high - low) * np.array([rng.random(k) for rng in rngs])
         factors = np.ones((len(rngs), L.N_PARAMS))
         for k, name in enumerate(self.airframe):
             factors[:, AIRFRAME_COLUMNS[name]] *= scales[:, k : k + 1]
