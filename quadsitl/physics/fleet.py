@@ -10,7 +10,7 @@ simulator processes of the MAVLink backend) is a VehicleStates with its own ``st
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -236,11 +236,12 @@ class VehicleStates:
             self.wind_params[i] = w.to_params(_span(self.airframes[i]))
             self.winds[i] = w
         if seed is not None:
-            seeds = [seed] if isinstance(seed, (int, np.integer, bool)) else list(seed)
+            one = not isinstance(seed, (list, tuple, np.ndarray))
+            seeds: list[Any] = [seed] if one else list(seed)  # type: ignore[arg-type]
             if not all(isinstance(s, (int, np.integer)) and not isinstance(s, bool) for s in seeds):
                 raise ValueError(f"wind seed must be an integer, got {seed!r}")
-            if isinstance(seed, (int, np.integer)):
-                self.wind_streams[index] = wind.seed_streams(int(seed), self.n)[index]
+            if one:
+                self.wind_streams[index] = wind.seed_streams(int(seeds[0]), self.n)[index]
             elif len(seeds) == len(index):
                 own = [wind.seed_streams(int(s), 1)[0] for s in seeds]
                 self.wind_streams[index] = np.array(own, dtype=np.uint64)
