@@ -33,7 +33,10 @@ Keyword arguments of ``gymnasium.make(id, **kwargs)`` (all optional; unknown nam
 ``init_attitude_noise`` (rad), ``init_velocity_noise`` (m/s), ``init_rate_noise`` (rad/s)
 (uniform half-widths added to the start; 0 = the paper's start) and
 ``param_randomization`` (``{{"mass": 0.1, ...}}``: per episode, scale each named airframe
-parameter by U(1 − f, 1 + f)). ``render_mode``: None, or "rerun" to log every episode to a
+parameter by U(1 − f, 1 + f)), ``delay`` (``{{"observation": s, "action": s}}``, seconds
+or (low, high) drawn per episode), ``randomize`` (True: airframe, wind and delay drawn per
+episode; docs/tasks.md) and ``airframe_scale`` (``{{"mass": 1.3}}``: exact scales).
+``render_mode``: None, or "rerun" to log every episode to a
 Rerun viewer (or to the .rrd file ``rerun_save``).
 
 Episode-end ``info`` keys: ``outcome`` (timed_out, out_of_bounds, flipped, landed,

@@ -206,8 +206,9 @@ class MavlinkBackend:
         simulators: int | None = None,
         ray: bool | str | None = None,
     ) -> None:
-        if options.param_randomization:
-            raise ValueError("param_randomization is not available with backend='mavlink'")
+        for name in ("param_randomization", "randomize", "airframe_scale", "delay"):
+            if getattr(options, name):  # their per-episode draws live in this process
+                raise ValueError(f"{name} is not available with backend='mavlink'")
         if options.wind is not None:
             raise ValueError(
                 "wind is not available with backend='mavlink' yet (the simulator process "

@@ -10,7 +10,7 @@ simulator processes of the MAVLink backend) is a VehicleStates with its own ``st
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -68,8 +68,9 @@ class FleetLike(Protocol):
     def set_wind(
         self,
         weather: Wind | Sequence[Wind],
-        seed: int | None = None,
+        seed: int | Sequence[int] | None = None,
         mask: ArrayLike | None = None,
+        restart: bool = True,
     ) -> None: ...
 
 
@@ -209,8 +210,9 @@ class VehicleStates:
     def set_wind(
         self,
         weather: Wind | Sequence[Wind],
-        seed: int | None = None,
+        seed: int | Sequence[int] | None = None,
         mask: ArrayLike | None = None,
+        restart: bool = True,
     ) -> None:
         """Fly the vehicles (all, or those of ``mask``) in ``weather`` (one Wind, or one
         per selected vehicle) from now on; their turbulence restarts, drawn from its
@@ -218,7 +220,10 @@ class VehicleStates:
 
         ``seed``: the selected vehicles' random streams (vehicle i of the fleet gets the
         i-th stream of this seed, so a vehicle's turbulence does not depend on which others
-        fly beside it); None keeps the streams as they are.
+        fly beside it); or one seed per selected vehicle, each taking the first stream of
+        its own seed (as a fleet of one would: env i of a vector env flies the turbulence
+        of the single env); None keeps the streams as they are. ``restart=False``: the
+        caller resets these vehicles next, and their weather restarts then.
         """
         rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
         if rows.shape != (self.n,):
@@ -231,10 +236,19 @@ class VehicleStates:
             self.wind_params[i] = w.to_params(_span(self.airframes[i]))
             self.winds[i] = w
         if seed is not None:
-            if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool):
+            one = not isinstance(seed, (list, tuple, np.ndarray))
+            seeds: list[Any] = [seed] if one else list(seed)  # type: ignore[arg-type]
+            if not all(isinstance(s, (int, np.integer)) and not isinstance(s, bool) for s in seeds):
                 raise ValueError(f"wind seed must be an integer, got {seed!r}")
-            self.wind_streams[index] = wind.seed_streams(int(seed), self.n)[index]
-        self._reset_wind(rows)
+            if one:
+                self.wind_streams[index] = wind.seed_streams(int(seeds[0]), self.n)[index]
+            elif len(seeds) == len(index):
+                own = [wind.seed_streams(int(s), 1)[0] for s in seeds]
+                self.wind_streams[index] = np.array(own, dtype=np.uint64)
+            else:
+                raise ValueError(f"need one wind seed for each of the {len(index)} vehicles")
+        if restart:
+            self._reset_wind(rows)
 
     def _reset_wind(self, rows: NDArray[np.bool_]) -> None:
         """Restart the weather of the selected vehicles (in still air: no air moves)."""
@@ -292,10 +306,11 @@ class Fleet(VehicleStates):
     def set_wind(
         self,
         weather: Wind | Sequence[Wind],
-        seed: int | None = None,
+        seed: int | Sequence[int] | None = None,
         mask: ArrayLike | None = None,
+        restart: bool = True,
     ) -> None:
-        super().set_wind(weather, seed, mask)
+        super().set_wind(weather, seed, mask, restart)
         self._choose_step()
 
     # --- stepping -------------------------------------------------------------------
@@ -391,8 +406,9 @@ class FleetSlot(VehicleStates):
     def set_wind(
         self,
         weather: Wind | Sequence[Wind],
-        seed: int | None = None,
+        seed: int | Sequence[int] | None = None,
         mask: ArrayLike | None = None,
+        restart: bool = True,
     ) -> None:
         """Set this vehicle's weather in the shared fleet (its stream: the ``index``-th of
         ``seed``)."""
@@ -400,7 +416,7 @@ class FleetSlot(VehicleStates):
             return
         one = np.zeros(self.shared.n, bool)
         one[self.index] = True
-        self.shared.set_wind(weather, seed, one)
+        self.shared.set_wind(weather, seed, one, restart)
 
     @property
     def time(self) -> float:  # type: ignore[override]

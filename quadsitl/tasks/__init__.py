@@ -1,7 +1,8 @@
 """The paper's five flight tasks over the batched physics."""
 
 from quadsitl.tasks import hover, land, random_waypoint, static_waypoint, target_follow
-from quadsitl.tasks.engine import TaskEngine, TaskOptions
+from quadsitl.tasks.engine import TaskEngine
+from quadsitl.tasks.options import TaskOptions
 from quadsitl.tasks.spec import OUTCOME_NAMES, TaskSpec
 
 TASKS: dict[str, TaskSpec] = {

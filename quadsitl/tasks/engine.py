@@ -10,10 +10,7 @@ reset conventions (the faces do that).
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -25,149 +22,10 @@ from quadsitl.physics.fleet import FleetLike
 from quadsitl.physics.wind import Wind
 from quadsitl.tasks import features as F
 from quadsitl.tasks import spec as S
+from quadsitl.tasks.delay import Delay, DelayLine
+from quadsitl.tasks.options import TaskOptions
+from quadsitl.tasks.randomization import Randomization, airframe_scale_row
 from quadsitl.tasks.reward import jit
-
-# Parameter columns that ``param_randomization`` may scale.
-RANDOMIZABLE = {
-    "mass": [L.P_MASS],
-    "inertia": [L.P_JXX, L.P_JYY, L.P_JZZ],
-    "thrust_coeff": [L.P_KT],
-    "torque_coeff": [L.P_KQ],
-    "drag_coeff": [L.P_KD],
-    "aero_moment_coeff": [L.P_KM],
-    "motor_rate": [L.P_MOTOR_RATE],
-}
-
-
-# Time steps a simulation can sensibly take: finer than 0.1 ms costs seconds per env
-# step for nothing (RK4 at 0.01 s is already accurate, docs/physics.md); coarser than
-# 50 ms is unstable for this airframe.
-LIMITS = {"physics_dt": (1e-4, 0.05), "control_period": (1e-4, 1.0)}
-MAX_EPISODE_SECONDS = 3600.0
-# Start-state noise a task can sensibly draw (half-widths): beyond these the vehicle starts
-# far outside every task's arena (waypoints lie within a few metres), faster than it can fly
-# (about 10 m/s) or tumbling beyond what its rotors can stop.
-NOISE_LIMITS = {
-    "init_position_noise": (100.0, "m"),
-    "init_attitude_noise": (math.pi / 2, "rad"),
-    "init_velocity_noise": (20.0, "m/s"),
-    "init_rate_noise": (20.0, "rad/s"),
-}
-
-
-def _is_real(value: object) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-
-
-@dataclass(frozen=True)
-class TaskOptions:
-    """Options every task accepts as keyword arguments.
-
-    Attributes:
-        airframe: airframe preset name (``"paper"``, ``"paper-x"``) or an Airframe.
-        physics_dt: physics step, s (the paper: 0.01).
-        control_period: seconds per env step, a whole number of physics steps (0.05).
-        episode_seconds: episode length, s; None = the task's (paper) value.
-        beta: action bandwidth β, rad/s: Ω_c = Ω_hover + β·a (Eq. 19; the paper: 35).
-        init_position_noise: half-width, m, of a uniform offset added to the start
-            position on each axis (0 = the paper's start).
-        init_attitude_noise: half-width, rad, of uniform roll, pitch and yaw at start.
-        init_velocity_noise: half-width, m/s, of a uniform start velocity per axis.
-        init_rate_noise: half-width, rad/s, of uniform start body rates per axis.
-        param_randomization: {parameter: fraction}: each episode, scale that airframe
-            parameter by U(1 − f, 1 + f) (names: mass, inertia, thrust_coeff,
-            torque_coeff, drag_coeff, aero_moment_coeff, motor_rate).
-        wind: the weather every episode is flown in: a
-            :class:`~quadsitl.physics.wind.Wind` or a dict of its fields (e.g.
-            ``{"speed": 6, "from_deg": 270, "turbulence": "moderate"}``); None: still
-            air. Each episode's turbulence is drawn from the env's own generator.
-    """
-
-    airframe: object = "paper"
-    physics_dt: float = 0.01
-    control_period: float = 0.05
-    episode_seconds: float | None = None
-    beta: float = 35.0
-    init_position_noise: float = 0.0
-    init_attitude_noise: float = 0.0
-    init_velocity_noise: float = 0.0
-    init_rate_noise: float = 0.0
-    param_randomization: dict[str, float] | None = None
-    wind: Wind | dict[str, Any] | None = None
-
-    @classmethod
-    def from_kwargs(cls, **options: object) -> TaskOptions:
-        """Build from keyword arguments; an unknown name raises ValueError."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(options) - known)
-        if unknown:
-            raise ValueError(f"unknown task option(s) {unknown}; known: {sorted(known)}")
-        return cls(**options)  # type: ignore[arg-type]
-
-    def __post_init__(self) -> None:
-        get_airframe(self.airframe)  # type: ignore[arg-type]
-        for name in ("physics_dt", "control_period", "beta"):
-            value = getattr(self, name)
-            if not (_is_real(value) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive number, got {value!r}")
-        for name, (low, high) in LIMITS.items():
-            value = getattr(self, name)
-            if not low <= value <= high:
-                raise ValueError(f"{name} must be in [{low:g}, {high:g}] s, got {value!r}")
-        ratio = self.control_period / self.physics_dt
-        if abs(ratio - round(ratio)) > 1e-9:
-            raise ValueError(
-                f"control_period ({self.control_period}) must be a whole number of "
-                f"physics_dt ({self.physics_dt})"
-            )
-        seconds = self.episode_seconds
-        if seconds is not None and not (
-            _is_real(seconds) and self.control_period <= seconds <= MAX_EPISODE_SECONDS
-        ):
-            raise ValueError(
-                f"episode_seconds must be in [control_period, {MAX_EPISODE_SECONDS:g}] s, "
-                f"got {seconds!r}"
-            )
-        for name, (limit, unit) in NOISE_LIMITS.items():
-            value = getattr(self, name)
-            if not (_is_real(value) and 0 <= value <= limit):
-                raise ValueError(f"{name} must be in [0, {limit:.4g}] {unit}, got {value!r}")
-        self._check_param_randomization()
-        object.__setattr__(self, "wind", self._weather())
-
-    def _weather(self) -> Wind | None:
-        """The ``wind`` option as a checked Wind (None: still air)."""
-        wind = self.wind
-        if wind is None or isinstance(wind, Wind):
-            return None if wind is None or wind.calm else wind
-        if not isinstance(wind, dict):
-            raise ValueError(
-                "wind must be a Wind or a dict of its fields, e.g. "
-                f"{{'speed': 6, 'from_deg': 270, 'turbulence': 'moderate'}}, got {wind!r}"
-            )
-        known = {f.name for f in dataclasses.fields(Wind)}
-        unknown = sorted(set(wind) - known)
-        if unknown:
-            raise ValueError(f"unknown wind field(s) {unknown}; known: {sorted(known)}")
-        weather = Wind(**wind)
-        return None if weather.calm else weather
-
-    def _check_param_randomization(self) -> None:
-        randomization = self.param_randomization
-        if randomization is None:
-            return
-        if not isinstance(randomization, dict):
-            raise ValueError(
-                "param_randomization must be a dict of parameter name to fraction, e.g. "
-                f"{{'mass': 0.1}}, got {randomization!r}"
-            )
-        for name, fraction in randomization.items():
-            if name not in RANDOMIZABLE:
-                raise ValueError(f"cannot randomise {name!r}; randomisable: {sorted(RANDOMIZABLE)}")
-            if not (_is_real(fraction) and 0 <= fraction < 1):
-                raise ValueError(
-                    f"param_randomization[{name!r}] must be a number in [0, 1), got {fraction!r}"
-                )
 
 
 @jit
@@ -255,12 +113,20 @@ class TaskEngine:
         self.fleet: FleetLike = fleet or Fleet(
             num_envs, airframe=self.airframe, dt=options.physics_dt, ground_z=ground_z
         )
+        # The airframe every episode starts from: nominal, or scaled by airframe_scale.
         self.base_params = self.fleet.params[0].copy()
+        scale = airframe_scale_row(options.airframe_scale)
+        if scale is not None:
+            self.base_params *= scale
+            self.fleet.params[:] = self.base_params
+        self.randomization = Randomization.parse(options.randomize)  # (checked already)
         self.substeps = round(options.control_period / options.physics_dt)
         self.control_period = options.control_period
         seconds = options.episode_seconds or task.episode_seconds
         self.max_steps = max(1, round(seconds / options.control_period))
-        self.hover_speed = self.airframe.hover_rotor_speed  # Eq. 19's Ω_h (nominal)
+        # Eq. 19's Ω_h and the action bounds stay nominal under airframe_scale and
+        # randomisation: what a real controller knows of its vehicle.
+        self.hover_speed = self.airframe.hover_rotor_speed
         self.action_low = -self.hover_speed / options.beta
         self.action_high = (self.airframe.max_rotor_speed - self.hover_speed) / options.beta
         self.obs_size = F.OBS_SIZE + task.extra_obs
@@ -282,6 +148,15 @@ class TaskEngine:
         self._action_shape = (num_envs, L.N_ROTORS)
         # Whatever state the task keeps per env beyond the goal (its own typed object).
         self.task_state = task.new_state(num_envs) if task.new_state is not None else None
+        delay = Delay.parse(options.delay)  # fixed, or drawn by randomize (not both)
+        if delay is None and self.randomization is not None:
+            delay = self.randomization.delay
+        self.delay: DelayLine | None = None
+        if delay is not None:
+            delay.check_episode(self.max_steps * self.control_period)
+            self.delay = DelayLine(
+                delay, num_envs, options.physics_dt, self.substeps, self.obs_size
+            )
 
     # --- seeding and reset ---------------------------------------------------------
     def seed(self, seeds: list[int | None]) -> None:
@@ -293,7 +168,7 @@ class TaskEngine:
         rows = np.flatnonzero(mask)
         if rows.size == 0:
             return
-        o = self.options
+        o, randomization = self.options, self.randomization
         # Half-widths of the start noise, in the order drawn: position, attitude,
         # velocity, rates (three values each). ``low + (high − low)·u`` is what
         # ``rng.uniform(low, high)`` computes, from the same draws, without its checks.
@@ -319,12 +194,18 @@ class TaskEngine:
             draws.append(rng.random(12))
             if callable(goal):
                 goals[k] = goal(rng)
-            if o.param_randomization:
-                params = self.base_params.copy()
-                for name, fraction in o.param_randomization.items():
-                    params[RANDOMIZABLE[name]] *= rng.uniform(1 - fraction, 1 + fraction)
-                self.fleet.params[i] = params
         self.goal[rows] = goals
+        if randomization is not None and randomization.airframe:
+            rngs = [self.rngs[i] for i in rows]
+            self.fleet.params[rows] = randomization.draw_airframes(rngs, self.base_params)
+        drawn_wind = randomization.wind if randomization is not None else None
+        if isinstance(o.wind, Wind) or drawn_wind is not None:  # each env's own turbulence
+            weathers, seeds = [], []
+            for i in rows:
+                weathers.append(drawn_wind.draw(self.rngs[i]) if drawn_wind else o.wind)
+                seeds.append(int(self.rngs[i].integers(2**62)))
+            # The weather first: the reset below starts it from each vehicle's new state.
+            self.fleet.set_wind(weathers, seeds, mask, restart=False)  # type: ignore[arg-type]
         noise = -spread + (spread - -spread) * np.array(draws)
         states = np.zeros((rows.size, L.STATE_SIZE))
         states[:, L.POS] = starts + noise[:, 0:3]
@@ -334,11 +215,8 @@ class TaskEngine:
         hover = self.fleet.hover_rotor_speed[rows]  # of each vehicle's (randomised) airframe
         states[:, L.ROTORS] = np.minimum(hover, self.fleet.params[rows, L.P_OMEGA_MAX])[:, None]
         self.fleet.reset(states, mask=mask)
-        if isinstance(o.wind, Wind):  # (a dict was made a Wind) each env's own turbulence
-            for i in rows:
-                one = np.zeros(self.n, bool)
-                one[i] = True
-                self.fleet.set_wind(o.wind, seed=int(self.rngs[i].integers(2**62)), mask=one)
+        if self.delay is not None:
+            self.delay.draw(rows, self.rngs)
         self.steps[rows] = 0
         self.outcome[rows] = S.RUNNING
         self.time_within[rows] = 0.0
@@ -350,6 +228,8 @@ class TaskEngine:
         # The first reward of an episode measures progress from its own start, not from
         # where the previous episode ended (the authors' code got this wrong).
         self.prev_dist[rows] = self.dist[rows]
+        if self.delay is not None:
+            self.delay.reset(rows, self.obs[rows], self.hover_speed)
 
     def observe(self, rows: NDArray[np.int64] | None = None) -> None:
         """Recompute the observation and goal distances of the vehicles as they are (of
@@ -361,6 +241,14 @@ class TaskEngine:
         obs, dist, tilt = self.obs[rows], self.dist[rows], self.tilt[rows]
         observe(fleet.state[rows], fleet.params[rows], self.goal[rows], obs, dist, tilt)
         self.obs[rows], self.dist[rows], self.tilt[rows] = obs, dist, tilt
+
+    def _observation_of(self, rows: NDArray[np.int64]) -> NDArray[np.float32]:
+        """The observation of the vehicles of ``rows`` as they are now (a copy)."""
+        fleet, count = self.fleet, rows.size
+        obs = np.empty((count, self.obs_size), np.float32)
+        dist, tilt = np.empty((count, F.N_DIST)), np.empty(count)
+        self.task.observe(fleet.state[rows], fleet.params[rows], self.goal[rows], obs, dist, tilt)
+        return obs
 
     # --- stepping ------------------------------------------------------------------
     def step(
@@ -406,7 +294,10 @@ class TaskEngine:
         if bad >= 0:
             raise ValueError(f"action of env {bad} is not finite: {raw[bad]}")
         fleet = self.fleet
-        fleet.step(self.rotor_cmd, n_substeps=self.substeps)
+        if self.delay is None:
+            fleet.step(self.rotor_cmd, n_substeps=self.substeps)
+        else:
+            self.delay.step(fleet, self.rotor_cmd, self.steps, self._observation_of)
         if self.task.advance_goal is not None:
             self.task.advance_goal(self, active)
         self.task.evaluate(
@@ -424,6 +315,8 @@ class TaskEngine:
             self.reward,
             self.outcome,
         )
+        if self.delay is not None:
+            self.delay.delay_observations(self.obs, self.steps)
         close_step(
             self.dist,
             self.prev_dist,
