@@ -3,6 +3,7 @@
     python benchmarks/images.py [NAME ...]     # PNGs into docs/images/, .rrd beside them
 
 Each recording is made the way a user makes it — the mission demo (``quadsitl demo``,
+in still air and in wind with moderate turbulence,
 replayed), a replay of a foreign-style (PX4-like) log, ``quadsitl eval --rerun`` of
 each shipped policy, a 4-vehicle fleet (``quadsitl sim --vehicles 4``, each vehicle
 flying its own mission, its log replayed) — and rendered by the Rerun viewer itself,
@@ -41,10 +42,10 @@ WINDOW = "1600x900"  # logical points; saved at this size in pixels
 POLICIES = ("hover", "land", "random_waypoint", "static_waypoint", "target_follow")
 
 
-def demo_recording(folder: Path) -> Path:
-    """``quadsitl demo``: a mission flown through MAVLink, then replayed."""
-    logs = folder / "demo"
-    if run_demo(speed=4.0, logs=str(logs)) != 0:
+def demo_recording(folder: Path, *sim_args: str) -> Path:
+    """``quadsitl demo [SIM_ARGS]``: a mission flown through MAVLink, then replayed."""
+    logs = folder / ("demo_wind" if sim_args else "demo")
+    if run_demo(speed=4.0, logs=str(logs), sim_args=sim_args) != 0:
         raise RuntimeError("the demo flight failed")
     return next(logs.glob("*.rrd"))
 
@@ -238,6 +239,9 @@ def recordings(folder: Path) -> dict[str, Callable[[], Path]]:
     """Picture name -> how its recording is made."""
     made: dict[str, Callable[[], Path]] = {
         "rerun_demo": lambda: demo_recording(folder),
+        "rerun_wind": lambda: demo_recording(
+            folder, "--wind", "5,270", "--turbulence", "moderate"
+        ),
         "rerun_replay_px4": lambda: foreign_recording(folder),
         "rerun_fleet": lambda: fleet_recording(folder),
     }

@@ -41,10 +41,11 @@ def stop_simulator(process: subprocess.Popen[str], timeout: float = 10.0) -> str
     return process.stdout.read() if process.stdout else ""
 
 
-def run_demo(speed: float = 4.0, logs: str = "logs") -> int:
+def run_demo(speed: float = 4.0, logs: str = "logs", sim_args: tuple[str, ...] = ()) -> int:
+    """``sim_args``: more options of ``quadsitl sim`` (the weather: ``--wind 5,270``)."""
     port = free_udp_port()
     sim = start_simulator(
-        "--api", f"udpout:127.0.0.1:{port}", "--speed", str(speed), "--logs", logs
+        "--api", f"udpout:127.0.0.1:{port}", "--speed", str(speed), "--logs", logs, *sim_args
     )
     client = VehicleClient(f"udpin:127.0.0.1:{port}")
     started = time.monotonic()
@@ -73,6 +74,8 @@ def run_demo(speed: float = 4.0, logs: str = "logs") -> int:
         "(none)",
     )
     for line in output.splitlines():
+        if line.startswith("quadsitl sim: wind"):
+            print("  " + line)
         if line.startswith("[") and "s]" in line:
             print("  vehicle:", line)
     print(f"quadsitl demo: done in {time.monotonic() - started:.1f} s wall clock")

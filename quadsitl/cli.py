@@ -39,6 +39,7 @@ def _build_parser() -> argparse.ArgumentParser:
     demo.add_argument(
         "--print-every", type=float, default=0.5, help="seconds between table rows (default: 0.5)"
     )
+    _add_weather_options(demo)
     _add_sim_parser(commands)
     _add_fly_parser(commands)
     try:  # training needs torch; the simulator does not
@@ -117,18 +118,7 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         help="vehicles in this process, their physics stepped as one batch; each is a "
         "complete MAVLink vehicle on every link (default: 1)",
     )
-    sim.add_argument(
-        "--wind",
-        metavar="SPEED,FROM",
-        help="mean wind: SPEED m/s blowing from FROM degrees (clockwise from north, as "
-        "weather reports give it), e.g. 5,270 (default: still air)",
-    )
-    sim.add_argument(
-        "--turbulence",
-        metavar="SEVERITY",
-        help="Dryden turbulence (MIL-F-8785C): light, moderate, severe, or its sigma in "
-        "m/s (default: none)",
-    )
+    _add_weather_options(sim)
     sim.add_argument(
         "--spacing",
         type=float,
@@ -340,6 +330,22 @@ def _sim_config(args: argparse.Namespace) -> object:
     )
 
 
+def _add_weather_options(parser: argparse.ArgumentParser) -> None:
+    """``--wind`` and ``--turbulence``, of ``sim`` and ``demo`` alike."""
+    parser.add_argument(
+        "--wind",
+        metavar="SPEED,FROM",
+        help="mean wind: SPEED m/s blowing from FROM degrees (clockwise from north, as "
+        "weather reports give it), e.g. 5,270 (default: still air)",
+    )
+    parser.add_argument(
+        "--turbulence",
+        metavar="SEVERITY",
+        help="Dryden turbulence (MIL-F-8785C): light, moderate, severe, or its sigma in "
+        "m/s (default: none)",
+    )
+
+
 def _weather(wind: str | None, turbulence: str | None) -> Any:
     """``--wind SPEED,FROM`` and ``--turbulence SEVERITY|SIGMA`` as a Wind (None: still
     air); a one-line ValueError for what does not parse or is not weather."""
@@ -412,7 +418,19 @@ def _main(argv: Sequence[str] | None = None) -> int:
     if args.command == "demo" and not args.physics:
         from gcs_tools.demo import run_demo as run_mission_demo
 
-        return run_mission_demo(speed=args.speed, logs=args.logs)
+        try:
+            _weather(args.wind, args.turbulence)  # a bad value: an error before any flight
+        except ValueError as error:
+            parser.exit(2, f"quadsitl demo: error: {error}\n")
+        weather = [*("--wind", args.wind)] if args.wind else []
+        weather += [*("--turbulence", args.turbulence)] if args.turbulence else []
+        return run_mission_demo(speed=args.speed, logs=args.logs, sim_args=tuple(weather))
+    if args.command == "demo" and (args.wind or args.turbulence):
+        parser.exit(
+            2,
+            "quadsitl demo: error: --wind and --turbulence fly the simulator's "
+            "demo, not --physics\n",
+        )
     if args.command == "demo":
         from quadsitl.demo import run_demo
 

@@ -22,7 +22,7 @@ from gcs_tools.replay import convert, main
 from gcs_tools.tlog_reader import ReadStats, read_tlog
 from quadsitl.mavlink.links import free_udp_port
 from quadsitl.mavlink.tlog import TlogWriter
-from quadsitl.viz.flight_view import WIND_ARROW_SCALE
+from quadsitl.viz.scene import WIND_ARROW_SCALE
 from tests.conftest import cli, run_cli, start_sim
 
 

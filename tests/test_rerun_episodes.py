@@ -47,8 +47,30 @@ def test_render_mode_rerun_records_episodes(tmp_path):
         },
     )
     assert rows["/events"] == 2  # each episode's outcome
+    assert "/plots/wind/speed" not in rows and "/world/wind" not in rows  # still air
     with pytest.raises(ValueError, match="render_mode"):
         gym.make("QuadSITL/Hover-v0", render_mode="human")
+
+
+def test_episodes_in_wind_show_it(tmp_path):
+    """An env flying in a 5 m/s west wind records the wind panel (the air's speed, 5 m/s
+    on average with turbulence) and an arrow at the vehicle, blowing east."""
+    import gymnasium as gym
+
+    import quadsitl  # noqa: F401
+
+    out = tmp_path / "windy.rrd"
+    wind = {"speed": 5.0, "from_deg": 270.0, "turbulence": "light"}
+    env = gym.make("QuadSITL/Hover-v0", render_mode="rerun", rerun_save=str(out), wind=wind)
+    env.reset(seed=0)
+    for _ in range(40):
+        env.step(np.zeros(4, np.float32))
+    env.close()
+    check_panels(out, {"plots/wind", "plots/altitude"})
+    speed = scalars(out, "/plots/wind/speed")
+    assert len(speed) == 41 and 3.0 < speed.mean() < 7.0 and speed.std() > 0.01
+    arrows = rows_per_entity(out, static=False)["/world/wind"]
+    assert arrows == 41
 
 
 def _record_episodes(path: Path, task: str, seeds: tuple[int, ...]) -> int:

@@ -498,3 +498,25 @@ def test_ground_station_sees_and_sets_the_weather():
         client.close()
         process.terminate()
         process.communicate(timeout=20)
+
+
+@pytest.mark.slow
+def test_the_demo_mission_flies_in_wind_and_turbulence(tmp_path):
+    """``quadsitl demo --wind 5,270 --turbulence moderate``: the mission is flown and the
+    vehicle lands at home; the path holds within 0.3 m RMS (0.04 m in still air)."""
+    import re
+    import subprocess
+
+    from tests.conftest import cli
+
+    result = subprocess.run(
+        cli("demo --wind 5,270 --turbulence moderate --logs", tmp_path),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "wind 5 m/s from 270°, moderate turbulence" in result.stdout
+    rms = float(re.search(r"path tracking error: RMS ([\d.]+) m", result.stdout).group(1))
+    assert rms < 0.3, result.stdout
+    assert "landed: True" in result.stdout

@@ -118,6 +118,7 @@ class VehicleStates:
         self.time = 0.0
         # Still air until set_wind: the weather's parameters, state and random streams.
         self.winds: list[Wind] = [wind.CALM] * self.n
+        self.stirred = np.zeros(self.n, bool)  # per vehicle: its Wind is not calm
         self.wind_params = np.stack([wind.CALM.to_params(_span(a)) for a in airframes])
         self.wind_state = np.zeros((self.n, L.N_WIND_STATE))
         self.wind_streams = wind.seed_streams(0, self.n)
@@ -157,7 +158,7 @@ class VehicleStates:
     @property
     def windy(self) -> bool:
         """True when any vehicle flies in something other than still air."""
-        return not all(w.calm for w in self.winds)
+        return bool(self.stirred.any())
 
     @property
     def hover_rotor_speed(self) -> NDArray[np.float64]:
@@ -235,6 +236,7 @@ class VehicleStates:
         for i, w in zip(index, winds, strict=True):
             self.wind_params[i] = w.to_params(_span(self.airframes[i]))
             self.winds[i] = w
+            self.stirred[i] = not w.calm
         if seed is not None:
             one = not isinstance(seed, (list, tuple, np.ndarray))
             seeds: list[Any] = [seed] if one else list(seed)  # type: ignore[arg-type]
@@ -397,6 +399,7 @@ class FleetSlot(VehicleStates):
         self.wind_params = fleet.wind_params[rows]
         self.wind_state = fleet.wind_state[rows]
         self.wind_streams = fleet.wind_streams[rows]
+        self.stirred = fleet.stirred[rows]
         self._epoch = fleet.time
 
     @property

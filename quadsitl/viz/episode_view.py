@@ -4,7 +4,8 @@ Logged on the ``step`` timeline (one tick per env step), in the task's world fra
 (ENU, metres): the vehicle posed from the physics state (with the episode's path), what the task
 flies to — the goal (a sphere of the task's goal radius), the landing pad (a disc of
 its radius) or the moving target — and the reward, the goal errors the reward is made
-of (position, attitude, velocity, rates), the distance to the goal, altitude and speed.
+of (position, attitude, velocity, rates), the distance to the goal, altitude and speed,
+and in wind the air's velocity at the vehicle (a panel and an arrow).
 Each episode's outcome (landed, crashed, timed out ...) is an event. Each episode
 starts a new ``episode`` on its own timeline; the layout (blueprint) frames the task's
 start and goal on the first reset.
@@ -32,7 +33,14 @@ from quadsitl.tasks import TaskEngine
 from quadsitl.tasks import features as F
 from quadsitl.tasks import spec as S
 from quadsitl.tasks.land import PAD_RADIUS
-from quadsitl.viz.scene import EPISODE_PANELS, blueprint, framing, open_recording
+from quadsitl.viz.scene import (
+    EPISODE_PANELS,
+    WIND_ARROW_SCALE,
+    WIND_COLOR,
+    blueprint,
+    framing,
+    open_recording,
+)
 
 STEP_TIMELINE = "step"
 TERMS = ("position", "attitude", "velocity", "rates")  # the columns of engine.dist
@@ -42,15 +50,17 @@ CAPACITY = 32768  # steps buffered before they are sent
 FLUSH_AFTER = 0.5  # wall s: a buffer older than this is sent at the next step
 
 # One buffer row: the vehicle's state, the goal position, the goal errors, the speed,
-# the distance to the goal, the reward (NaN at a reset), the episode and the step.
+# the distance to the goal, the reward (NaN at a reset), the episode, the step and the
+# air's velocity at the vehicle (m/s, ENU; 0 in still air).
 C_GOAL = slice(L.STATE_SIZE, L.STATE_SIZE + 3)
 C_DIST = slice(C_GOAL.stop, C_GOAL.stop + len(TERMS))
 C_SPEED, C_DISTANCE, C_REWARD, C_EPISODE, C_STEP = range(C_DIST.stop, C_DIST.stop + 5)
-ROW_SIZE = C_STEP + 1
+C_AIR = slice(C_STEP + 1, C_STEP + 4)
+ROW_SIZE = C_AIR.stop
 
 
 @numba.njit(cache=True)
-def _copy_row(rows, k, state, goal, dist, i, reward, episode, step):  # pragma: no cover
+def _copy_row(rows, k, state, goal, dist, wind_state, i, reward, episode, step):  # pragma: no cover
     """Row ``k`` of ``rows`` from env ``i`` of the engine's arrays (one call: a step's
     whole cost of recording is this copy)."""
     row = rows[k]
@@ -62,6 +72,7 @@ def _copy_row(rows, k, state, goal, dist, i, reward, episode, step):  # pragma: 
     row[C_REWARD] = reward
     row[C_EPISODE] = episode
     row[C_STEP] = step
+    row[C_AIR] = wind_state[i, L.WS_AIR_VELOCITY]
 
 
 class _Arrow:
@@ -78,8 +89,11 @@ class EpisodeView:
     """Logs env ``index`` of an engine. ``save``: an .rrd path, else a viewer is spawned."""
 
     def __init__(self, name: str, save: str | None = None, index: int = 0) -> None:
-        self.layout = lambda frame=None: blueprint(
-            EPISODE_PANELS, state=False, frame=frame, timeline=STEP_TIMELINE
+        self.layout = lambda frame=None, windy=False: blueprint(
+            (*EPISODE_PANELS, "wind") if windy else EPISODE_PANELS,
+            state=False,
+            frame=frame,
+            timeline=STEP_TIMELINE,
         )
         self.rec = open_recording(
             "quadsitl_episodes", save, spawn=True, default_blueprint=self.layout()
@@ -92,6 +106,7 @@ class EpisodeView:
         self.ended = False
         self.framed = False
         self.task = ""
+        self.windy = False  # the env flies in wind: its panel and arrow are sent
         self.goal_radius = 0.05
         self.rows = np.empty((CAPACITY, ROW_SIZE))
         self.count = 0  # rows buffered
@@ -129,6 +144,7 @@ class EpisodeView:
             engine.fleet.state,
             engine.goal,
             engine.dist,
+            engine.fleet.wind_state,
             self.index,
             reward,
             self.episode,
@@ -146,7 +162,8 @@ class EpisodeView:
         position = engine.fleet.state[self.index, L.POS]
         goal = engine.goal[self.index, F.GOAL_POS]
         points = [position, goal, [position[0], position[1], 0.0], [goal[0], goal[1], 0.0]]
-        self.rec.send_blueprint(self.layout(framing(points)), make_active=True)
+        self.windy = engine.fleet.windy
+        self.rec.send_blueprint(self.layout(framing(points), self.windy), make_active=True)
         self.task = engine.task.name
         names = rr.SeriesLines(names=list(TERMS))
         self.rec.log("plots/reward_terms/terms", names, static=True)
@@ -219,6 +236,16 @@ class EpisodeView:
         if stepped.any():
             reward = rr.Scalars.columns(scalars=rows[stepped, C_REWARD])
             send("plots/reward/reward", reward, stepped)
+        if self.windy:
+            air = rows[:, C_AIR]
+            send("plots/wind/speed", rr.Scalars.columns(scalars=np.linalg.norm(air, axis=1)))
+            for k, name in enumerate(("east", "north", "up")):
+                send(f"plots/wind/{name}", rr.Scalars.columns(scalars=air[:, k]))
+            colors = np.tile(np.array(WIND_COLOR, np.uint8), (len(rows), 1))
+            arrows = rr.Arrows3D.columns(
+                origins=position, vectors=air * WIND_ARROW_SCALE, colors=colors
+            )
+            send("world/wind", arrows)
 
     def _send_goal(self, rows: np.ndarray, send) -> None:  # type: ignore[no-untyped-def]
         """The goal where it is new (each row a moving target has moved) and, as the

@@ -24,10 +24,9 @@ from pymavlink import mavutil
 from quadsitl import frames
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.modes import Mode
-from quadsitl.viz.scene import pose_from_ned, quat_xyzw
+from quadsitl.viz.scene import WIND_ARROW_SCALE, pose_from_ned, quat_xyzw
 
 GCS_TYPE = 6  # MAV_TYPE_GCS
-WIND_ARROW_SCALE = 0.25  # m of arrow in the 3-D view per m/s of wind
 SEVERITY = ["CRITICAL"] * 3 + ["ERROR", "WARN", "INFO", "INFO", "DEBUG"]  # MAV_SEVERITY 0..7
 
 

@@ -141,6 +141,7 @@ PANELS = {
     "wind": "wind at the vehicle (m/s, ENU)",
 }
 WIND_COLOR = [70, 150, 230]  # the wind arrow in the 3-D view
+WIND_ARROW_SCALE = 0.25  # m of arrow per m/s of wind
 STATE_PANEL = "state"  # flight mode (a coloured band per mode) and armed (0/1)
 LIVE_PANELS = (
     "altitude",
