@@ -239,9 +239,7 @@ def recordings(folder: Path) -> dict[str, Callable[[], Path]]:
     """Picture name -> how its recording is made."""
     made: dict[str, Callable[[], Path]] = {
         "rerun_demo": lambda: demo_recording(folder),
-        "rerun_wind": lambda: demo_recording(
-            folder, "--wind", "5,270", "--turbulence", "moderate"
-        ),
+        "rerun_wind": lambda: demo_recording(folder, "--wind", "5,270", "--turbulence", "moderate"),
         "rerun_replay_px4": lambda: foreign_recording(folder),
         "rerun_fleet": lambda: fleet_recording(folder),
     }
