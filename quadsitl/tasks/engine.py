@@ -22,6 +22,7 @@ from quadsitl.frames import quat_from_euler
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import FleetLike
+from quadsitl.physics.sensors.observation import ObservationNoise
 from quadsitl.physics.wind import Wind
 from quadsitl.tasks import features as F
 from quadsitl.tasks import spec as S
@@ -81,6 +82,10 @@ class TaskOptions:
             :class:`~quadsitl.physics.wind.Wind` or a dict of its fields (e.g.
             ``{"speed": 6, "from_deg": 270, "turbulence": "moderate"}``); None: still
             air. Each episode's turbulence is drawn from the env's own generator.
+        sensor_noise: noise scale of the observation as the sensors would measure it
+            (position and velocity as the GPS, rates as the gyroscope, attitude as an
+            estimator: :mod:`quadsitl.physics.sensors.observation`); 0: the exact state.
+            Rewards and episode ends keep reading the truth.
     """
 
     airframe: object = "paper"
@@ -94,6 +99,7 @@ class TaskOptions:
     init_rate_noise: float = 0.0
     param_randomization: dict[str, float] | None = None
     wind: Wind | dict[str, Any] | None = None
+    sensor_noise: float = 0.0
 
     @classmethod
     def from_kwargs(cls, **options: object) -> TaskOptions:
@@ -132,6 +138,9 @@ class TaskOptions:
             value = getattr(self, name)
             if not (_is_real(value) and 0 <= value <= limit):
                 raise ValueError(f"{name} must be in [0, {limit:.4g}] {unit}, got {value!r}")
+        noise = self.sensor_noise
+        if not (_is_real(noise) and 0 <= noise <= 100):
+            raise ValueError(f"sensor_noise must be a scale in [0, 100], got {noise!r}")
         self._check_param_randomization()
         object.__setattr__(self, "wind", self._weather())
 
@@ -282,6 +291,8 @@ class TaskEngine:
         self._action_shape = (num_envs, L.N_ROTORS)
         # Whatever state the task keeps per env beyond the goal (its own typed object).
         self.task_state = task.new_state(num_envs) if task.new_state is not None else None
+        noise = options.sensor_noise
+        self.observation_noise = ObservationNoise(num_envs, noise) if noise > 0 else None
 
     # --- seeding and reset ---------------------------------------------------------
     def seed(self, seeds: list[int | None]) -> None:
@@ -344,6 +355,8 @@ class TaskEngine:
         self.time_within[rows] = 0.0
         self.reach_time[rows] = math.nan
         self.episode_return[rows] = 0.0
+        if self.observation_noise is not None:
+            self.observation_noise.reset(rows, [self.rngs[i] for i in rows])
         if self.task.on_reset is not None:
             self.task.on_reset(self, rows)
         self.observe(rows if rows.size < self.n else None)
@@ -357,10 +370,22 @@ class TaskEngine:
         fleet, observe = self.fleet, self.task.observe
         if rows is None:
             observe(fleet.state, fleet.params, self.goal, self.obs, self.dist, self.tilt)
-            return
+        else:
+            obs, dist, tilt = self.obs[rows], self.dist[rows], self.tilt[rows]
+            observe(fleet.state[rows], fleet.params[rows], self.goal[rows], obs, dist, tilt)
+            self.obs[rows], self.dist[rows], self.tilt[rows] = obs, dist, tilt
+        if self.observation_noise is not None:
+            self._observe_noisy(np.arange(self.n) if rows is None else rows, 0.0)
+
+    def _observe_noisy(self, rows: NDArray[np.int64], elapsed: float) -> None:
+        """Overwrite the observation of ``rows`` with that of their sensed state (the
+        distances and tilt, which rewards and endings read, stay the truth's)."""
+        assert self.observation_noise is not None
+        fleet = self.fleet
+        sensed = self.observation_noise.perturb(fleet.state[rows], rows, elapsed)
         obs, dist, tilt = self.obs[rows], self.dist[rows], self.tilt[rows]
-        observe(fleet.state[rows], fleet.params[rows], self.goal[rows], obs, dist, tilt)
-        self.obs[rows], self.dist[rows], self.tilt[rows] = obs, dist, tilt
+        self.task.observe(sensed, fleet.params[rows], self.goal[rows], obs, dist, tilt)
+        self.obs[rows] = obs
 
     # --- stepping ------------------------------------------------------------------
     def step(
@@ -424,6 +449,8 @@ class TaskEngine:
             self.reward,
             self.outcome,
         )
+        if self.observation_noise is not None:
+            self._observe_noisy(np.arange(self.n), self.control_period)
         close_step(
             self.dist,
             self.prev_dist,
