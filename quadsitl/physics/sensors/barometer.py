@@ -61,7 +61,7 @@ class Barometer:
         self.drift = np.zeros(n)
         self.samples = 0
 
-    def reset(self, rows: Array) -> None:
+    def reset(self, rows: np.ndarray) -> None:
         self.drift[rows] = 0.0
 
     def sample(self, time: float, altitude: Array, noise_scale: Array) -> None:

@@ -110,7 +110,7 @@ class Gps:
         )  # fmt: skip
         self.samples = 0
 
-    def reset(self, rows: Array, time: float) -> None:
+    def reset(self, rows: np.ndarray, time: float) -> None:
         """Start the selected receivers again at ``time`` s: no fix until time_to_fix."""
         self.error[rows] = self.rng.standard_normal((int(np.count_nonzero(rows)), 3))
         self.fix_time[rows] = time + self.params.time_to_fix

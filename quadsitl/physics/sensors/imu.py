@@ -80,7 +80,7 @@ class Imu:
         self.gyro_turn_on, self.accel_turn_on = np.zeros((n, 3)), np.zeros((n, 3))
         self.samples = 0
 
-    def reset(self, rows: Array) -> None:
+    def reset(self, rows: np.ndarray) -> None:
         """New turn-on biases for the selected vehicles; their drifting biases start at 0."""
         p, k = self.params, int(np.count_nonzero(rows))
         self.gyro_turn_on[rows] = p.gyro_turn_on_sigma * self.rng.standard_normal((k, 3))

@@ -52,7 +52,7 @@ class Magnetometer:
         self.bias = np.zeros((n, 3))
         self.samples = 0
 
-    def reset(self, rows: Array) -> None:
+    def reset(self, rows: np.ndarray) -> None:
         self.bias[rows] = 0.0
 
     def sample(self, time: float, field_body: Array, noise_scale: Array) -> None:

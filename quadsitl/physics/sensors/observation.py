@@ -34,14 +34,14 @@ class ObservationNoise:
         self.position_error = np.zeros((n, 3))  # unit Gauss–Markov (the GPS's)
         self.gyro_bias = np.zeros((n, 3))  # rad/s at scale 1
 
-    def reset(self, rows: Array, env_rngs: list[np.random.Generator]) -> None:
+    def reset(self, rows: np.ndarray, env_rngs: list[np.random.Generator]) -> None:
         """New episodes in ``rows``: each env's noise generator is drawn from its own."""
         for i, rng in zip(rows, env_rngs, strict=True):
             self.rngs[i] = np.random.default_rng(int(rng.integers(2**62)))
             self.position_error[i] = self.rngs[i].standard_normal(3)
             self.gyro_bias[i] = 0.0
 
-    def perturb(self, state: Array, rows: Array, elapsed: float) -> Array:
+    def perturb(self, state: Array, rows: np.ndarray, elapsed: float) -> Array:
         """A noisy copy of ``state`` (one row per env of ``rows``), the noise processes
         moved on by ``elapsed`` s."""
         gps, imu = self.params.gps, self.params.imu

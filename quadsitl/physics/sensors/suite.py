@@ -10,6 +10,7 @@ Frames: world ENU, body FLU (the physics'); the MAVLink edge converts.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -56,7 +57,7 @@ def body_from_world(state: Array, vectors: Array) -> Array:
     )
 
 
-def specific_force(state: Array, params: Array, contact: Array, air_velocity: Array) -> Array:
+def specific_force(state: Array, params: Array, contact: np.ndarray, air_velocity: Array) -> Array:
     """(N, 3) m/s², body FLU: what an ideal accelerometer reads, a − g = (thrust + drag)/m
     by the paper's force law (:func:`quadsitl.physics.reference.derivative`, which a test
     holds this to); on the ground, which holds the vehicle up, gravity's reaction
@@ -148,7 +149,7 @@ class SensorSuite:
         self.reset(time=time)
 
     def update(
-        self, time: float, state: Array, params: Array, contact: Array, air_velocity: Array
+        self, time: float, state: Array, params: Array, contact: np.ndarray, air_velocity: Array
     ) -> None:
         """Take the samples due at ``time`` s from the physics arrays: state (N, 17),
         params (N, N_PARAMS), contact (N,), the air's velocity (N, 3) m/s world ENU."""
@@ -218,11 +219,11 @@ class SensorSlot:
     def noise_scale(self) -> float:
         return float(self.suite.noise_scale[self.index, 0])
 
-    def gps(self) -> dict[str, float]:
+    def gps(self) -> dict[str, Any]:
         """This vehicle's latest GPS fix: measured_at s, position (3,) m and velocity (3,)
         m/s world ENU, eph/epv m, speed_accuracy m/s, hdop, vdop, satellites, fix_type."""
         fix, i = self.suite.gps.fix, self.index
-        out: dict = {"measured_at": fix.measured_at}
+        out: dict[str, Any] = {"measured_at": fix.measured_at}
         for name in ("position", "velocity"):
             out[name] = getattr(fix, name)[i]
         for name in ("eph", "epv", "speed_accuracy", "hdop", "vdop"):
