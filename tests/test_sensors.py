@@ -97,6 +97,7 @@ def _fly(suite: SensorSuite, fleet: Fleet, seconds: float, velocity=(3.0, -2.0, 
         fleet.time += fleet.dt
         fleet.state[:, L.POS] += fleet.dt * np.asarray(velocity)
         suite.update(fleet.time, fleet.state, fleet.params, fleet.contact, fleet.air_velocity)
+        suite.sample_due()  # a reader at every step
         yield fleet.time
 
 

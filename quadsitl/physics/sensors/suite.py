@@ -1,10 +1,11 @@
 """The sensors of N vehicles, each at its own rate, fed from the physics state.
 
-:class:`SensorSuite` is called after each physics step (or each control period) with the
-state; each sensor samples when its own clock is due, so calling it more often costs one
-comparison. Everything is seeded, and one noise scale per vehicle multiplies every noise
-term (0: the truth, sampled at each sensor's rate and, for GPS, delivered late).
-Frames: world ENU, body FLU (the physics'); the MAVLink edge converts.
+:class:`SensorSuite` is told after each physics step (or each control period) where the
+state is; each sensor samples at the multiples of its own period (the GPS when they come,
+the others when read), so calling it more often costs one comparison. Everything is
+seeded, and one noise scale per vehicle multiplies every noise term (0: the truth,
+sampled at each sensor's rate and, for GPS, delivered late). Frames: world ENU, body FLU
+(the physics'); the MAVLink edge converts.
 """
 
 from __future__ import annotations
@@ -78,7 +79,9 @@ def specific_force(state: Array, params: Array, contact: np.ndarray, air_velocit
 
 
 class SensorSuite:
-    """IMU, barometer, magnetometer and GPS of N vehicles.
+    """IMU, barometer, magnetometer and GPS of N vehicles: :meth:`update` after the
+    physics moves, :meth:`sample_due` before reading the IMU, barometer or magnetometer
+    (the :class:`SensorSlot` accessors do).
 
     Args:
         n: vehicles.
@@ -120,6 +123,7 @@ class SensorSuite:
         self._clocks = (self.imu.clock, self.barometer.clock, self.magnetometer.clock)
         self._last_time = 0.0
         self._next_due = 0.0
+        self._truth: tuple[Array, Array, np.ndarray, Array] | None = None
         self.reset()
 
     def set_noise_scale(self, scale: ArrayLike, mask: ArrayLike | None = None) -> None:
@@ -151,14 +155,33 @@ class SensorSuite:
     def update(
         self, time: float, state: Array, params: Array, contact: np.ndarray, air_velocity: Array
     ) -> None:
-        """Take the samples due at ``time`` s from the physics arrays: state (N, 17),
-        params (N, N_PARAMS), contact (N,), the air's velocity (N, 3) m/s world ENU."""
+        """The physics moved to ``time`` s: state (N, 17), params (N, N_PARAMS), contact
+        (N,), the air's velocity (N, 3) m/s world ENU (kept, not copied: the arrays the
+        physics steps in place). The GPS measures now when due (its delay line needs the
+        past); the IMU, barometer and magnetometer take the sample due by now when they
+        are read (:meth:`sample_due`): statistically the same as sampling at every due
+        tick (the biases move on exactly over any interval), and free while nobody reads
+        them."""
         if time + 1e-9 < self._last_time:
             self._restart(time)
         self._last_time = time
+        self._truth = (state, params, contact, air_velocity)
         if time + 1e-9 < self._next_due:
             return
-        scale = self.noise_scale
+        if self.gps.clock.due(time):
+            self.gps.sample(time, state[:, L.POS], state[:, L.VEL], self.noise_scale)
+        self.gps.deliver(time)
+        self._next_due = self.gps.clock.next_due
+        if self.gps.queue:
+            self._next_due = min(self._next_due, self.gps.queue[0][0])
+
+    def sample_due(self) -> SensorSuite:
+        """Take the IMU, barometer and magnetometer samples due at the last update's time
+        (their clocks' latest multiple of 1/rate), from the state then; returns self."""
+        if self._truth is None:
+            return self
+        time, scale = self._last_time, self.noise_scale
+        state, params, contact, air_velocity = self._truth
         if self.imu.clock.due(time):
             force = specific_force(state, params, contact, air_velocity)
             self.imu.sample(time, state[:, L.RATES], force, scale)
@@ -166,13 +189,7 @@ class SensorSuite:
             self.barometer.sample(time, self.altitude_offset + state[:, L.I_PZ], scale[:, 0])
         if self.magnetometer.clock.due(time):
             self.magnetometer.sample(time, body_from_world(state, self.field_enu), scale)
-        if self.gps.clock.due(time):
-            self.gps.sample(time, state[:, L.POS], state[:, L.VEL], scale)
-        self.gps.deliver(time)
-        due = [clock.next_due for clock in (*self._clocks, self.gps.clock)]
-        if self.gps.queue:
-            due.append(self.gps.queue[0][0])
-        self._next_due = min(due)
+        return self
 
 
 class SensorSlot:
@@ -188,32 +205,32 @@ class SensorSlot:
     @property
     def gyro(self) -> Array:
         """(3,) rad/s, body FLU."""
-        return self.suite.imu.gyro[self.index]
+        return self.suite.sample_due().imu.gyro[self.index]
 
     @property
     def accel(self) -> Array:
         """(3,) m/s², body FLU: specific force."""
-        return self.suite.imu.accel[self.index]
+        return self.suite.sample_due().imu.accel[self.index]
 
     @property
     def magnetic_field(self) -> Array:
         """(3,) gauss, body FLU."""
-        return self.suite.magnetometer.field[self.index]
+        return self.suite.sample_due().magnetometer.field[self.index]
 
     @property
     def pressure(self) -> float:
         """Pa."""
-        return float(self.suite.barometer.pressure[self.index])
+        return float(self.suite.sample_due().barometer.pressure[self.index])
 
     @property
     def temperature(self) -> float:
         """K."""
-        return float(self.suite.barometer.temperature[self.index])
+        return float(self.suite.sample_due().barometer.temperature[self.index])
 
     @property
     def pressure_altitude(self) -> float:
         """m above mean sea level."""
-        return float(self.suite.barometer.altitude[self.index])
+        return float(self.suite.sample_due().barometer.altitude[self.index])
 
     @property
     def noise_scale(self) -> float:
@@ -235,7 +252,7 @@ class SensorSlot:
     def fresh(self) -> tuple[bool, bool, bool, bool]:
         """(IMU, magnetometer, barometer, GPS): True for each that sampled since the last
         call."""
-        s = self.suite
+        s = self.suite.sample_due()
         counts = (s.imu.samples, s.magnetometer.samples, s.barometer.samples, s.gps.samples)
         fresh = tuple(now != seen for now, seen in zip(counts, self._seen, strict=True))
         self._seen = counts
