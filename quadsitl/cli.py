@@ -120,6 +120,15 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
     )
     _add_weather_options(sim)
     sim.add_argument(
+        "--sensor-noise",
+        type=float,
+        default=1.0,
+        metavar="SCALE",
+        help="scale of the sensor models' noise in HIGHRES_IMU, SCALED_IMU, RAW_IMU, "
+        "SCALED_PRESSURE and GPS_RAW_INT: 0 the truth, 1 the defaults of docs/physics.md, "
+        "3 three times as much (default: 1)",
+    )
+    sim.add_argument(
         "--spacing",
         type=float,
         default=2.0,
@@ -327,6 +336,7 @@ def _sim_config(args: argparse.Namespace) -> object:
         quiet=args.quiet,
         flown_by=f"the policy in {args.autopilot}" if args.autopilot else None,
         wind=wind,
+        sensor_noise=args.sensor_noise,
     )
 
 

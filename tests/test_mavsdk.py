@@ -200,8 +200,9 @@ async def _streams_params_version_fence(port: int) -> None:
         assert math.isclose(q.w**2 + q.x**2 + q.y**2 + q.z**2, 1.0, rel_tol=1e-5)
         await telemetry.set_rate_imu(10.0)
         imu = await _first(telemetry.subscribe_imu(), 10, "HIGHRES_IMU")
-        assert imu.acceleration_frd.down_m_s2 == pytest.approx(-9.81, abs=0.05)  # specific force
-        assert imu.acceleration_frd.forward_m_s2 == pytest.approx(0.0, abs=0.05)
+        # Specific force, from the noisy accelerometer model (σ ≈ 0.03 m/s² a sample).
+        assert imu.acceleration_frd.down_m_s2 == pytest.approx(-9.81, abs=0.2)
+        assert imu.acceleration_frd.forward_m_s2 == pytest.approx(0.0, abs=0.2)
         assert (
             0.4
             < math.hypot(
@@ -213,7 +214,7 @@ async def _streams_params_version_fence(port: int) -> None:
         )
         await telemetry.set_rate_raw_imu(10.0)
         raw = await _first(telemetry.subscribe_raw_imu(), 10, "RAW_IMU")
-        assert raw.acceleration_frd.down_m_s2 == pytest.approx(-1000, abs=5)  # mG, as sent
+        assert raw.acceleration_frd.down_m_s2 == pytest.approx(-1000, abs=20)  # mG, as sent
         # The polling calls give the latest of each.
         latest = await asyncio.wait_for(telemetry.odometry(), 5)
         assert latest.time_usec >= odometry.time_usec > 0

@@ -75,6 +75,8 @@ class SimConfig:
     flown_by: str | None = None  # what flies instead of the cascaded controller (banner)
     wind: Wind | None = None  # the weather every vehicle flies in (None: still air)
     wind_seed: int = 0  # of the turbulence (vehicle i: the i-th stream of this seed)
+    sensor_noise: float = 1.0  # scale of the sensor models' noise (0: the truth)
+    sensor_seed: int = 0  # of the sensors' noise
 
     def validate(self) -> None:
         get_identity(self.autopilot_id)
@@ -101,6 +103,8 @@ class SimConfig:
                 f"physics rate {self.physics_rate:g} Hz is not a whole multiple of the control "
                 f"rate {self.control_rate:g} Hz (the controller runs every N physics steps)"
             )
+        if not (math.isfinite(self.sensor_noise) and 0 <= self.sensor_noise <= 100):
+            raise ValueError(f"--sensor-noise must be a scale 0..100, got {self.sensor_noise}")
         if not (math.isfinite(self.speed) and 0.01 <= self.speed <= 100):
             raise ValueError(f"speed factor must be 0.01..100, got {self.speed}")
         if not [u for u in (self.gcs_url, self.api_url, self.hil_url, *self.extra_urls) if u]:
@@ -195,6 +199,8 @@ class Simulator:
             control_period=1.0 / config.control_rate,
             spacing=config.spacing,
             make_autopilot=(lambda: make_autopilot(airframe)) if make_autopilot else None,
+            sensor_noise=config.sensor_noise,
+            sensor_seed=config.sensor_seed,
         )
         self.vehicle = self.group.vehicles[0]
         if config.wind is not None and not config.wind.calm:

@@ -1,9 +1,10 @@
 """Telemetry: what the vehicle reports, converted to MAVLink's frames and units here.
 
 One ``build_*`` function per message. World ENU -> local NED, body FLU -> FRD, through
-:mod:`quadsitl.frames` only. The sensor messages (HIGHRES_IMU, SCALED_IMU, RAW_IMU) and
-ODOMETRY are streamed on request only and carry the truth: there is no sensor model yet
-(see :class:`Snapshot` for the accelerometer, magnetometer and barometer values).
+:mod:`quadsitl.frames` only. The sensor messages (HIGHRES_IMU, SCALED_IMU, RAW_IMU,
+SCALED_PRESSURE) and ODOMETRY are streamed on request only; the sensor messages and
+GPS_RAW_INT carry the vehicle's sensor models (:mod:`quadsitl.physics.sensors`: noise,
+bias, GPS latency), the others the truth (there is no estimator).
 Rates are per link and per message (SET_MESSAGE_INTERVAL, REQUEST_DATA_STREAM), paced
 by simulated time; the heartbeat is paced by the wall
 clock so that ground stations keep the link even when simulated time stands still.
@@ -34,6 +35,8 @@ from quadsitl.mavlink.identity import (
 from quadsitl.mavlink.motor_path import STANDARD_GRAVITY, odometry_values
 from quadsitl.physics import dryden as D
 from quadsitl.physics import layout as L
+from quadsitl.physics.sensors import environment as E
+from quadsitl.physics.sensors.gps import FIX_3D
 from quadsitl.vehicle.modes import MAIN_AUTO, MAIN_OFFBOARD, MAIN_POSCTL, Mode
 from quadsitl.vehicle.vehicle import Vehicle
 
@@ -66,15 +69,10 @@ CAPABILITIES = (
     | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
 )
 HEARTBEAT_PERIOD = 1.0  # s, wall clock
-# The simulated world's magnetic field, local NED, gauss: uniform, no declination, 60°
-# inclination, 0.5 G (a mid-latitude field).
-MAGNETIC_FIELD_NED = np.array([0.25, 0.0, 0.25 * math.sqrt(3.0)])
-# The International Standard Atmosphere (the barometer's truth; no wind).
-ISA_SEA_LEVEL = (1013.25, 288.15)  # hPa, K
-ISA_LAPSE = 0.0065  # K/m
-ISA_EXPONENT = 5.25588  # g M / (R L)
-AIR_GAS_CONSTANT = 287.053  # J/(kg K)
-HIGHRES_IMU_FIELDS = 0x1FFF  # HIGHRES_IMU_UPDATED_ALL: accel, gyro, mag, pressures, temperature
+# HIGHRES_IMU fields_updated bits (HIGHRES_IMU_UPDATED_FLAGS).
+HIGHRES_ACCEL, HIGHRES_GYRO, HIGHRES_MAG = 0x007, 0x038, 0x1C0
+HIGHRES_BARO = 0x200 | 0x800 | 0x1000  # absolute pressure, pressure altitude, temperature
+HIGHRES_DIFF_PRESSURE = 0x400
 
 
 class Snapshot:
@@ -112,26 +110,21 @@ class Snapshot:
         self.heading_deg = math.degrees(self.yaw) % 360.0
         self.ground_speed = math.hypot(self.velocity_ned[0], self.velocity_ned[1])
 
-    # --- the sensors' truth (computed only when a sensor message is built) ------------
+    # --- the sensors (read only when a sensor message is built) -------------------------
     @cached_property
     def specific_force_frd(self) -> np.ndarray:
-        """What an ideal accelerometer reads, m/s², body FRD: the rotor thrust and the
-        drag over the mass in the air (about (0, 0, −g) in a hover); on the ground, where
-        the ground holds it up, gravity's reaction (0, 0, −g) when level."""
-        v = self.vehicle
-        a = v.airframe
-        if int(v.fleet.contact[0]) != L.AIRBORNE:
-            up_world = np.array([0.0, 0.0, -a.gravity])  # NED: the reaction points up
-            return frames.quat_rotate(frames.quat_conjugate(self.q_ned_frd), up_world)
-        thrust = a.thrust_coeff * float(np.sum(self.rotor_speeds**2))  # N, along −z FRD
-        speed = float(np.linalg.norm(self.velocity_frd))
-        drag = -a.drag_coeff * speed * self.velocity_frd  # N, body FRD
-        return (np.array([0.0, 0.0, -thrust]) + drag) / a.mass
+        """The accelerometer, m/s², body FRD: specific force, (0, 0, −g) at rest."""
+        return frames.flu_to_frd(self.vehicle.sensors.accel)
+
+    @cached_property
+    def gyro_frd(self) -> np.ndarray:
+        """The gyroscope, rad/s, body FRD."""
+        return frames.flu_to_frd(self.vehicle.sensors.gyro)
 
     @cached_property
     def magnetic_field_frd(self) -> np.ndarray:
-        """The world's field (MAGNETIC_FIELD_NED) in body FRD, gauss."""
-        return frames.quat_rotate(frames.quat_conjugate(self.q_ned_frd), MAGNETIC_FIELD_NED)
+        """The magnetometer, gauss, body FRD: the Earth's field at home (WMM)."""
+        return frames.flu_to_frd(self.vehicle.sensors.magnetic_field)
 
     @cached_property
     def wind_ned(self) -> np.ndarray:
@@ -146,15 +139,36 @@ class Snapshot:
 
     @cached_property
     def air(self) -> tuple[float, float, float]:
-        """(static pressure hPa, differential pressure hPa, temperature °C) of the ISA
-        at the vehicle's altitude; the differential pressure of its speed through the
-        air."""
-        sea_pressure, sea_temperature = ISA_SEA_LEVEL
-        temperature = sea_temperature - ISA_LAPSE * self.alt_amsl  # K
-        pressure = sea_pressure * (temperature / sea_temperature) ** ISA_EXPONENT
-        density = pressure * 100 / (AIR_GAS_CONSTANT * temperature)  # kg/m³
+        """(static pressure hPa, differential pressure hPa, temperature °C): the
+        barometer's, and the dynamic pressure ½ρv² of the speed through the air."""
+        sensors = self.vehicle.sensors
+        density = sensors.pressure / (E.AIR_GAS_CONSTANT * sensors.temperature)  # kg/m³
         dynamic = 0.5 * density * self.airspeed**2 / 100
-        return pressure, dynamic, temperature - 273.15
+        return sensors.pressure / 100, dynamic, sensors.temperature - 273.15
+
+    @cached_property
+    def highres_fields(self) -> int:
+        """HIGHRES_IMU fields_updated: the sensors that sampled since the last one built
+        for this vehicle (once per snapshot: every link sending it in this tick agrees)."""
+        imu, mag, baro, _ = self.vehicle.sensors.fresh()
+        bits = HIGHRES_DIFF_PRESSURE  # computed from the state at each message
+        bits |= (HIGHRES_ACCEL | HIGHRES_GYRO) if imu else 0
+        bits |= HIGHRES_MAG if mag else 0
+        bits |= HIGHRES_BARO if baro else 0
+        return bits
+
+    @cached_property
+    def gps(self) -> dict[str, Any]:
+        """The GPS receiver's latest fix, with its position on the globe (lat, lon deg,
+        alt m AMSL of the ground-level point, as GLOBAL_POSITION_INT) and NED velocity."""
+        fix = self.vehicle.sensors.gps()
+        east, north, up = fix["position"]
+        gear = self.vehicle.airframe.gear_height
+        fix["lat"], fix["lon"], fix["alt"] = self.vehicle.origin.to_global(
+            float(east), float(north), float(up) - gear
+        )
+        fix["velocity_ned"] = frames.enu_to_ned(fix["velocity"])
+        return fix
 
 
 def build_heartbeat(v: Vehicle, autopilot: int = mav.MAV_AUTOPILOT_PX4) -> Any:
@@ -241,18 +255,27 @@ def build_global_position_int(s: Snapshot) -> Any:
 
 
 def build_gps_raw_int(s: Snapshot) -> Any:
-    course = round(math.degrees(math.atan2(s.velocity_ned[1], s.velocity_ned[0])) % 360 * 100)
+    """The GPS receiver's fix, as PX4 fills GPS_RAW_INT: eph/epv are the dilutions of
+    precision × 100, h_acc/v_acc/vel_acc the 1-σ accuracies (mm, mm/s)."""
+    g = s.gps
+    vn, ve = (float(x) for x in g["velocity_ned"][:2])
+    speed = math.hypot(vn, ve)
+    course = round(math.degrees(math.atan2(ve, vn)) % 360 * 100)
+    fixed = g["fix_type"] == FIX_3D
     return _encoder.gps_raw_int_encode(
         s.time_usec,
-        mav.GPS_FIX_TYPE_3D_FIX,
-        round(s.lat * 1e7),
-        round(s.lon * 1e7),
-        round(s.alt_amsl * 1000),
-        80,
-        120,
-        round(s.ground_speed * 100),
-        course if s.ground_speed > 0.2 else 65535,
-        14,
+        g["fix_type"],
+        round(g["lat"] * 1e7) if fixed else 0,
+        round(g["lon"] * 1e7) if fixed else 0,
+        round(g["alt"] * 1000) if fixed else 0,
+        min(round(g["hdop"] * 100), 65534) if fixed else 65535,
+        min(round(g["vdop"] * 100), 65534) if fixed else 65535,
+        round(speed * 100) if fixed else 65535,
+        course if fixed and speed > 0.2 else 65535,
+        g["satellites"],
+        h_acc=min(round(g["eph"] * 1000), 2**32 - 1),
+        v_acc=min(round(g["epv"] * 1000), 2**32 - 1),
+        vel_acc=min(round(g["speed_accuracy"] * 1000), 2**32 - 1),
     )
 
 
@@ -373,7 +396,7 @@ def build_odometry(s: Snapshot) -> Any:
 
 def build_highres_imu(s: Snapshot) -> Any:
     """SI units: m/s², rad/s, gauss, hPa, m, °C; body FRD."""
-    f, w, m = s.specific_force_frd, s.rates_frd, s.magnetic_field_frd
+    f, w, m = s.specific_force_frd, s.gyro_frd, s.magnetic_field_frd
     pressure, differential, temperature = s.air
     return _encoder.highres_imu_encode(
         s.time_usec,
@@ -382,16 +405,16 @@ def build_highres_imu(s: Snapshot) -> Any:
         *(float(x) for x in m),
         pressure,
         differential,
-        s.alt_amsl,  # the ISA pressure altitude is the true altitude
+        s.vehicle.sensors.pressure_altitude,
         temperature,
-        HIGHRES_IMU_FIELDS,
+        s.highres_fields,
     )
 
 
 def _imu_integers(s: Snapshot) -> list[int]:
     """Accelerometer mG, gyroscope mrad/s, magnetometer mgauss (body FRD), int16."""
     mg = s.specific_force_frd / STANDARD_GRAVITY * 1000
-    values = [*mg, *(s.rates_frd * 1000), *(s.magnetic_field_frd * 1000)]
+    values = [*mg, *(s.gyro_frd * 1000), *(s.magnetic_field_frd * 1000)]
     return [int(max(-32767, min(32767, round(float(x))))) for x in values]
 
 
@@ -426,6 +449,14 @@ def build_wind_cov(s: Snapshot) -> Any:
     )
 
 
+def build_scaled_pressure(s: Snapshot) -> Any:
+    """The barometer: hPa, the differential pressure hPa, cdegC."""
+    pressure, differential, temperature = s.air
+    return _encoder.scaled_pressure_encode(
+        s.time_boot_ms, pressure, differential, round(temperature * 100)
+    )
+
+
 def build_current_mode(s: Snapshot) -> Any:
     v = s.vehicle
     standard = next((e.standard_mode for e in AVAILABLE_MODES if e.mode is v.mode), 0)
@@ -455,6 +486,7 @@ BUILDERS: dict[int, Callable[[Snapshot], Any]] = {
     mav.MAVLINK_MSG_ID_HIGHRES_IMU: build_highres_imu,
     mav.MAVLINK_MSG_ID_SCALED_IMU: build_scaled_imu,
     mav.MAVLINK_MSG_ID_RAW_IMU: build_raw_imu,
+    mav.MAVLINK_MSG_ID_SCALED_PRESSURE: build_scaled_pressure,
 }
 
 # Default rates, Hz (the spec's typical rates; position and attitude at 50 Hz).

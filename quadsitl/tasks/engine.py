@@ -19,6 +19,7 @@ from quadsitl.frames import quat_from_euler
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import FleetLike
+from quadsitl.physics.sensors.observation import ObservationNoise
 from quadsitl.physics.wind import Wind
 from quadsitl.tasks import features as F
 from quadsitl.tasks import spec as S
@@ -148,6 +149,8 @@ class TaskEngine:
         self._action_shape = (num_envs, L.N_ROTORS)
         # Whatever state the task keeps per env beyond the goal (its own typed object).
         self.task_state = task.new_state(num_envs) if task.new_state is not None else None
+        noise = options.sensor_noise
+        self.observation_noise = ObservationNoise(num_envs, noise) if noise > 0 else None
         delay = Delay.parse(options.delay)  # fixed, or drawn by randomize (not both)
         if delay is None and self.randomization is not None:
             delay = self.randomization.delay
@@ -222,6 +225,8 @@ class TaskEngine:
         self.time_within[rows] = 0.0
         self.reach_time[rows] = math.nan
         self.episode_return[rows] = 0.0
+        if self.observation_noise is not None:
+            self.observation_noise.reset(rows, [self.rngs[i] for i in rows])
         if self.task.on_reset is not None:
             self.task.on_reset(self, rows)
         self.observe(rows if rows.size < self.n else None)
@@ -237,17 +242,29 @@ class TaskEngine:
         fleet, observe = self.fleet, self.task.observe
         if rows is None:
             observe(fleet.state, fleet.params, self.goal, self.obs, self.dist, self.tilt)
-            return
-        obs, dist, tilt = self.obs[rows], self.dist[rows], self.tilt[rows]
-        observe(fleet.state[rows], fleet.params[rows], self.goal[rows], obs, dist, tilt)
-        self.obs[rows], self.dist[rows], self.tilt[rows] = obs, dist, tilt
+        else:
+            obs, dist, tilt = self.obs[rows], self.dist[rows], self.tilt[rows]
+            observe(fleet.state[rows], fleet.params[rows], self.goal[rows], obs, dist, tilt)
+            self.obs[rows], self.dist[rows], self.tilt[rows] = obs, dist, tilt
+        if self.observation_noise is not None:
+            self._observe_noisy(np.arange(self.n) if rows is None else rows, 0.0)
 
-    def _observation_of(self, rows: NDArray[np.int64]) -> NDArray[np.float32]:
-        """The observation of the vehicles of ``rows`` as they are now (a copy)."""
+    def _observe_noisy(self, rows: NDArray[np.int64], elapsed: float) -> None:
+        """Overwrite the observation of ``rows`` with that of their sensed state, the
+        sensors' slow errors moved on by ``elapsed`` s (the distances and tilt, which
+        rewards and endings read, stay the truth's)."""
+        self.obs[rows] = self._observation_of(rows, elapsed)
+
+    def _observation_of(self, rows: NDArray[np.int64], elapsed: float = 0.0) -> NDArray[np.float32]:
+        """The observation of the vehicles of ``rows`` as they are now (a copy): as the
+        sensors measure it, with ``sensor_noise`` (a delayed observation too)."""
         fleet, count = self.fleet, rows.size
         obs = np.empty((count, self.obs_size), np.float32)
         dist, tilt = np.empty((count, F.N_DIST)), np.empty(count)
-        self.task.observe(fleet.state[rows], fleet.params[rows], self.goal[rows], obs, dist, tilt)
+        state = fleet.state[rows]
+        if self.observation_noise is not None:
+            state = self.observation_noise.perturb(state, rows, elapsed)
+        self.task.observe(state, fleet.params[rows], self.goal[rows], obs, dist, tilt)
         return obs
 
     # --- stepping ------------------------------------------------------------------
@@ -315,6 +332,8 @@ class TaskEngine:
             self.reward,
             self.outcome,
         )
+        if self.observation_noise is not None:
+            self._observe_noisy(np.arange(self.n), self.control_period)
         if self.delay is not None:
             self.delay.delay_observations(self.obs, self.steps)
         close_step(

@@ -69,6 +69,10 @@ class TaskOptions:
             "default" for every documented default, or a dict naming what to draw.
         airframe_scale: exact airframe scales, the same every episode, e.g.
             ``{"mass": 1.3}`` for a vehicle 30 % heavier.
+        sensor_noise: noise scale of the observation as the sensors would measure it
+            (position and velocity as the GPS, rates as the gyroscope, attitude as an
+            estimator: :mod:`quadsitl.physics.sensors.observation`); 0: the exact state.
+            Rewards and episode ends keep reading the truth.
     """
 
     airframe: object = "paper"
@@ -85,6 +89,7 @@ class TaskOptions:
     delay: Delay | dict[str, Any] | None = None
     randomize: Randomization | bool | str | dict[str, Any] | None = None
     airframe_scale: dict[str, float] | None = None
+    sensor_noise: float = 0.0
 
     @classmethod
     def from_kwargs(cls, **options: object) -> TaskOptions:
@@ -123,6 +128,9 @@ class TaskOptions:
             value = getattr(self, name)
             if not (_is_real(value) and 0 <= value <= limit):
                 raise ValueError(f"{name} must be in [0, {limit:.4g}] {unit}, got {value!r}")
+        noise = self.sensor_noise
+        if not (_is_real(noise) and 0 <= noise <= 100):
+            raise ValueError(f"sensor_noise must be a scale in [0, 100], got {noise!r}")
         self._check_param_randomization()
         object.__setattr__(self, "wind", self._weather())
         object.__setattr__(self, "delay", Delay.parse(self.delay))

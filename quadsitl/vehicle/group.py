@@ -19,6 +19,7 @@ import numpy as np
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import FleetSlot
+from quadsitl.physics.sensors import SensorSlot, SensorSuite
 from quadsitl.vehicle import ground_contact as GC
 from quadsitl.vehicle.battery import shaft_power
 from quadsitl.vehicle.controller import Autopilot
@@ -42,6 +43,9 @@ class VehicleGroup:
         airframe, physics_dt, control_period: as for :class:`Vehicle`, shared.
         home: the first vehicle's home; the others' lie ``spacing`` m apart on a grid.
         make_autopilot: an autopilot for each vehicle (None: the cascaded controller).
+        sensor_noise: noise scale of every vehicle's sensors (0: the truth, 1: the
+            defaults of docs/physics.md).
+        sensor_seed: of the sensors' noise.
     """
 
     def __init__(
@@ -53,6 +57,8 @@ class VehicleGroup:
         control_period: float = 0.004,
         spacing: float = 2.0,
         make_autopilot: Callable[[], Autopilot] | None = None,
+        sensor_noise: float = 1.0,
+        sensor_seed: int = 0,
     ) -> None:
         if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_VEHICLES:
             raise ValueError(f"the number of vehicles must be 1..{MAX_VEHICLES}, got {n!r}")
@@ -61,9 +67,14 @@ class VehicleGroup:
         home = home or Home()
         self.physics = Fleet(n, get_airframe(airframe), dt=physics_dt)
         self.rotor_cmd = np.zeros((n, L.N_ROTORS))  # rad/s; row i is vehicle i's
+        homes = [home.to_global(east, north, 0.0) for east, north in grid_offsets(n, spacing)]
+        lats, lons, alts = np.array(homes).T
+        gear = get_airframe(airframe).gear_height  # the ground is at z = gear
+        self.sensors = SensorSuite(
+            n, lats, lons, alts - gear, noise_scale=sensor_noise, seed=sensor_seed
+        )
         self.vehicles = []
-        for i, (east, north) in enumerate(grid_offsets(n, spacing)):
-            lat, lon, alt = home.to_global(east, north, 0.0)
+        for i, (lat, lon, alt) in enumerate(homes):
             self.vehicles.append(
                 Vehicle(
                     airframe,
@@ -74,6 +85,7 @@ class VehicleGroup:
                     fleet=FleetSlot(self.physics, i),
                     rotor_cmd=self.rotor_cmd[i],
                     control_phase=i,  # the controllers take turns: no step runs them all
+                    sensors=SensorSlot(self.sensors, i),
                 )
             )
         self.substeps = self.vehicles[0].substeps
@@ -106,13 +118,17 @@ class VehicleGroup:
         self._move(self.substeps, self.control_period)
 
     def _move(self, substeps: int, seconds: float) -> None:
-        """The physics of all vehicles, then what each vehicle's flight software does
-        about it: contact events for the vehicles whose ground contact changed, and,
-        once per control period, the batteries (each drawing its rotors' shaft power of
-        that moment for the whole period: the power changes little in one)."""
+        """The physics of all vehicles, their sensors, then what each vehicle's flight
+        software does about it: contact events for the vehicles whose ground contact
+        changed, and, once per control period, the batteries (each drawing its rotors'
+        shaft power of that moment for the whole period: the power changes little in
+        one)."""
         physics = self.physics
         before = physics.contact.tolist()
         physics.step(self.rotor_cmd, n_substeps=substeps)
+        self.sensors.update(
+            physics.time, physics.state, physics.params, physics.contact, physics.air_velocity
+        )
         after = physics.contact.tolist()
         if before != after:
             for v, was, now in zip(self.vehicles, before, after, strict=True):

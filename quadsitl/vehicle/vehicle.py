@@ -19,6 +19,7 @@ from quadsitl import frames
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import FleetSlot
+from quadsitl.physics.sensors import SensorSlot, SensorSuite
 from quadsitl.vehicle import external_control as X
 from quadsitl.vehicle import failsafe as FS
 from quadsitl.vehicle import ground_contact as GC
@@ -54,6 +55,8 @@ class Vehicle:
             a physics of its own.
         control_phase: physics steps by which this vehicle's controller runs early (a
             group spreads its vehicles' controllers over the steps of a period).
+        sensors: for a vehicle of a group, its row of the group's sensors (the group
+            updates them); alone, it has sensors of its own at the default noise.
     """
 
     # Flight state, (re)set by _reset_flight_state.
@@ -83,6 +86,7 @@ class Vehicle:
         fleet: FleetSlot | None = None,
         rotor_cmd: Vec | None = None,
         control_phase: int = 0,
+        sensors: SensorSlot | None = None,
     ) -> None:
         self.origin = home or Home()
         self.home_position = np.zeros(3)  # m, ENU: where home is in the local frame
@@ -99,6 +103,16 @@ class Vehicle:
         # another autopilot (e.g. a trained policy) is passed in.
         self.cascade = CascadedController(self.airframe)
         self.controller: Autopilot = autopilot or self.cascade
+        self._own_sensors = sensors is None
+        self.sensors = sensors or SensorSlot(
+            SensorSuite(
+                1,
+                self.origin.latitude,
+                self.origin.longitude,
+                self.origin.altitude - self.airframe.gear_height,  # the ground is at z = gear
+            ),
+            0,
+        )
         self.battery = Battery()
         self.failsafes = Failsafes()
         self.missions = MissionRunner(self)
@@ -304,6 +318,7 @@ class Vehicle:
         self._reset_flight_state()
         self.battery.recharge()
         self.failsafes.reset()
+        self.sensors.reset()
         self.event(Severity.INFO, "rebooted")
 
     # --- stepping ---------------------------------------------------------------------
@@ -331,8 +346,12 @@ class Vehicle:
         return int(self.fleet.contact[0])
 
     def end_step(self, contact_before: int, seconds: float) -> None:
-        """After the physics moved ``seconds``: touchdowns and crashes, battery."""
+        """After the physics moved ``seconds``: touchdowns and crashes, battery, and the
+        sensors (a vehicle of a group: the group's)."""
         GC.watch_contact(self, contact_before)
+        if self._own_sensors:
+            f = self.fleet
+            self.sensors.suite.update(f.time, f.state, f.params, f.contact, f.air_velocity)
         rotors = self.fleet.state[0, L.ROTORS]
         self.battery.drain(float(battery_power(self.airframe.torque_coeff, rotors)), seconds)
 

@@ -1,0 +1,265 @@
+"""The sensors of N vehicles, each at its own rate, fed from the physics state.
+
+:class:`SensorSuite` is told after each physics step (or each control period) where the
+state is; each sensor samples at the multiples of its own period (the GPS when they come,
+the others when read), so calling it more often costs one comparison. Everything is
+seeded, and one noise scale per vehicle multiplies every noise term (0: the truth,
+sampled at each sensor's rate and, for GPS, delivered late). Frames: world ENU, body FLU
+(the physics'); the MAVLink edge converts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from quadsitl.physics import layout as L
+from quadsitl.physics.sensors.barometer import Barometer, BarometerParams
+from quadsitl.physics.sensors.environment import magnetic_field_enu
+from quadsitl.physics.sensors.gps import Gps, GpsParams
+from quadsitl.physics.sensors.imu import Imu, ImuParams
+from quadsitl.physics.sensors.magnetometer import Magnetometer, MagnetometerParams
+from quadsitl.physics.sensors.processes import Array, check_number
+
+
+@dataclass(frozen=True)
+class SensorParams:
+    """The parameters of every sensor (defaults and sources: docs/physics.md)."""
+
+    imu: ImuParams = field(default_factory=ImuParams)
+    barometer: BarometerParams = field(default_factory=BarometerParams)
+    magnetometer: MagnetometerParams = field(default_factory=MagnetometerParams)
+    gps: GpsParams = field(default_factory=GpsParams)
+
+
+def check_noise_scale(value: object) -> float:
+    """A noise scale (0 = perfect, 1 = the defaults, 3 = three times), or ValueError."""
+    return check_number("sensor noise scale", value)
+
+
+def body_from_world(state: Array, vectors: Array) -> Array:
+    """(N, 3) world ENU vectors expressed in each vehicle's body FLU frame."""
+    qw, qx, qy, qz = state[:, L.QUAT].T
+    x, y, z = vectors.T
+    # v_body = q* ⊗ v ⊗ q: the transpose of the body -> world rotation.
+    tx = 2.0 * (qy * z - qz * y)
+    ty = 2.0 * (qz * x - qx * z)
+    tz = 2.0 * (qx * y - qy * x)
+    return np.stack(
+        [
+            x - qw * tx + (qy * tz - qz * ty),
+            y - qw * ty + (qz * tx - qx * tz),
+            z - qw * tz + (qx * ty - qy * tx),
+        ],
+        axis=1,
+    )
+
+
+def specific_force(state: Array, params: Array, contact: np.ndarray, air_velocity: Array) -> Array:
+    """(N, 3) m/s², body FLU: what an ideal accelerometer reads, a − g = (thrust + drag)/m
+    by the paper's force law (:func:`quadsitl.physics.reference.derivative`, which a test
+    holds this to); on the ground, which holds the vehicle up, gravity's reaction
+    (0, 0, g) in world."""
+    mass = params[:, L.P_MASS]
+    relative = state[:, L.VEL] - air_velocity  # (N, 3) m/s, world: through the air
+    speed = np.sqrt(np.einsum("ij,ij->i", relative, relative))
+    world = relative * (-params[:, L.P_KD] * speed / mass)[:, None]  # drag, world
+    grounded = contact != L.AIRBORNE
+    if grounded.any():
+        world[grounded] = 0.0
+        world[grounded, 2] = params[grounded, L.P_GRAVITY]
+    force = body_from_world(state, world)
+    rotors = state[:, L.ROTORS]
+    thrust = params[:, L.P_KT] * np.einsum("ij,ij->i", rotors, rotors) / mass  # body +z
+    force[:, 2] += np.where(grounded, 0.0, thrust)
+    return force
+
+
+class SensorSuite:
+    """IMU, barometer, magnetometer and GPS of N vehicles: :meth:`update` after the
+    physics moves, :meth:`sample_due` before reading the IMU, barometer or magnetometer
+    (the :class:`SensorSlot` accessors do).
+
+    Args:
+        n: vehicles.
+        latitude, longitude: degrees, one per vehicle (or one for all): where the
+            magnetic field is looked up (the home position).
+        altitude_offset: m above mean sea level of each vehicle's local z = 0 (what the
+            barometer adds to the height).
+        params: the sensors' parameters.
+        noise_scale: one for all vehicles, or one each.
+        seed: of the noise.
+    """
+
+    def __init__(
+        self,
+        n: int,
+        latitude: ArrayLike = 47.397742,
+        longitude: ArrayLike = 8.545594,
+        altitude_offset: ArrayLike = 0.0,
+        params: SensorParams | None = None,
+        noise_scale: ArrayLike = 1.0,
+        seed: int = 0,
+    ) -> None:
+        if not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"n must be a positive integer, got {n!r}")
+        self.n = int(n)
+        self.params = params or SensorParams()
+        self.rng = np.random.default_rng(seed)
+        lat = np.broadcast_to(np.asarray(latitude, dtype=np.float64), (self.n,))
+        lon = np.broadcast_to(np.asarray(longitude, dtype=np.float64), (self.n,))
+        self.field_enu = np.stack([magnetic_field_enu(a, b) for a, b in zip(lat, lon, strict=True)])
+        self.altitude_offset = np.broadcast_to(np.asarray(altitude_offset, np.float64), (self.n,))
+        self.noise_scale = np.ones((self.n, 1))
+        self.set_noise_scale(noise_scale)
+        p = self.params
+        self.imu = Imu(self.n, p.imu, self.rng)
+        self.barometer = Barometer(self.n, p.barometer, self.rng)
+        self.magnetometer = Magnetometer(self.n, p.magnetometer, self.rng)
+        self.gps = Gps(self.n, p.gps, self.rng)
+        self._clocks = (self.imu.clock, self.barometer.clock, self.magnetometer.clock)
+        self._last_time = 0.0
+        self._next_due = 0.0
+        self._truth: tuple[Array, Array, np.ndarray, Array] | None = None
+        self.reset()
+
+    def set_noise_scale(self, scale: ArrayLike, mask: ArrayLike | None = None) -> None:
+        """Noise scale of all vehicles, or of those selected by a boolean mask."""
+        values = np.asarray(scale, dtype=np.float64).ravel()
+        for value in values:
+            check_noise_scale(float(value))
+        rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
+        self.noise_scale[rows, 0] = values if values.size > 1 else values[0]
+
+    def reset(self, mask: ArrayLike | None = None, time: float | None = None) -> None:
+        """Restart the selected vehicles' sensors (all by default): new turn-on biases,
+        drifts at 0, the GPS without a fix until time_to_fix from ``time`` (default: the
+        last update's)."""
+        rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
+        when = self._last_time if time is None else time
+        self.imu.reset(rows)
+        self.barometer.reset(rows)
+        self.magnetometer.reset(rows)
+        self.gps.reset(rows, when)
+
+    def _restart(self, time: float) -> None:
+        """Time went back (a vehicle alone rebooted): start every clock again."""
+        for clock in (*self._clocks, self.gps.clock):
+            clock.restart(time)
+        self.gps.clear()
+        self.reset(time=time)
+
+    def update(
+        self, time: float, state: Array, params: Array, contact: np.ndarray, air_velocity: Array
+    ) -> None:
+        """The physics moved to ``time`` s: state (N, 17), params (N, N_PARAMS), contact
+        (N,), the air's velocity (N, 3) m/s world ENU (kept, not copied: the arrays the
+        physics steps in place). The GPS measures now when due (its delay line needs the
+        past); the IMU, barometer and magnetometer take the sample due by now when they
+        are read (:meth:`sample_due`): statistically the same as sampling at every due
+        tick (the biases move on exactly over any interval), and free while nobody reads
+        them."""
+        if time + 1e-9 < self._last_time:
+            self._restart(time)
+        self._last_time = time
+        self._truth = (state, params, contact, air_velocity)
+        if time + 1e-9 < self._next_due:
+            return
+        if self.gps.clock.due(time):
+            self.gps.sample(time, state[:, L.POS], state[:, L.VEL], self.noise_scale)
+        self.gps.deliver(time)
+        self._next_due = self.gps.clock.next_due
+        if self.gps.queue:
+            self._next_due = min(self._next_due, self.gps.queue[0][0])
+
+    def sample_due(self) -> SensorSuite:
+        """Take the IMU, barometer and magnetometer samples due at the last update's time
+        (their clocks' latest multiple of 1/rate), from the state then; returns self."""
+        if self._truth is None:
+            return self
+        time, scale = self._last_time, self.noise_scale
+        state, params, contact, air_velocity = self._truth
+        if self.imu.clock.due(time):
+            force = specific_force(state, params, contact, air_velocity)
+            self.imu.sample(time, state[:, L.RATES], force, scale)
+        if self.barometer.clock.due(time):
+            self.barometer.sample(time, self.altitude_offset + state[:, L.I_PZ], scale[:, 0])
+        if self.magnetometer.clock.due(time):
+            self.magnetometer.sample(time, body_from_world(state, self.field_enu), scale)
+        return self
+
+
+class SensorSlot:
+    """Vehicle ``index`` of a :class:`SensorSuite`: its readings, for one vehicle's
+    telemetry. ``fresh`` tells which sensors sampled since the last call of it."""
+
+    def __init__(self, suite: SensorSuite, index: int) -> None:
+        if not 0 <= index < suite.n:
+            raise ValueError(f"vehicle {index} is not in a sensor suite of {suite.n}")
+        self.suite, self.index = suite, index
+        self._seen = (-1, -1, -1, -1)
+
+    @property
+    def gyro(self) -> Array:
+        """(3,) rad/s, body FLU."""
+        return self.suite.sample_due().imu.gyro[self.index]
+
+    @property
+    def accel(self) -> Array:
+        """(3,) m/s², body FLU: specific force."""
+        return self.suite.sample_due().imu.accel[self.index]
+
+    @property
+    def magnetic_field(self) -> Array:
+        """(3,) gauss, body FLU."""
+        return self.suite.sample_due().magnetometer.field[self.index]
+
+    @property
+    def pressure(self) -> float:
+        """Pa."""
+        return float(self.suite.sample_due().barometer.pressure[self.index])
+
+    @property
+    def temperature(self) -> float:
+        """K."""
+        return float(self.suite.sample_due().barometer.temperature[self.index])
+
+    @property
+    def pressure_altitude(self) -> float:
+        """m above mean sea level."""
+        return float(self.suite.sample_due().barometer.altitude[self.index])
+
+    @property
+    def noise_scale(self) -> float:
+        return float(self.suite.noise_scale[self.index, 0])
+
+    def gps(self) -> dict[str, Any]:
+        """This vehicle's latest GPS fix: measured_at s, position (3,) m and velocity (3,)
+        m/s world ENU, eph/epv m, speed_accuracy m/s, hdop, vdop, satellites, fix_type."""
+        fix, i = self.suite.gps.fix, self.index
+        out: dict[str, Any] = {"measured_at": fix.measured_at}
+        for name in ("position", "velocity"):
+            out[name] = getattr(fix, name)[i]
+        for name in ("eph", "epv", "speed_accuracy", "hdop", "vdop"):
+            out[name] = float(getattr(fix, name)[i])
+        out["satellites"] = int(fix.satellites[i])
+        out["fix_type"] = int(fix.fix_type[i])
+        return out
+
+    def fresh(self) -> tuple[bool, bool, bool, bool]:
+        """(IMU, magnetometer, barometer, GPS): True for each that sampled since the last
+        call."""
+        s = self.suite.sample_due()
+        counts = (s.imu.samples, s.magnetometer.samples, s.barometer.samples, s.gps.samples)
+        fresh = tuple(now != seen for now, seen in zip(counts, self._seen, strict=True))
+        self._seen = counts
+        return fresh  # type: ignore[return-value]
+
+    def reset(self) -> None:
+        """Restart this vehicle's sensors (a reboot)."""
+        one = np.zeros(self.suite.n, bool)
+        one[self.index] = True
+        self.suite.reset(one)
