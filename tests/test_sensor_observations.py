@@ -71,3 +71,32 @@ def test_bad_sensor_noise_is_a_one_line_error(bad):
     with pytest.raises(ValueError, match="sensor_noise") as caught:
         gym.make("QuadSITL/Hover-v0", sensor_noise=bad)
     assert "\n" not in str(caught.value)
+
+
+def test_noisy_observations_are_delayed_like_exact_ones():
+    """``sensor_noise`` with an observation delay of two control periods: each noisy
+    observation is that of the state two steps earlier (its rotor speeds exactly, its
+    position within the GPS noise), the rewards are those of the undelayed env, and a
+    second run on the same seed repeats it."""
+
+    def run(**options):
+        env = gym.make("QuadSITL/Hover-v0", **options)
+        obs, _ = env.reset(seed=7)
+        out, rewards = [obs], []
+        for action in np.random.default_rng(1).normal(0, 0.05, (30, 4)).astype(np.float32):
+            obs, reward, *_ = env.step(action)
+            out.append(obs)
+            rewards.append(reward)
+        env.close()
+        return np.array(out), np.array(rewards)
+
+    delay = {"observation": 0.1, "action": 0.0}  # two control periods of 0.05 s
+    exact, exact_rewards = run()
+    noisy, noisy_rewards = run(sensor_noise=1.0, delay=delay)
+    again, _ = run(sensor_noise=1.0, delay=delay)
+    np.testing.assert_array_equal(noisy, again)
+    np.testing.assert_array_equal(noisy_rewards, exact_rewards)
+    # The rotor speeds are not a sensor's: exactly those of two steps earlier.
+    np.testing.assert_array_equal(noisy[3:, F.OBS_ROTORS], exact[1:-2, F.OBS_ROTORS])
+    position_error = noisy[3:, F.OBS_POS] - exact[1:-2, F.OBS_POS]  # vs 2 steps earlier
+    assert 0 < np.abs(position_error).max() < 5 * GpsParams().horizontal_sigma
