@@ -18,7 +18,7 @@ import numpy as np
 
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
-from quadsitl.physics.fleet import FleetSlot
+from quadsitl.physics.fleet_slot import FleetSlot
 from quadsitl.vehicle import ground_contact as GC
 from quadsitl.vehicle.battery import shaft_power
 from quadsitl.vehicle.controller import Autopilot
