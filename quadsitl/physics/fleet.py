@@ -22,6 +22,12 @@ from quadsitl.physics.airframe import Airframe, get_airframe, hover_rotor_speed
 from quadsitl.physics.wind import Wind
 
 BACKENDS = ("compiled", "reference")
+# Weather arrays with no rows: the kernel's world build then steps still air.
+STILL_AIR = (
+    np.empty((0, L.N_WIND_PARAMS)),
+    np.empty((0, L.N_WIND_STATE)),
+    np.empty(0, np.uint64),
+)
 _FLOAT64, _NDARRAY = np.dtype(np.float64), np.ndarray  # the fast path of Fleet.step
 
 
@@ -346,7 +352,8 @@ class Fleet(VehicleStates):
             self._step_arrays = (lambda *arrays: step(*arrays, *weather)) if windy else step
             return
         world = kernel.single_step_wind if self.n == 1 else kernel.batch_step_wind
-        self._step_arrays = lambda *arrays: world(*arrays, *weather, windy)
+        arrays = weather if windy else STILL_AIR
+        self._step_arrays = lambda *state_arrays: world(*state_arrays, *arrays)
 
     def set_wind(
         self,

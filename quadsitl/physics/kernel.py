@@ -209,13 +209,12 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
         wind_params,
         wind_state,
         streams,
-        weather,
     ):  # pragma: no cover
         """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place, each
-        after a step of its weather when ``weather`` is true: ``wind_params``
-        (n, N_WIND_PARAMS), ``wind_state`` (n, N_WIND_STATE), random ``streams`` (n,)
-        uint64; without it the air is still (the weather's arrays are not touched) and
-        only the rotors' world (efficiency, ground effect) is added to the physics.
+        after a step of its weather: ``wind_params`` (n, N_WIND_PARAMS), ``wind_state``
+        (n, N_WIND_STATE), random ``streams`` (n,) uint64. Weather arrays with no rows
+        mean still air for every vehicle: only the rotors' world (efficiency, ground
+        effect) is added to the physics.
 
         Returns -1, or the index of the first vehicle with a non-finite command, in
         which case nothing was changed."""
@@ -223,6 +222,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
         bad = first_invalid_command(commands)
         if bad >= 0:
             return bad
+        weather = wind_params.shape[0] > 0
         size = L.STATE_SIZE
         # One allocation cut into the block arrays (each a run of rows of B values).
         z = size * B

@@ -120,7 +120,9 @@ class VehicleGroup:
                     GC.watch_contact(v, was)
         self._undrawn += seconds
         if self._steps % self.substeps == 0:
-            powers = shaft_power(physics.params[:, L.P_KQ], physics.state[:, L.ROTORS])
+            powers = shaft_power(
+                physics.params[:, L.P_KQ], physics.state[:, L.ROTORS], physics.motor_efficiency
+            )
             for v, power in zip(self.vehicles, powers.tolist(), strict=True):
-                v.battery.drain(power, self._undrawn)
+                v.drain_battery(power, self._undrawn)
             self._undrawn = 0.0
