@@ -273,16 +273,14 @@ class Commands:
         restores, OFF stops, WRONG leaves it param4 (0 < η < 1) of its thrust."""
         v = self.server.vehicle
         if not v.params["SYS_FAILURE_EN"]:
-            return Result(Outcome.DENIED, "failure injection disabled: set SYS_FAILURE_EN to 1")
+            return Result(Outcome.DENIED, "failure injection off (SYS_FAILURE_EN 0)")
         unit, kind = _int(c.params[0], "failure unit"), _int(c.params[1], "failure type")
         if unit != mav.FAILURE_UNIT_SYSTEM_MOTOR:
             name = _enum_name("FAILURE_UNIT", unit)
-            return Result(Outcome.UNSUPPORTED, f"failure injection: {name} is not simulated")
+            return Result(Outcome.UNSUPPORTED, f"{name} failure not simulated")
         if kind not in (mav.FAILURE_TYPE_OK, mav.FAILURE_TYPE_OFF, mav.FAILURE_TYPE_WRONG):
             name = _enum_name("FAILURE_TYPE", kind)
-            return Result(
-                Outcome.UNSUPPORTED, f"motor failure {name} is not simulated (OK, OFF, WRONG are)"
-            )
+            return Result(Outcome.UNSUPPORTED, f"motor {name} not simulated: OK, OFF, WRONG")
         motor = _int(c.params[2], "motor instance")
         which = "every motor" if motor == 0 else f"motor {motor}"
         if kind == mav.FAILURE_TYPE_OK:
@@ -293,9 +291,7 @@ class Commands:
         if kind == mav.FAILURE_TYPE_WRONG:
             efficiency = c.params[3]
             if not (math.isfinite(efficiency) and 0.0 < efficiency < 1.0):
-                raise ValueError(
-                    f"motor failure WRONG: param4 is the thrust left, 0 < η < 1; got {efficiency}"
-                )
+                raise ValueError(f"motor WRONG: param4 (thrust left) not in (0, 1): {efficiency:g}")
         v.motors.inject(motor, efficiency)
         state = "off" if efficiency == 0.0 else f"at {efficiency:.0%} thrust"
         v.event(Severity.CRITICAL, f"{which} {state} (failure injection)")
