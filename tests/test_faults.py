@@ -175,7 +175,8 @@ def test_inject_failure_over_udp_stops_a_motor_and_the_vehicle_crashes():
 
 
 def test_fail_motor_flies_on_a_weak_motor_from_power_on():
-    """``--fail-motor 3:0.8``: the banner says so and the vehicle's physics has it."""
+    """``--fail-motor 3:0.8`` (SimConfig.motor_faults): the vehicle's physics has the weak
+    motor from power-on and after a reboot; an injected failure does not outlive one."""
     from quadsitl.mavlink.runner import SimConfig, Simulator
 
     sim = Simulator(
@@ -185,7 +186,7 @@ def test_fail_motor_flies_on_a_weak_motor_from_power_on():
             extra_urls=["udpin:127.0.0.1:0"],
             log_dir=None,
             motor_faults={3: 0.8},
-        )  # fmt: skip
+        )
     )
     try:
         np.testing.assert_array_equal(sim.vehicle.fleet.motor_efficiency[0], [1, 1, 0.8, 1])
@@ -196,3 +197,43 @@ def test_fail_motor_flies_on_a_weak_motor_from_power_on():
         np.testing.assert_array_equal(sim.vehicle.fleet.motor_efficiency[0], [1, 1, 0.8, 1])
     finally:
         sim.close()
+
+
+def test_env_fault_option_fails_the_motor_on_time_and_each_episode_starts_healthy():
+    import gymnasium as gym
+
+    env = gym.make(
+        "QuadSITL/Hover-v0", faults={"motor": 2, "efficiency": 0.6, "at": 0.12}
+    ).unwrapped
+    fleet = env.engine.fleet
+    env.reset(seed=1)
+    efficiencies = []
+    for _ in range(5):  # control period 0.05 s: steps start at 0, 0.05, 0.10, 0.15, 0.20 s
+        env.step(np.zeros(4))
+        efficiencies.append(fleet.motor_efficiency[0].copy())
+    np.testing.assert_array_equal(efficiencies[2], [1, 1, 1, 1])
+    np.testing.assert_array_equal(efficiencies[3], [1, 0.6, 1, 1])
+    np.testing.assert_array_equal(efficiencies[4], [1, 0.6, 1, 1])
+    env.reset(seed=2)
+    np.testing.assert_array_equal(fleet.motor_efficiency[0], [1, 1, 1, 1])
+    for _ in range(40):
+        obs, *_ = env.step(np.zeros(4))
+        assert np.isfinite(obs).all()
+    env.close()
+
+
+def test_env_fault_and_ground_effect_options_are_checked_in_one_line():
+    import gymnasium as gym
+
+    for options, match in (
+        ({"faults": {"motor": 7}}, "motor 7 does not exist"),
+        ({"faults": {"motor": 2, "efficiency": 1.5}}, r"in \[0, 1\]"),
+        ({"faults": {"motor": 2, "at": -1}}, "'at' must be a time"),
+        ({"faults": {"motor": 2, "at": math.nan}}, "'at' must be a time"),
+        ({"faults": {"engine": 2}}, "a fault needs 'motor'"),
+        ({"faults": "motor 2"}, "faults must be a dict"),
+        ({"ground_effect": "yes"}, "ground_effect must be True or False"),
+    ):
+        with pytest.raises(ValueError, match=match) as error:
+            gym.make("QuadSITL/Land-v0", **options)
+        assert "\n" not in str(error.value)

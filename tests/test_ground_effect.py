@@ -109,7 +109,7 @@ def test_ratio_is_held_below_half_a_radius_and_is_one_without_ground():
     ratio = thrust_ratio(heights, R)
     assert np.isfinite(ratio).all()
     np.testing.assert_allclose(ratio[:5], MAX_THRUST_RATIO)
-    assert MAX_THRUST_RATIO == pytest.approx(4 / 3)
+    assert pytest.approx(4 / 3) == MAX_THRUST_RATIO
     assert ratio[5] == pytest.approx(cheeseman_bennett(0.6)) and ratio[5] < MAX_THRUST_RATIO
     assert ratio[6] == 1.0
 

@@ -33,7 +33,9 @@ Keyword arguments of ``gymnasium.make(id, **kwargs)`` (all optional; unknown nam
 ``init_attitude_noise`` (rad), ``init_velocity_noise`` (m/s), ``init_rate_noise`` (rad/s)
 (uniform half-widths added to the start; 0 = the paper's start) and
 ``param_randomization`` (``{{"mass": 0.1, ...}}``: per episode, scale each named airframe
-parameter by U(1 − f, 1 + f)). ``render_mode``: None, or "rerun" to log every episode to a
+parameter by U(1 − f, 1 + f)), ``wind``, ``ground_effect`` (True: rotor thrust grows
+near the ground) and ``faults`` (``{{"motor": 2, "efficiency": 0.6, "at": 1.0}}``: a motor
+that loses thrust during every episode). ``render_mode``: None, or "rerun" to log every episode to a
 Rerun viewer (or to the .rrd file ``rerun_save``).
 
 Episode-end ``info`` keys: ``outcome`` (timed_out, out_of_bounds, flipped, landed,

@@ -23,6 +23,7 @@ from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import FleetLike
 from quadsitl.physics.wind import Wind
+from quadsitl.tasks import faults as FT
 from quadsitl.tasks import features as F
 from quadsitl.tasks import spec as S
 from quadsitl.tasks.reward import jit
@@ -81,6 +82,11 @@ class TaskOptions:
             :class:`~quadsitl.physics.wind.Wind` or a dict of its fields (e.g.
             ``{"speed": 6, "from_deg": 270, "turbulence": "moderate"}``); None: still
             air. Each episode's turbulence is drawn from the env's own generator.
+        ground_effect: True: each rotor gains thrust near the ground (Cheeseman–Bennett;
+            docs/physics.md). Off by default, in every task.
+        faults: a motor that fails during every episode: ``{"motor": 2, "efficiency":
+            0.6, "at": 1.0}`` (motor 1-4, thrust fraction 0..1, s into the episode) or a
+            list of them (:mod:`quadsitl.tasks.faults`); None: healthy motors.
     """
 
     airframe: object = "paper"
@@ -94,6 +100,8 @@ class TaskOptions:
     init_rate_noise: float = 0.0
     param_randomization: dict[str, float] | None = None
     wind: Wind | dict[str, Any] | None = None
+    ground_effect: bool = False
+    faults: Any = None
 
     @classmethod
     def from_kwargs(cls, **options: object) -> TaskOptions:
@@ -134,6 +142,9 @@ class TaskOptions:
                 raise ValueError(f"{name} must be in [0, {limit:.4g}] {unit}, got {value!r}")
         self._check_param_randomization()
         object.__setattr__(self, "wind", self._weather())
+        if not isinstance(self.ground_effect, bool):
+            raise ValueError(f"ground_effect must be True or False, got {self.ground_effect!r}")
+        object.__setattr__(self, "faults", FT.parse_faults(self.faults))
 
     def _weather(self) -> Wind | None:
         """The ``wind`` option as a checked Wind (None: still air)."""
@@ -255,6 +266,8 @@ class TaskEngine:
         self.fleet: FleetLike = fleet or Fleet(
             num_envs, airframe=self.airframe, dt=options.physics_dt, ground_z=ground_z
         )
+        if options.ground_effect:
+            self.fleet.set_ground_effect(True)
         self.base_params = self.fleet.params[0].copy()
         self.substeps = round(options.control_period / options.physics_dt)
         self.control_period = options.control_period
@@ -339,6 +352,8 @@ class TaskEngine:
                 one = np.zeros(self.n, bool)
                 one[i] = True
                 self.fleet.set_wind(o.wind, seed=int(self.rngs[i].integers(2**62)), mask=one)
+        if o.faults:
+            FT.heal(self.fleet, rows)
         self.steps[rows] = 0
         self.outcome[rows] = S.RUNNING
         self.time_within[rows] = 0.0
@@ -406,6 +421,8 @@ class TaskEngine:
         if bad >= 0:
             raise ValueError(f"action of env {bad} is not finite: {raw[bad]}")
         fleet = self.fleet
+        if self.options.faults:
+            FT.strike(fleet, self.options.faults, self.steps, active, self.control_period)
         fleet.step(self.rotor_cmd, n_substeps=self.substeps)
         if self.task.advance_goal is not None:
             self.task.advance_goal(self, active)

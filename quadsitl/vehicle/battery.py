@@ -42,7 +42,7 @@ OCV_SHAPE = (np.array(_TABLE_CELL_V) - 3.091) / (4.173 - 3.091)
 
 def ocv_shape(charge: ArrayLike) -> np.ndarray:
     """(OCV − empty) / (full − empty) of a cell with ``charge`` (0..1) left."""
-    return np.interp(charge, OCV_CHARGE, OCV_SHAPE)
+    return np.interp(np.asarray(charge, dtype=np.float64), OCV_CHARGE, OCV_SHAPE)
 
 
 def shaft_power(
