@@ -25,6 +25,8 @@ from quadsitl.physics import wind_kernel
 
 BLOCK = 32  # vehicles per vectorised block (measured best of 16..256)
 THRUST, ROLL_MOMENT, PITCH_MOMENT, YAW_SUM = 0, 1, 2, 3  # rows of the rotor sums
+GAIN0 = 4  # rows 4..7 of the same scratch: the rotors' ground-effect gains (world build)
+SUMS_ROWS = GAIN0 + L.N_ROTORS
 # FMA contraction and reciprocal division only: no fast-math NaN/inf assumptions, so
 # the finiteness check stays exact.
 _OPTIONS: dict[str, Any] = dict(
@@ -37,20 +39,17 @@ _inline = numba.njit(inline="always", **_OPTIONS)
 @_inline
 def _derivative(s, p, cmd, out, m, sums, air, B, WIND):  # pragma: no cover - compiled
     """ṡ of the first m vehicles of a block: s, p and cmd hold rows of B values; ``sums``
-    (4 rows) is scratch for the rotor sums; ``air`` (6 rows) the air's velocity (world)
-    and angular velocity (body). The compile-time flag WIND builds the world: the air,
-    and each rotor's efficiency and ground effect (without it, the still-air arithmetic
-    of the paper, unchanged). Each loop runs over vehicles, innermost, so that it is
-    vectorised."""
+    (SUMS_ROWS rows) is scratch for the rotor sums and gains; ``air`` (6 rows) the air's
+    velocity (world) and angular velocity (body). The compile-time flag WIND builds the
+    world: the air, and each rotor's efficiency and ground effect (without it, the
+    still-air arithmetic of the paper, unchanged). Each loop runs over vehicles,
+    innermost, so that it is vectorised."""
     for j in range(m):
         for k in range(4):
             sums[k * B + j] = 0.0
-    for i in range(L.N_ROTORS):  # rotor i: thrust, its moments, and its motor lag
-        for j in range(m):
-            rotor = s[(L.I_ROTOR0 + i) * B + j]
-            rotor_sq = rotor * rotor
-            if WIND:  # the world: the rotor's efficiency η_i and ground-effect gain G_i
-                rotor_sq = rotor_sq * p[(L.P_ROTOR_EFFICIENCY0 + i) * B + j]
+    if WIND:  # the world: each rotor's ground-effect gain G_i, into sums rows 4..7
+        for i in range(L.N_ROTORS):
+            for j in range(m):
                 qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
                 qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
                 hub_z = (
@@ -62,8 +61,15 @@ def _derivative(s, p, cmd, out, m, sums, air, B, WIND):  # pragma: no cover - co
                 height = max(hub_z - p[L.P_GROUND_Z * B + j], GE.MIN_HEIGHT_RADII * radius)
                 k = radius / (4.0 * height)
                 ratio = 1.0 / (1.0 - k * k)  # Cheeseman–Bennett (+inf height: 1)
-                gain = ratio if p[L.P_GROUND_EFFECT * B + j] > 0.0 else 1.0
-                thrust = p[L.P_KT * B + j] * rotor_sq * gain
+                on = p[L.P_GROUND_EFFECT * B + j] > 0.0
+                sums[(GAIN0 + i) * B + j] = ratio if on else 1.0
+    for i in range(L.N_ROTORS):  # rotor i: thrust, its moments, and its motor lag
+        for j in range(m):
+            rotor = s[(L.I_ROTOR0 + i) * B + j]
+            rotor_sq = rotor * rotor
+            if WIND:  # the world: the rotor's efficiency η_i and ground-effect gain G_i
+                rotor_sq = rotor_sq * p[(L.P_ROTOR_EFFICIENCY0 + i) * B + j]
+                thrust = p[L.P_KT * B + j] * rotor_sq * sums[(GAIN0 + i) * B + j]
             else:
                 thrust = p[L.P_KT * B + j] * rotor_sq
             sums[THRUST * B + j] += thrust
@@ -196,7 +202,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
     jit = numba.njit(nogil=release_gil, **_OPTIONS)
     WIND = wind
     # Block scratch: state, previous state, RK4 temp, k1..k4, parameters, commands, sums.
-    scratch_size = (7 * L.STATE_SIZE + L.N_PARAMS + L.N_ROTORS + 4) * B
+    scratch_size = (7 * L.STATE_SIZE + L.N_PARAMS + L.N_ROTORS + SUMS_ROWS) * B
 
     def advance(
         state,
