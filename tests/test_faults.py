@@ -174,7 +174,7 @@ def test_inject_failure_over_udp_stops_a_motor_and_the_vehicle_crashes():
     assert "Traceback" not in out
 
 
-def test_fail_motor_flies_on_a_weak_motor_from_power_on():
+def test_fail_motor_fits_a_weak_motor_from_power_on_and_a_reboot_keeps_it():
     """``--fail-motor 3:0.8`` (SimConfig.motor_faults): the vehicle's physics has the weak
     motor from power-on and after a reboot; an injected failure does not outlive one."""
     from quadsitl.mavlink.runner import SimConfig, Simulator
