@@ -129,6 +129,14 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         "3 three times as much (default: 1)",
     )
     sim.add_argument(
+        "--fail-motor",
+        action="append",
+        default=[],
+        metavar="N[:EFFICIENCY]",
+        help="motor N (1-4) fails on every vehicle from power-on: off, or left EFFICIENCY "
+        "(0..1) of its thrust, e.g. 2:0.6 (repeatable; default: healthy motors)",
+    )
+    sim.add_argument(
         "--spacing",
         type=float,
         default=2.0,
@@ -337,6 +345,7 @@ def _sim_config(args: argparse.Namespace) -> object:
         flown_by=f"the policy in {args.autopilot}" if args.autopilot else None,
         wind=wind,
         sensor_noise=args.sensor_noise,
+        motor_faults=_motor_faults(args.fail_motor),
     )
 
 
@@ -354,6 +363,21 @@ def _add_weather_options(parser: argparse.ArgumentParser) -> None:
         help="Dryden turbulence (MIL-F-8785C): light, moderate, severe, or its sigma in "
         "m/s (default: none)",
     )
+
+
+def _motor_faults(items: list[str]) -> dict[int, float]:
+    """``--fail-motor N[:EFFICIENCY]`` (repeatable) as {motor: efficiency}; a one-line
+    ValueError for what does not parse."""
+    faults = {}
+    for item in items:
+        motor, sep, efficiency = item.partition(":")
+        try:
+            faults[int(motor)] = float(efficiency) if sep else 0.0
+        except ValueError:
+            raise ValueError(
+                f"--fail-motor must be N or N:EFFICIENCY (e.g. 2 or 2:0.6), got {item!r}"
+            ) from None
+    return faults
 
 
 def _weather(wind: str | None, turbulence: str | None) -> Any:

@@ -35,8 +35,12 @@ Keyword arguments of ``gymnasium.make(id, **kwargs)`` (all optional; unknown nam
 ``param_randomization`` (``{{"mass": 0.1, ...}}``: per episode, scale each named airframe
 parameter by U(1 − f, 1 + f)), ``delay`` (``{{"observation": s, "action": s}}``, seconds
 or (low, high) drawn per episode), ``randomize`` (True: airframe, wind and delay drawn per
-episode; docs/tasks.md) and ``airframe_scale`` (``{{"mass": 1.3}}``: exact scales).
-``render_mode``: None, or "rerun" to log every episode to a
+episode; docs/tasks.md), ``airframe_scale`` (``{{"mass": 1.3}}``: exact scales),
+``wind`` (a Wind or ``{{"speed": 6, "from_deg": 270, "turbulence": "moderate"}}``),
+``sensor_noise`` (0: exact observations; 1: as the sensors measure them),
+``ground_effect`` (True: rotor thrust grows near the ground) and ``faults``
+(``{{"motor": 2, "efficiency": 0.6, "at": 1.0}}``: a motor that loses thrust during every
+episode). ``render_mode``: None, or "rerun" to log every episode to a
 Rerun viewer (or to the .rrd file ``rerun_save``).
 
 Episode-end ``info`` keys: ``outcome`` (timed_out, out_of_bounds, flipped, landed,

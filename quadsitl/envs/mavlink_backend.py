@@ -214,6 +214,11 @@ class MavlinkBackend:
                 "wind is not available with backend='mavlink' yet (the simulator process "
                 "flies in still air); use the in-process backend"
             )
+        if options.ground_effect or options.faults:
+            raise ValueError(
+                "ground_effect and faults are not available with backend='mavlink' yet; use "
+                "the in-process backend (or quadsitl sim --fail-motor, MAV_CMD_INJECT_FAILURE)"
+            )
         airframe = get_airframe(options.airframe)  # type: ignore[arg-type]
         if AIRFRAMES.get(airframe.name) != airframe:
             raise ValueError(

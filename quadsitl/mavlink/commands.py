@@ -88,6 +88,7 @@ class Commands:
             ),
             mav.MAV_CMD_DO_CHANGE_SPEED: self._cmd_change_speed,
             mav.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: self._cmd_reboot,
+            mav.MAV_CMD_INJECT_FAILURE: self._cmd_inject_failure,
             RESET_STATE: self._cmd_reset_state,
             STAGE_MOTION: lambda c, link: self.server.motors.stage_motion(c.params),
         }
@@ -266,6 +267,36 @@ class Commands:
         self.server.vehicle.reboot()
         return ACCEPTED
 
+    def _cmd_inject_failure(self, c: Command, link: Link) -> Result:
+        """PX4's failure injection, guarded by SYS_FAILURE_EN: param1 the unit, param2 the
+        type, param3 the instance (the motor, 1-based; 0 every one). Motors only: OK
+        restores, OFF stops, WRONG leaves it param4 (0 < η < 1) of its thrust."""
+        v = self.server.vehicle
+        if not v.params["SYS_FAILURE_EN"]:
+            return Result(Outcome.DENIED, "failure injection off (SYS_FAILURE_EN 0)")
+        unit, kind = _int(c.params[0], "failure unit"), _int(c.params[1], "failure type")
+        if unit != mav.FAILURE_UNIT_SYSTEM_MOTOR:
+            name = _enum_name("FAILURE_UNIT", unit)
+            return Result(Outcome.UNSUPPORTED, f"{name} failure not simulated")
+        if kind not in (mav.FAILURE_TYPE_OK, mav.FAILURE_TYPE_OFF, mav.FAILURE_TYPE_WRONG):
+            name = _enum_name("FAILURE_TYPE", kind)
+            return Result(Outcome.UNSUPPORTED, f"motor {name} not simulated: OK, OFF, WRONG")
+        motor = _int(c.params[2], "motor instance")
+        which = "every motor" if motor == 0 else f"motor {motor}"
+        if kind == mav.FAILURE_TYPE_OK:
+            v.motors.restore(motor)
+            v.event(Severity.NOTICE, f"{which} restored (failure injection)")
+            return ACCEPTED
+        efficiency = 0.0
+        if kind == mav.FAILURE_TYPE_WRONG:
+            efficiency = c.params[3]
+            if not (math.isfinite(efficiency) and 0.0 < efficiency < 1.0):
+                raise ValueError(f"motor WRONG: param4 (thrust left) not in (0, 1): {efficiency:g}")
+        v.motors.inject(motor, efficiency)
+        state = "off" if efficiency == 0.0 else f"at {efficiency:.0%} thrust"
+        v.event(Severity.CRITICAL, f"{which} {state} (failure injection)")
+        return ACCEPTED
+
     def _cmd_reset_state(self, c: Command, link: Link) -> Result:
         result = self.server.motors.reset(c.params)
         if result.ok:
@@ -273,6 +304,12 @@ class Commands:
                 self.server.motors.state_messages(self.server.hil_state(link))
             )
         return result
+
+
+def _enum_name(enum: str, value: int) -> str:
+    """The MAVLink name of ``value`` in ``enum`` (its number if it has none)."""
+    entry = mav.enums[enum].get(value)
+    return entry.name if entry is not None else f"{enum} {value}"
 
 
 def _int(value: float, what: str) -> int:

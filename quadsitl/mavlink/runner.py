@@ -35,10 +35,12 @@ from quadsitl.mavlink.links import Link, is_loopback, parse_url
 from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.physics import Airframe, get_airframe
+from quadsitl.physics import layout as L
 from quadsitl.physics.wind import Wind
 from quadsitl.vehicle.controller import Autopilot, Setpoint
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.group import VehicleGroup
+from quadsitl.vehicle.motor_faults import check_efficiency, check_motor
 from quadsitl.vehicle.param_binding import show_weather
 from quadsitl.vehicle.results import Severity
 from quadsitl.vehicle.vehicle import Vehicle
@@ -77,6 +79,8 @@ class SimConfig:
     wind_seed: int = 0  # of the turbulence (vehicle i: the i-th stream of this seed)
     sensor_noise: float = 1.0  # scale of the sensor models' noise (0: the truth)
     sensor_seed: int = 0  # of the sensors' noise
+    # motor (1-based) -> its efficiency, on every vehicle from power-on (--fail-motor)
+    motor_faults: dict[int, float] = field(default_factory=dict)
 
     def validate(self) -> None:
         get_identity(self.autopilot_id)
@@ -107,6 +111,9 @@ class SimConfig:
             raise ValueError(f"--sensor-noise must be a scale 0..100, got {self.sensor_noise}")
         if not (math.isfinite(self.speed) and 0.01 <= self.speed <= 100):
             raise ValueError(f"speed factor must be 0.01..100, got {self.speed}")
+        for motor, efficiency in self.motor_faults.items():
+            check_motor(motor)
+            check_efficiency(efficiency)
         if not [u for u in (self.gcs_url, self.api_url, self.hil_url, *self.extra_urls) if u]:
             raise ValueError("at least one link is needed")
         if self.lockstep and self.hil_url and self.signing_key is None:
@@ -122,8 +129,11 @@ class SimConfig:
 
 def _compile(vehicles: int, airframe: str, wind: Wind | None = None) -> None:
     """Load (or compile) the physics and the controller before the clock starts: their
-    first calls take milliseconds to seconds, which real time cannot absorb."""
+    first calls take milliseconds to seconds, which real time cannot absorb. The physics'
+    world build too: a motor failure injected in flight switches to it."""
     group = VehicleGroup(vehicles, airframe)
+    group.step()
+    group.physics.set_motor_efficiency((1.0, 1.0, 1.0, 0.5))
     if wind is not None and not wind.calm:
         group.physics.set_wind(wind)
     group.step()
@@ -206,6 +216,11 @@ class Simulator:
         if config.wind is not None and not config.wind.calm:
             self.group.physics.set_wind(config.wind, seed=config.wind_seed)
         _compile(config.vehicles, config.airframe, config.wind)
+        fitted = np.ones(L.N_ROTORS)
+        for motor, efficiency in config.motor_faults.items():
+            fitted[motor - 1] = efficiency
+        for vehicle in self.group.vehicles:
+            vehicle.motors.fit(fitted)
         for vehicle in self.group.vehicles:
             show_weather(vehicle)
             for name, value in config.params.items():
@@ -415,6 +430,9 @@ def run_simulator(
         form = "MIL-F-8785C" if wind.turbulence_model == "8785C" else "MIL-HDBK-1797"
         gusts = "" if wind.turbulence is None else f", {wind.turbulence} turbulence ({form})"
         sim._print(f"quadsitl sim: wind {wind.speed:g} m/s from {wind.from_deg:g}°{gusts}")
+    for motor, efficiency in sorted(config.motor_faults.items()):
+        state = "off" if efficiency == 0 else f"at {efficiency:.0%} thrust"
+        sim._print(f"quadsitl sim: motor {motor} {state} on every vehicle (--fail-motor)")
     exposed = [link for link in sim.links if link.exposed]
     if exposed and config.signing_key is None:
         names = ", ".join(f"{link.name} ({link.url})" for link in exposed)

@@ -147,6 +147,8 @@ class Airframe:
         row[L.P_ROTOR_X] = positions[:, 0]
         row[L.P_ROTOR_Y] = positions[:, 1]
         row[L.P_ROTOR_YAW_SIGN] = self.rotor_yaw_sign
+        row[L.P_GROUND_EFFECT] = 0.0  # the world beyond the airframe: set by the Fleet
+        row[L.P_ROTOR_EFFICIENCY] = 1.0
         return row
 
 

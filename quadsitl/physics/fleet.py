@@ -22,6 +22,12 @@ from quadsitl.physics.airframe import Airframe, get_airframe, hover_rotor_speed
 from quadsitl.physics.wind import Wind
 
 BACKENDS = ("compiled", "reference")
+# Weather arrays with no rows: the kernel's world build then steps still air.
+STILL_AIR = (
+    np.empty((0, L.N_WIND_PARAMS)),
+    np.empty((0, L.N_WIND_STATE)),
+    np.empty(0, np.uint64),
+)
 _FLOAT64, _NDARRAY = np.dtype(np.float64), np.ndarray  # the fast path of Fleet.step
 
 
@@ -71,6 +77,12 @@ class FleetLike(Protocol):
         seed: int | Sequence[int] | None = None,
         mask: ArrayLike | None = None,
         restart: bool = True,
+    ) -> None: ...
+
+    def set_ground_effect(self, on: bool, mask: ArrayLike | None = None) -> None: ...
+
+    def set_motor_efficiency(
+        self, efficiency: ArrayLike, mask: ArrayLike | None = None
     ) -> None: ...
 
 
@@ -159,6 +171,22 @@ class VehicleStates:
     def windy(self) -> bool:
         """True when any vehicle flies in something other than still air."""
         return bool(self.stirred.any())
+
+    @property
+    def world(self) -> bool:
+        """True when any vehicle needs the physics' world: weather, ground effect, or a
+        rotor below full efficiency (else the still-air physics runs, as it always did)."""
+        p = self.params
+        return (
+            self.windy
+            or bool(p[:, L.P_GROUND_EFFECT].any())
+            or bool((p[:, L.P_ROTOR_EFFICIENCY] != 1.0).any())
+        )
+
+    @property
+    def motor_efficiency(self) -> NDArray[np.float64]:
+        """(n, 4) thrust and torque fraction of each rotor: 1 healthy, 0 dead (a view)."""
+        return self.params[:, L.P_ROTOR_EFFICIENCY]
 
     @property
     def hover_rotor_speed(self) -> NDArray[np.float64]:
@@ -252,6 +280,41 @@ class VehicleStates:
         if restart:
             self._reset_wind(rows)
 
+    def set_ground_effect(self, on: bool, mask: ArrayLike | None = None) -> None:
+        """Turn the rotors' ground effect (Cheeseman–Bennett) on or off for the vehicles
+        (all, or those of ``mask``)."""
+        if not isinstance(on, (bool, np.bool_)):
+            raise ValueError(f"ground effect must be True or False, got {on!r}")
+        self.params[self._rows(mask), L.P_GROUND_EFFECT] = float(on)
+
+    def set_motor_efficiency(self, efficiency: ArrayLike, mask: ArrayLike | None = None) -> None:
+        """Set each rotor's efficiency η (its thrust and reaction torque are η times a
+        healthy rotor's: 1 healthy, 0 dead) for the vehicles (all, or those of ``mask``):
+        four values for all of them, or one row of four per selected vehicle."""
+        rows = self._rows(mask)
+        count = int(rows.sum())
+        try:
+            values = np.asarray(efficiency, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"motor efficiency must be numbers, got {efficiency!r}") from None
+        if values.shape == (L.N_ROTORS,):
+            values = np.broadcast_to(values, (count, L.N_ROTORS))
+        if values.shape != (count, L.N_ROTORS):
+            raise ValueError(
+                f"motor efficiency must have shape ({L.N_ROTORS},) or ({count}, {L.N_ROTORS}), "
+                f"got {values.shape}"
+            )
+        if not (np.isfinite(values).all() and (values >= 0).all() and (values <= 1).all()):
+            raise ValueError(f"motor efficiency must be in [0, 1], got {values.tolist()}")
+        self.params[rows, L.P_ROTOR_EFFICIENCY] = values
+
+    def _rows(self, mask: ArrayLike | None) -> NDArray[np.bool_]:
+        """The boolean rows of ``mask`` (None: every vehicle), checked."""
+        rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
+        if rows.shape != (self.n,):
+            raise ValueError(f"mask must have shape ({self.n},), got {rows.shape}")
+        return rows
+
     def _reset_wind(self, rows: NDArray[np.bool_]) -> None:
         """Restart the weather of the selected vehicles (in still air: no air moves)."""
         if not rows.any():
@@ -293,17 +356,23 @@ class Fleet(VehicleStates):
         self._choose_step()
 
     def _choose_step(self) -> None:
-        """The still-air kernel, or the one with weather once any vehicle has some (given
-        the weather's arrays here, so that a still-air step costs what it always did)."""
-        if not self.windy:
+        """The still-air kernel, or its world build once any vehicle has weather, ground
+        effect or a weak rotor (given the weather's arrays here, so that a still-air step
+        costs what it always did). The reference reads ground effect and efficiency from
+        the parameters always."""
+        if not self.world:
             still = kernel.single_step if self.n == 1 else kernel.batch_step
             self._step_arrays = _reference_step if self.backend == "reference" else still
             return
-        step: Callable[..., int] = _reference_step
-        if self.backend != "reference":
-            step = kernel.single_step_wind if self.n == 1 else kernel.batch_step_wind
+        windy = self.windy
         weather = (self.wind_params, self.wind_state, self.wind_streams)
-        self._step_arrays = lambda *arrays: step(*arrays, *weather)
+        if self.backend == "reference":
+            step: Callable[..., int] = _reference_step
+            self._step_arrays = (lambda *arrays: step(*arrays, *weather)) if windy else step
+            return
+        world = kernel.single_step_wind if self.n == 1 else kernel.batch_step_wind
+        arrays = weather if windy else STILL_AIR
+        self._step_arrays = lambda *state_arrays: world(*state_arrays, *arrays)
 
     def set_wind(
         self,
@@ -313,6 +382,14 @@ class Fleet(VehicleStates):
         restart: bool = True,
     ) -> None:
         super().set_wind(weather, seed, mask, restart)
+        self._choose_step()
+
+    def set_ground_effect(self, on: bool, mask: ArrayLike | None = None) -> None:
+        super().set_ground_effect(on, mask)
+        self._choose_step()
+
+    def set_motor_efficiency(self, efficiency: ArrayLike, mask: ArrayLike | None = None) -> None:
+        super().set_motor_efficiency(efficiency, mask)
         self._choose_step()
 
     # --- stepping -------------------------------------------------------------------
@@ -374,64 +451,3 @@ def _reference_step(
             state, params, cmd, contact, touchdown_speed, dt, air
         )
     return -1
-
-
-class FleetSlot(VehicleStates):
-    """Vehicle ``index`` of a shared :class:`Fleet`, seen as a fleet of one.
-
-    Its arrays are views of the shared fleet's rows, so whoever steps the shared fleet
-    (:class:`quadsitl.vehicle.group.VehicleGroup`, one batch for all) moves this vehicle;
-    ``time`` is the shared clock, counted from this vehicle's own start (a reboot sets
-    it back to 0 for this vehicle alone).
-    """
-
-    def __init__(self, fleet: Fleet, index: int) -> None:
-        if not 0 <= index < fleet.n:
-            raise ValueError(f"vehicle {index} is not in a fleet of {fleet.n}")
-        rows = slice(index, index + 1)
-        self.shared, self.index = fleet, index
-        self.n, self.dt = 1, fleet.dt
-        self.airframes = [fleet.airframes[index]]
-        self.state = fleet.state[rows]
-        self.params = fleet.params[rows]
-        self.contact = fleet.contact[rows]
-        self.touchdown_speed = fleet.touchdown_speed[rows]
-        self.wind_params = fleet.wind_params[rows]
-        self.wind_state = fleet.wind_state[rows]
-        self.wind_streams = fleet.wind_streams[rows]
-        self.stirred = fleet.stirred[rows]
-        self._epoch = fleet.time
-
-    @property
-    def winds(self) -> list[Wind]:  # type: ignore[override]
-        return [self.shared.winds[self.index]]
-
-    def set_wind(
-        self,
-        weather: Wind | Sequence[Wind],
-        seed: int | Sequence[int] | None = None,
-        mask: ArrayLike | None = None,
-        restart: bool = True,
-    ) -> None:
-        """Set this vehicle's weather in the shared fleet (its stream: the ``index``-th of
-        ``seed``)."""
-        if mask is not None and not np.asarray(mask, dtype=bool).all():
-            return
-        one = np.zeros(self.shared.n, bool)
-        one[self.index] = True
-        self.shared.set_wind(weather, seed, one, restart)
-
-    @property
-    def time(self) -> float:  # type: ignore[override]
-        return self.shared.time - self._epoch
-
-    @time.setter
-    def time(self, value: float) -> None:
-        self._epoch = self.shared.time - value
-
-    def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
-        """Step this vehicle alone: only when it is the whole fleet (a vehicle of a larger
-        group moves when the group steps)."""
-        if self.shared.n != 1:
-            raise RuntimeError("a vehicle of a group is stepped with its group")
-        self.shared.step(rotor_cmd, n_substeps)

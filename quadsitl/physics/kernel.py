@@ -19,11 +19,14 @@ from typing import Any
 import numba
 import numpy as np
 
+from quadsitl.physics import ground_effect as GE
 from quadsitl.physics import layout as L
 from quadsitl.physics import wind_kernel
 
 BLOCK = 32  # vehicles per vectorised block (measured best of 16..256)
 THRUST, ROLL_MOMENT, PITCH_MOMENT, YAW_SUM = 0, 1, 2, 3  # rows of the rotor sums
+GAIN0 = 4  # rows 4..7 of the same scratch: the rotors' ground-effect gains (world build)
+SUMS_ROWS = GAIN0 + L.N_ROTORS
 # FMA contraction and reciprocal division only: no fast-math NaN/inf assumptions, so
 # the finiteness check stays exact.
 _OPTIONS: dict[str, Any] = dict(
@@ -36,17 +39,39 @@ _inline = numba.njit(inline="always", **_OPTIONS)
 @_inline
 def _derivative(s, p, cmd, out, m, sums, air, B, WIND):  # pragma: no cover - compiled
     """ṡ of the first m vehicles of a block: s, p and cmd hold rows of B values; ``sums``
-    (4 rows) is scratch for the rotor sums; ``air`` (6 rows) the air's velocity (world)
-    and angular velocity (body), read only when the compile-time flag WIND is set. Each
-    loop runs over vehicles, innermost, so that it is vectorised."""
+    (SUMS_ROWS rows) is scratch for the rotor sums and gains; ``air`` (6 rows) the air's
+    velocity (world) and angular velocity (body). The compile-time flag WIND builds the
+    world: the air, and each rotor's efficiency and ground effect (without it, the
+    still-air arithmetic of the paper, unchanged). Each loop runs over vehicles,
+    innermost, so that it is vectorised."""
     for j in range(m):
         for k in range(4):
             sums[k * B + j] = 0.0
+    if WIND:  # the world: each rotor's ground-effect gain G_i, into sums rows 4..7
+        for i in range(L.N_ROTORS):
+            for j in range(m):
+                qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
+                qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
+                hub_z = (
+                    s[L.I_PZ * B + j]
+                    + 2 * (qx * qz - qw * qy) * p[(L.P_ROTOR_X0 + i) * B + j]
+                    + 2 * (qy * qz + qw * qx) * p[(L.P_ROTOR_Y0 + i) * B + j]
+                )
+                radius = p[L.P_ROTOR_RADIUS * B + j]
+                height = max(hub_z - p[L.P_GROUND_Z * B + j], GE.MIN_HEIGHT_RADII * radius)
+                k = radius / (4.0 * height)
+                ratio = 1.0 / (1.0 - k * k)  # Cheeseman–Bennett (+inf height: 1)
+                on = p[L.P_GROUND_EFFECT * B + j] > 0.0
+                sums[(GAIN0 + i) * B + j] = ratio if on else 1.0
     for i in range(L.N_ROTORS):  # rotor i: thrust, its moments, and its motor lag
         for j in range(m):
             rotor = s[(L.I_ROTOR0 + i) * B + j]
             rotor_sq = rotor * rotor
-            thrust = p[L.P_KT * B + j] * rotor_sq
+            if WIND:  # the world: the rotor's efficiency η_i and ground-effect gain G_i
+                rotor_sq = rotor_sq * p[(L.P_ROTOR_EFFICIENCY0 + i) * B + j]
+                thrust = p[L.P_KT * B + j] * rotor_sq * sums[(GAIN0 + i) * B + j]
+            else:
+                thrust = p[L.P_KT * B + j] * rotor_sq
             sums[THRUST * B + j] += thrust
             sums[ROLL_MOMENT * B + j] += p[(L.P_ROTOR_Y0 + i) * B + j] * thrust
             sums[PITCH_MOMENT * B + j] += p[(L.P_ROTOR_X0 + i) * B + j] * thrust
@@ -169,13 +194,15 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
     A batch uses ``B = BLOCK`` and releases the GIL while it computes; a single vehicle
     uses ``B = 1`` (straight-line code, scratch of a few hundred bytes) and keeps the GIL,
     since releasing it would cost more than the step. Same source, same arithmetic.
-    ``wind`` (compile-time too) adds the weather of :mod:`quadsitl.physics.wind_kernel`
-    before each physics step; without it the arithmetic is that of still air, unchanged.
+    ``wind`` (compile-time too) builds the world: the weather of
+    :mod:`quadsitl.physics.wind_kernel` before each physics step, and each rotor's
+    efficiency and ground effect; without it the arithmetic is that of still air and
+    healthy rotors far from the ground, unchanged (and the world's columns unread).
     """
     jit = numba.njit(nogil=release_gil, **_OPTIONS)
     WIND = wind
     # Block scratch: state, previous state, RK4 temp, k1..k4, parameters, commands, sums.
-    scratch_size = (7 * L.STATE_SIZE + L.N_PARAMS + L.N_ROTORS + 4) * B
+    scratch_size = (7 * L.STATE_SIZE + L.N_PARAMS + L.N_ROTORS + SUMS_ROWS) * B
 
     def advance(
         state,
@@ -191,7 +218,9 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
     ):  # pragma: no cover
         """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place, each
         after a step of its weather: ``wind_params`` (n, N_WIND_PARAMS), ``wind_state``
-        (n, N_WIND_STATE), random ``streams`` (n,) uint64.
+        (n, N_WIND_STATE), random ``streams`` (n,) uint64. Weather arrays with no rows
+        mean still air for every vehicle: only the rotors' world (efficiency, ground
+        effect) is added to the physics.
 
         Returns -1, or the index of the first vehicle with a non-finite command, in
         which case nothing was changed."""
@@ -199,6 +228,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
         bad = first_invalid_command(commands)
         if bad >= 0:
             return bad
+        weather = wind_params.shape[0] > 0
         size = L.STATE_SIZE
         # One allocation cut into the block arrays (each a run of rows of B values).
         z = size * B
@@ -213,7 +243,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
         wp = np.empty(L.N_WIND_PARAMS * B if WIND else 0)
         ws = np.empty(L.N_WIND_STATE * B if WIND else 0)
         wscratch = np.empty(wind_kernel.N_SCRATCH * B if WIND else 0)
-        air = np.empty(wind_kernel.AIR_ROWS * B if WIND else 0)
+        air = np.zeros(wind_kernel.AIR_ROWS * B if WIND else 0)  # still unless weather
         rng = np.empty(B if WIND else 0, np.uint64)
         sixth = dt / 6.0
         for first in range(0, state.shape[0], B):
@@ -225,7 +255,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
                     p[k * B + j] = params[first + j, k]
                 for k in range(L.N_ROTORS):
                     cmd[k * B + j] = commands[(first + j) * L.N_ROTORS + k]
-                if WIND:
+                if WIND and weather:
                     for k in range(L.N_WIND_PARAMS):
                         wp[k * B + j] = wind_params[first + j, k]
                     for k in range(L.N_WIND_STATE):
@@ -236,7 +266,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
                     if contact[first + j] == L.CRASHED:
                         for k in range(size):
                             prev[k * B + j] = s[k * B + j]
-                if WIND:
+                if WIND and weather:
                     wind_kernel.advance_block(s, p, wp, ws, rng, wscratch, air, m, B, dt)
                 _derivative(s, p, cmd, k1, m, sums, air, B, WIND)
                 _axpy(tmp, s, 0.5 * dt, k1, m, B)
@@ -263,7 +293,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
             for j in range(m):
                 for k in range(size):
                     state[first + j, k] = s[k * B + j]
-                if WIND:
+                if WIND and weather:
                     for k in range(L.N_WIND_STATE):
                         wind_state[first + j, k] = ws[k * B + j]
                     streams[first + j] = rng[j]

@@ -58,7 +58,12 @@ P_ROTOR_X = slice(16, 20)  # m, body x of each rotor hub
 P_ROTOR_Y = slice(20, 24)  # m, body y of each rotor hub
 P_ROTOR_YAW_SIGN = slice(24, 28)  # ±1, sign of each rotor's reaction torque about +z
 P_ROTOR_X0, P_ROTOR_Y0, P_ROTOR_YAW_SIGN0 = 16, 20, 24
-N_PARAMS = 28
+# The vehicle's world beyond the airframe, read only by the kernel's world build
+# (quadsitl.physics.fleet.Fleet picks it once one of these is set; docs/physics.md):
+P_GROUND_EFFECT = 28  # 1: Cheeseman–Bennett ground effect on every rotor, 0: none
+P_ROTOR_EFFICIENCY = slice(29, 33)  # thrust and torque fraction per rotor: 1 healthy, 0 dead
+P_ROTOR_EFFICIENCY0 = 29
+N_PARAMS = 33
 
 # --- ground contact state (one int8 per vehicle) ---------------------------------------
 AIRBORNE = 0

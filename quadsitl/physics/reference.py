@@ -7,9 +7,12 @@ the same thing fast and is tested against this module.
 
 Model (world ENU, body FLU, paper Eqs. 1-9 with the moment signs of Σ r_i × F_i):
 
-* thrust T_i = kt Ω_i² along body +z; m v̇ = R e_z ΣT_i − kd |v_a| v_a − m g e_z
+* thrust T_i = η_i G_i kt Ω_i² along body +z; m v̇ = R e_z ΣT_i − kd |v_a| v_a − m g e_z
 * q̇ = ½ q ⊗ (0, ω)
-* J ω̇ = Σ r_i × T_i e_z + Σ s_i kq Ω_i² e_z − km |ω_a| ω_a − ω × J ω
+* J ω̇ = Σ r_i × T_i e_z + Σ s_i η_i kq Ω_i² e_z − km |ω_a| ω_a − ω × J ω
+
+η_i is rotor i's efficiency (1 healthy, 0 dead: a motor fault) and G_i its ground-effect
+gain (:mod:`quadsitl.physics.ground_effect`; 1 where it is off); both 1 by default.
 
 v_a = v − w and ω_a = ω − ω_w are the velocity and rates relative to the air (w, ω_w:
 the air's velocity and angular velocity, :mod:`quadsitl.physics.wind`); in still air
@@ -26,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quadsitl.physics import layout as L
+from quadsitl.physics.ground_effect import thrust_ratio
 
 Array = NDArray[np.float64]
 
@@ -43,8 +47,11 @@ def derivative(state: Array, params: Array, rotor_cmd: Array, air: Array | None 
     mass = params[:, L.P_MASS]
     inertia = params[:, L.P_INERTIA]  # (N, 3)
 
-    rotor_sq = rotors * rotors
-    thrust = params[:, [L.P_KT]] * rotor_sq  # (N, 4) N per rotor
+    rotor_sq = rotors * rotors * params[:, L.P_ROTOR_EFFICIENCY]  # (N, 4) η_i Ω_i², (rad/s)²
+    height = hub_heights(state, params) - params[:, [L.P_GROUND_Z]]  # (N, 4) m, +inf: no ground
+    ratio = thrust_ratio(height, params[:, [L.P_ROTOR_RADIUS]])
+    gain = np.where(params[:, [L.P_GROUND_EFFECT]] > 0, ratio, 1.0)  # (N, 4) G_i
+    thrust = params[:, [L.P_KT]] * rotor_sq * gain  # (N, 4) N per rotor
     total_thrust = thrust.sum(axis=1)
     body_z_in_world = np.stack(
         [2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx), 1 - 2 * (qx * qx + qy * qy)], axis=1
@@ -87,6 +94,17 @@ def derivative(state: Array, params: Array, rotor_cmd: Array, air: Array | None 
     return np.concatenate([vel, accel, quat_dot, rates_dot, rotors_dot], axis=1)
 
 
+def hub_heights(state: Array, params: Array) -> Array:
+    """(N, 4) m: each rotor hub's height, world z."""
+    qw, qx, qy, qz = state[:, L.QUAT].T
+    hub_z = (
+        state[:, [L.I_PZ]]
+        + 2 * (qx * qz - qw * qy)[:, None] * params[:, L.P_ROTOR_X]
+        + 2 * (qy * qz + qw * qx)[:, None] * params[:, L.P_ROTOR_Y]
+    )
+    return hub_z
+
+
 def rk4(f: Callable[[Array], Array], y: Array, dt: float) -> Array:
     """One classical Runge-Kutta step of ``ẏ = f(y)``."""
     k1 = f(y)
@@ -123,11 +141,7 @@ def ground_contact(
     ground_z = params[:, L.P_GROUND_Z]
     cos_tilt = 1 - 2 * (qx * qx + qy * qy)  # world z of the body z axis
     # Lowest point of each rotor disc: hub height minus radius × sin(tilt).
-    hub_z = (
-        pz[:, None]
-        + 2 * (qx * qz - qw * qy)[:, None] * params[:, L.P_ROTOR_X]
-        + 2 * (qy * qz + qw * qx)[:, None] * params[:, L.P_ROTOR_Y]
-    )
+    hub_z = hub_heights(state, params)
     sin_tilt = np.sqrt(np.maximum(0.0, 1.0 - cos_tilt * cos_tilt))
     disc_low = hub_z - (params[:, L.P_ROTOR_RADIUS] * sin_tilt)[:, None]
     strike = (disc_low < ground_z[:, None]).any(axis=1) & ~crashed

@@ -21,6 +21,7 @@ from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import FleetLike
 from quadsitl.physics.sensors.observation import ObservationNoise
 from quadsitl.physics.wind import Wind
+from quadsitl.tasks import faults as FT
 from quadsitl.tasks import features as F
 from quadsitl.tasks import spec as S
 from quadsitl.tasks.delay import Delay, DelayLine
@@ -114,6 +115,8 @@ class TaskEngine:
         self.fleet: FleetLike = fleet or Fleet(
             num_envs, airframe=self.airframe, dt=options.physics_dt, ground_z=ground_z
         )
+        if options.ground_effect:
+            self.fleet.set_ground_effect(True)
         # The airframe every episode starts from: nominal, or scaled by airframe_scale.
         self.base_params = self.fleet.params[0].copy()
         scale = airframe_scale_row(options.airframe_scale)
@@ -218,6 +221,8 @@ class TaskEngine:
         hover = self.fleet.hover_rotor_speed[rows]  # of each vehicle's (randomised) airframe
         states[:, L.ROTORS] = np.minimum(hover, self.fleet.params[rows, L.P_OMEGA_MAX])[:, None]
         self.fleet.reset(states, mask=mask)
+        if o.faults:
+            FT.heal(self.fleet, rows)
         if self.delay is not None:
             self.delay.draw(rows, self.rngs)
         self.steps[rows] = 0
@@ -311,6 +316,8 @@ class TaskEngine:
         if bad >= 0:
             raise ValueError(f"action of env {bad} is not finite: {raw[bad]}")
         fleet = self.fleet
+        if self.options.faults:
+            FT.strike(fleet, self.options.faults, self.steps, active, self.control_period)
         if self.delay is None:
             fleet.step(self.rotor_cmd, n_substeps=self.substeps)
         else:

@@ -11,6 +11,7 @@ import numpy as np
 
 from quadsitl.physics import get_airframe
 from quadsitl.physics.wind import Wind
+from quadsitl.tasks import faults as FT
 from quadsitl.tasks.delay import Delay
 from quadsitl.tasks.randomization import (
     AIRFRAME_COLUMNS,
@@ -69,6 +70,11 @@ class TaskOptions:
             "default" for every documented default, or a dict naming what to draw.
         airframe_scale: exact airframe scales, the same every episode, e.g.
             ``{"mass": 1.3}`` for a vehicle 30 % heavier.
+        ground_effect: True: each rotor gains thrust near the ground (Cheeseman–Bennett;
+            docs/physics.md). Off by default, in every task.
+        faults: a motor that fails during every episode: ``{"motor": 2, "efficiency":
+            0.6, "at": 1.0}`` (motor 1-4, thrust fraction 0..1, s into the episode) or a
+            list of them (:mod:`quadsitl.tasks.faults`); None: healthy motors.
         sensor_noise: noise scale of the observation as the sensors would measure it
             (position and velocity as the GPS, rates as the gyroscope, attitude as an
             estimator: :mod:`quadsitl.physics.sensors.observation`); 0: the exact state.
@@ -90,6 +96,8 @@ class TaskOptions:
     randomize: Randomization | bool | str | dict[str, Any] | None = None
     airframe_scale: dict[str, float] | None = None
     sensor_noise: float = 0.0
+    ground_effect: bool = False
+    faults: Any = None
 
     @classmethod
     def from_kwargs(cls, **options: object) -> TaskOptions:
@@ -133,6 +141,9 @@ class TaskOptions:
             raise ValueError(f"sensor_noise must be a scale in [0, 100], got {noise!r}")
         self._check_param_randomization()
         object.__setattr__(self, "wind", self._weather())
+        if not isinstance(self.ground_effect, bool):
+            raise ValueError(f"ground_effect must be True or False, got {self.ground_effect!r}")
+        object.__setattr__(self, "faults", FT.parse_faults(self.faults))
         object.__setattr__(self, "delay", Delay.parse(self.delay))
         object.__setattr__(self, "randomize", self._randomization())
         airframe_scale_row(self.airframe_scale)

@@ -18,7 +18,7 @@ import numpy as np
 
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
-from quadsitl.physics.fleet import FleetSlot
+from quadsitl.physics.fleet_slot import FleetSlot
 from quadsitl.physics.sensors import SensorSlot, SensorSuite
 from quadsitl.vehicle import ground_contact as GC
 from quadsitl.vehicle.battery import shaft_power
@@ -136,7 +136,9 @@ class VehicleGroup:
                     GC.watch_contact(v, was)
         self._undrawn += seconds
         if self._steps % self.substeps == 0:
-            powers = shaft_power(physics.params[:, L.P_KQ], physics.state[:, L.ROTORS])
+            powers = shaft_power(
+                physics.params[:, L.P_KQ], physics.state[:, L.ROTORS], physics.motor_efficiency
+            )
             for v, power in zip(self.vehicles, powers.tolist(), strict=True):
-                v.battery.drain(power, self._undrawn)
+                v.drain_battery(power, self._undrawn)
             self._undrawn = 0.0

@@ -51,12 +51,17 @@ def apply(v: Vehicle, name: str) -> None:
         v.battery.cell_full_v = value
     elif name == "BAT1_V_EMPTY":
         v.battery.cell_empty_v = value
+    elif name == "BAT1_R_INTERNAL":
+        v.battery.cell_resistance = value
+    elif name == "SIM_BAT_SAG":
+        v.follow_battery()
     elif name == "SIM_AIRFRAME":
         airframe = get_airframe(AIRFRAME_NAMES[int(value)])
         if airframe != v.airframe:
             v.airframe = airframe
             v.fleet.params[0] = airframe.to_params()
             v.fleet.airframes = [airframe]
+            v.motors.apply()  # the new row holds healthy rotors: the faults stay
             v.cascade.set_airframe(airframe)
             v.event(Severity.INFO, f"airframe {airframe.name}")
     elif name in WEATHER_PARAMS:

@@ -98,6 +98,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     _int("BAT1_N_CELLS", 4, 1, 10, "-", "battery cells in series"),
     ParamSpec("BAT1_V_CHARGED", 4.2, 3.5, 4.4, "V", "cell voltage when full"),
     ParamSpec("BAT1_V_EMPTY", 3.5, 2.5, 3.9, "V", "cell voltage when empty"),
+    ParamSpec("BAT1_R_INTERNAL", 0.01, 0.0, 0.2, "Ω", "internal resistance per cell"),
+    _int("SIM_BAT_SAG", 0, 0, 1, "-", "1: the rotors' top speed follows the battery "
+         "voltage (weak battery, less thrust)"),
     _int("BAT1_SOURCE", 0, 0, 0, "-", "battery source: 0 power module", read_only=True),
     ParamSpec("BAT_LOW_THR", 0.15, 0.12, 0.5, "-", "low battery: warning below this charge"),
     ParamSpec("BAT_CRIT_THR", 0.07, 0.05, 0.25, "-", "critical battery: COM_LOW_BAT_ACT"),
@@ -124,6 +127,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
          read_only=True),
     _int("CAL_MAG0_ID", 197388, 197388, 197388, "-", "magnetometer calibration id",
          read_only=True),
+    _int("SYS_FAILURE_EN", 0, 0, 1, "-", "1: failures may be injected (MAV_CMD_INJECT_FAILURE)"),
     _int("SIM_AIRFRAME", 0, 0, len(AIRFRAME_NAMES) - 1, "-",
          "airframe preset: " + ", ".join(f"{i} {n}" for i, n in enumerate(AIRFRAME_NAMES))),
     # The weather (ArduPilot's SIM_WIND_* names and units; PX4's SIH has only a constant

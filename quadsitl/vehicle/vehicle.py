@@ -18,7 +18,7 @@ import numpy as np
 from quadsitl import frames
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
-from quadsitl.physics.fleet import FleetSlot
+from quadsitl.physics.fleet_slot import FleetSlot
 from quadsitl.physics.sensors import SensorSlot, SensorSuite
 from quadsitl.vehicle import external_control as X
 from quadsitl.vehicle import failsafe as FS
@@ -33,6 +33,7 @@ from quadsitl.vehicle.failsafe import Failsafes
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.mission_runner import MissionRunner
 from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
+from quadsitl.vehicle.motor_faults import MotorFaults
 from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg, Limits, Sticks
 from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
 from quadsitl.vehicle.results import ACCEPTED, LandedState, Result, Severity, denied
@@ -114,6 +115,7 @@ class Vehicle:
             0,
         )
         self.battery = Battery()
+        self.motors = MotorFaults(self.fleet)
         self.failsafes = Failsafes()
         self.missions = MissionRunner(self)
         self.events: deque[tuple[int, str]] = deque(maxlen=100)
@@ -317,6 +319,8 @@ class Vehicle:
         self.fleet.time = 0.0
         self._reset_flight_state()
         self.battery.recharge()
+        self.follow_battery()
+        self.motors.reset()
         self.failsafes.reset()
         self.sensors.reset()
         self.event(Severity.INFO, "rebooted")
@@ -353,7 +357,21 @@ class Vehicle:
             f = self.fleet
             self.sensors.suite.update(f.time, f.state, f.params, f.contact, f.air_velocity)
         rotors = self.fleet.state[0, L.ROTORS]
-        self.battery.drain(float(battery_power(self.airframe.torque_coeff, rotors)), seconds)
+        power = battery_power(self.airframe.torque_coeff, rotors, self.motors.efficiency)
+        self.drain_battery(float(power), seconds)
+
+    def drain_battery(self, shaft_power: float, seconds: float) -> None:
+        """The rotors drew ``shaft_power`` (W) for ``seconds``: drain the battery, and let
+        the rotors' top speed follow its voltage (SIM_BAT_SAG)."""
+        self.battery.drain(shaft_power, seconds)
+        if self.params["SIM_BAT_SAG"]:
+            self.follow_battery()
+
+    def follow_battery(self) -> None:
+        """Ω_max of the physics: the airframe's times V / V_full with SIM_BAT_SAG, else the
+        airframe's own."""
+        scale = self.battery.rotor_speed_scale() if self.params["SIM_BAT_SAG"] else 1.0
+        self.fleet.params[0, L.P_OMEGA_MAX] = self.airframe.max_rotor_speed * scale
 
     def control(self) -> None:
         if self.motor_control and self.time - self.motor_command_time > MOTOR_TIMEOUT:

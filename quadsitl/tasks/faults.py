@@ -1,0 +1,97 @@
+"""Motor faults as a task option: a motor that loses thrust during every episode.
+
+``faults={"motor": 2, "efficiency": 0.6, "at": 1.0}`` (or a list of such dicts): from the
+first control period that starts ``at`` seconds or more into each episode, motor 2
+(1-based, as PX4 numbers them) gives 60 % of its thrust and torque (0: off). Each episode
+starts healthy. docs/tasks.md, "Motor faults".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quadsitl.physics import layout as L
+from quadsitl.physics.fleet import FleetLike
+from quadsitl.vehicle.motor_faults import check_efficiency, check_motor
+
+FIELDS = ("motor", "efficiency", "at")
+
+
+@dataclass(frozen=True)
+class MotorFault:
+    """Motor ``motor`` (1-based) at ``efficiency`` (0..1) from ``at`` s into the episode."""
+
+    motor: int
+    efficiency: float = 0.0
+    at: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_motor(self.motor)
+        check_efficiency(self.efficiency)
+        at = self.at
+        if (
+            isinstance(at, bool)
+            or not isinstance(at, (int, float))
+            or not (math.isfinite(at) and at >= 0)
+        ):
+            raise ValueError(f"fault 'at' must be a time >= 0 s into the episode, got {at!r}")
+
+    def first_step(self, control_period: float) -> int:
+        """The env step (1-based) whose control period is the first to start at ``at``
+        or later."""
+        return math.ceil(self.at / control_period - 1e-9) + 1
+
+
+def parse_faults(option: Any) -> tuple[MotorFault, ...]:
+    """The ``faults`` option (None, a dict, a MotorFault, or a list of them) checked; a
+    one-line ValueError naming what is wrong."""
+    if option is None:
+        return ()
+    items = option if isinstance(option, (list, tuple)) else [option]
+    faults = []
+    for item in items:
+        if isinstance(item, MotorFault):
+            faults.append(item)
+            continue
+        if not isinstance(item, dict):
+            raise ValueError(
+                "faults must be a dict like {'motor': 2, 'efficiency': 0.6, 'at': 1.0} or a "
+                f"list of them, got {item!r}"
+            )
+        unknown = sorted(set(item) - set(FIELDS))
+        if unknown or "motor" not in item:
+            raise ValueError(
+                f"a fault needs 'motor' and may have {list(FIELDS[1:])}; got {sorted(item)}"
+            )
+        faults.append(MotorFault(**item))
+    return tuple(faults)
+
+
+def heal(fleet: FleetLike, rows: NDArray[np.int64]) -> None:
+    """Every motor of the vehicles in ``rows`` healthy again (a new episode)."""
+    mask = np.zeros(len(fleet.state), bool)
+    mask[rows] = True
+    if (fleet.params[mask][:, L.P_ROTOR_EFFICIENCY] != 1.0).any():
+        fleet.set_motor_efficiency(np.ones(L.N_ROTORS), mask=mask)
+
+
+def strike(
+    fleet: FleetLike,
+    faults: tuple[MotorFault, ...],
+    steps: NDArray[np.int64],
+    active: NDArray[np.bool_],
+    control_period: float,
+) -> None:
+    """Fail the motors whose time has come in the envs stepping now (``steps``: each
+    env's step count, this step included)."""
+    for fault in faults:
+        due = active & (steps == fault.first_step(control_period))
+        if due.any():
+            efficiency = fleet.params[due][:, L.P_ROTOR_EFFICIENCY].copy()
+            efficiency[:, fault.motor - 1] = fault.efficiency
+            fleet.set_motor_efficiency(efficiency, mask=due)
