@@ -29,6 +29,7 @@ from quadsitl.bridges.ardupilot_json import (
     ServoFrame,
     parse_servo_packet,
 )
+from quadsitl.mavlink.links import is_loopback
 from quadsitl.physics.fleet import Fleet
 from quadsitl.physics.wind import Wind
 
@@ -150,11 +151,17 @@ def run_ardupilot(config: ArduPilotConfig, say: Callable[[str], None] | None = N
         fleet.set_wind(config.wind, seed=config.wind_seed)
     physics = JsonPhysics(fleet, notice=say)
     server = ArduPilotJsonServer(physics, config.bind, config.port)
+    if not is_loopback(config.bind):
+        say(
+            f"warning: the ArduPilot ports on {config.bind} can be reached from other hosts: "
+            "anyone there can fly the vehicles, and each 40-byte datagram is answered with "
+            "~300 bytes to its claimed sender (docs/security.md)"
+        )
     stopping: list[int] = []
     previous = [signal.signal(s, lambda n, _: stopping.append(n)) for s in _SIGNALS]
     try:
         if not config.quiet:
-            _banner(config, physics, server, print)
+            _banner(config, physics, server, lambda text: print(text, flush=True))
         started = time.monotonic()
         end = None if config.duration is None else started + config.duration
         while not stopping and (end is None or time.monotonic() < end):
