@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import re
 import socket
-from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 from quadsitl.bridges.ardupilot_json import (
     ARDUPILOT_QUAD_FRAMES,
@@ -30,8 +30,7 @@ FRAME_RATE = 1200  # Hz, ArduCopter's SIM_RATE_HZ
 RESEND_AFTER = 1.0  # s without an answer before ArduPilot sends the same frame again
 
 
-@dataclass(frozen=True)
-class Kinematics:
+class Kinematics(NamedTuple):
     """One answer, as ArduPilot reads it."""
 
     timestamp: float  # s
@@ -80,7 +79,7 @@ def parse_kinematics(data: bytes) -> Kinematics:
     if start < 0:
         raise ReplyError("no line between two newlines")
     json = text[start + 1 : end].decode("ascii", "replace")
-    values: dict[str, tuple[float, ...]] = {}
+    values: list[Any] = []
     for section, key, size in _FIELDS:
         p = json.find(section)
         if p < 0:
@@ -91,20 +90,13 @@ def parse_kinematics(data: bytes) -> Kinematics:
         p += len(key) + 2
         if size == 1:
             number = _ATOF.match(json, p)
-            values[key] = (float(number.group(1)) if number else 0.0,)
+            values.append(float(number.group(1)) if number else 0.0)
             continue
         vector = _VECTORS[size].match(json, p)
         if vector is None:
             raise ReplyError(f"Failed to parse Vector{size}f for {section}/{key}")
-        values[key] = tuple(map(float, vector.groups()))
-    return Kinematics(
-        timestamp=values["timestamp"][0],
-        gyro=values["gyro"],
-        accel_body=values["accel_body"],
-        position=values["position"],
-        velocity=values["velocity"],
-        quaternion=values["quaternion"],
-    )
+        values.append(tuple(map(float, vector.groups())))
+    return Kinematics(*values)
 
 
 class FakeArduPilot:
