@@ -116,7 +116,8 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         default=1,
         metavar="N",
         help="vehicles in this process, their physics stepped as one batch; each is a "
-        "complete MAVLink vehicle on every link (default: 1)",
+        "complete MAVLink vehicle on every link (with --flight-stack: the aircraft of one "
+        "autopilot instance each) (default: 1)",
     )
     sim.add_argument(
         "--wind",
@@ -374,19 +375,25 @@ def _flight_stack_config(args: argparse.Namespace) -> Any:
     from quadsitl.bridges.ardupilot_json import PORT
     from quadsitl.bridges.ardupilot_udp import ArduPilotConfig
 
-    own = {
+    own = {  # given with a value other than its default
         "--autopilot": args.autopilot,
         "--lockstep": args.lockstep,
         "--hil": args.hil,
         "--link": args.link,
         "--param": args.param,
         "--rerun": args.rerun or args.rerun_save or args.rerun_web,
+        "--signing-key": args.signing_key or args.signing_passphrase,
+        "--home": args.home,  # the autopilot's own (ArduCopter: --home)
+        "--speed": args.speed != 1.0,  # lockstep: the autopilot sets the pace
+        "--physics-rate": args.physics_rate != 1000.0,  # one step per autopilot frame
+        "--control-rate": args.control_rate != 250.0,
+        "--sysid": args.sysid != 1,
     }
     for option, value in own.items():
         if value:
             raise ValueError(
-                f"{option} is for quadsitl's own flight software, which --flight-stack "
-                f"turns off (the {args.flight_stack} autopilot serves MAVLink itself)"
+                f"{option} has no effect with --flight-stack: the {args.flight_stack} "
+                "autopilot flies the vehicle, sets the pace in lockstep and serves MAVLink"
             )
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be a positive number of seconds, got {args.duration}")

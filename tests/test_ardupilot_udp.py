@@ -207,7 +207,8 @@ def test_a_port_in_use_is_a_one_line_error_naming_it() -> None:
     ("options", "says"),
     [
         (["--flight-stack", "betaflight"], "invalid choice: 'betaflight'"),
-        (["--flight-stack", "ardupilot", "--lockstep"], "--lockstep is for quadsitl's own"),
+        (["--flight-stack", "ardupilot", "--lockstep"], "--lockstep has no effect with"),
+        (["--flight-stack", "ardupilot", "--speed", "4"], "--speed has no effect with"),
         (["--flight-stack", "ardupilot", "--airframe", "blimp"], "unknown airframe 'blimp'"),
     ],
 )
