@@ -299,9 +299,10 @@ class JsonPhysics:
         self.fleet.reset(rest, contact=L.ON_GROUND, mask=one)
         self._commands[index] = 0.0
 
-    def notice_once(self, index: int, text: str) -> None:
-        """Give ``text`` about vehicle ``index`` the first time only (bad packets)."""
+    def notice_once(self, index: int, text: str, key: str | None = None) -> None:
+        """Give ``text`` about vehicle ``index`` the first time only of its ``key`` (the
+        text itself unless given): bad packets of one kind are named once."""
         peer = self.peers[index]
-        if text not in peer.notices:
-            peer.notices.add(text)
+        if (key or text) not in peer.notices:
+            peer.notices.add(key or text)
             self.notice(f"vehicle {index}: {text}")

@@ -107,14 +107,15 @@ class ArduPilotJsonServer:
                 try:
                     frames[index] = parse_servo_packet(data)
                 except PacketError as error:
-                    self.physics.notice_once(index, f"ignored a datagram from {address}: {error}")
+                    text = f"ignored a datagram from {address}: {error}"
+                    self.physics.notice_once(index, text, key=str(error))
                     continue
                 self.addresses[index] = address
         now = time.monotonic()
         for index in list(frames):
-            peers = self.physics.peers[index]
+            peer = self.physics.peers[index]
             crossed = now - self.answered[index] < CROSSING
-            if frames[index].frame_count == peers.frame_count and crossed:
+            if frames[index].frame_count == peer.frame_count and crossed:
                 del frames[index]  # sent again just as our answer went out: it has one
         if not frames:
             return 0
