@@ -2,7 +2,7 @@
 
 Set ``QUADSITL_ARDUPILOT_BIN`` to an ``arducopter`` SITL binary built from ArduPilot's own
 instructions and run ``pytest -m ardupilot tests/test_ardupilot_real.py -s``. ArduCopter
-flies the iris preset through its JSON backend in lockstep with ``quadsitl sim
+flies the iris and paper-x-fast presets through its JSON backend in lockstep with ``quadsitl sim
 --flight-stack ardupilot`` and the shipped parameter file and nothing else; pymavlink, on
 ArduCopter's own MAVLink port, arms it in GUIDED, takes off to 5 m, uploads and flies a
 4-waypoint AUTO mission ending in a landing, and waits for the disarm. The flight's
@@ -129,13 +129,16 @@ def upload_mission(copter: Copter) -> None:
         )
 
 
-def test_arducopter_takes_off_flies_a_mission_and_lands_on_quadsitl(tmp_path: Path) -> None:
+@pytest.mark.parametrize("airframe", ["iris", "paper-x-fast"])
+def test_arducopter_takes_off_flies_a_mission_and_lands_on_quadsitl(
+    airframe: str, tmp_path: Path
+) -> None:
     instance = free_instance()
-    parm = parameter_file("iris")
+    parm = parameter_file(airframe)
     assert parm is not None and BINARY is not None
     command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", "ardupilot"]
     sim = subprocess.Popen(
-        [*command, "--airframe", "iris", "--flight-stack-port", str(9002 + 10 * instance)],
+        [*command, "--airframe", airframe, "--flight-stack-port", str(9002 + 10 * instance)],
         stdout=subprocess.PIPE,
         text=True,
     )
@@ -167,14 +170,20 @@ def test_arducopter_takes_off_flies_a_mission_and_lands_on_quadsitl(tmp_path: Pa
         copter = Copter(5760 + 10 * instance)
         mavlink = copter.mavutil.mavlink
         copter.link.mav.request_data_stream_send(1, 1, mavlink.MAV_DATA_STREAM_ALL, 10, 1)
+        # GUIDED flies by position: wait for ArduCopter's EKF to use GPS before choosing it.
+        copter.wait(
+            ["HEARTBEAT"], lambda m: any("using GPS" in t for t in copter.texts), 240, "GPS"
+        )
         copter.mode(GUIDED)
         deadline = time.monotonic() + 240
         while copter.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) != 0:
             assert time.monotonic() < deadline, f"no arming: {copter.texts[-8:]}"
             time.sleep(1.0)  # the EKF converges and GPS locks in ArduCopter's own time
+        # At once: a copter left armed on the ground disarms itself after 10 s (DISARM_DELAY),
+        # under a second of wall time in lockstep.
+        assert copter.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, ALTITUDE) == 0
         started_wall = time.monotonic()
         started_sim = copter.wait(["SYSTEM_TIME"], lambda m: True, 10, "time").time_boot_ms
-        assert copter.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, ALTITUDE) == 0
 
         def height(m) -> float:  # type: ignore[no-untyped-def]
             return m.relative_alt / 1000.0
@@ -195,9 +204,11 @@ def test_arducopter_takes_off_flies_a_mission_and_lands_on_quadsitl(tmp_path: Pa
         ended_sim = copter.wait(["SYSTEM_TIME"], lambda m: True, 10, "time").time_boot_ms
         factor = (ended_sim - started_sim) / 1000.0 / (time.monotonic() - started_wall)
         position = copter.wait(["GLOBAL_POSITION_INT"], lambda m: True, 10, "position")
+        flown = (ended_sim - started_sim) / 1000.0
         print(
-            f"ArduCopter flew the mission and landed: waypoints {sorted(reached)}, "
-            f"landed at {height(position):.2f} m, {factor:.1f}x real time in lockstep"
+            f"ArduCopter on {airframe} flew the mission and landed: waypoints "
+            f"{sorted(reached)}, landed at {height(position):.2f} m; {flown:.1f} s flown in "
+            f"{time.monotonic() - started_wall:.1f} s: {factor:.1f}x real time in lockstep"
         )
         assert {1, 2, 3, 4} <= reached and abs(height(position)) < 0.5
     finally:

@@ -38,7 +38,8 @@ WAIT = 0.2  # wall s, longest sleep in select() (signals, --duration)
 DATAGRAM = 2048  # bytes, more than the largest servo frame (72)
 # s: a frame sent again sooner than this after our answer to it crossed that answer on
 # the way (ArduPilot sends again only after 1 s without one); answering it twice would
-# leave an extra answer queued, which ArduPilot would take for the next frame's.
+# leave an extra answer queued, which ArduPilot would take for the next frame's. Queued
+# re-sends are dropped by this rule one by one, so no socket needs draining.
 CROSSING = 0.5
 
 
@@ -89,34 +90,44 @@ class ArduPilotJsonServer:
             self.close()
             raise
         self._index = {sock.fileno(): i for i, sock in enumerate(self.sockets)}
+        self._timeout = 0.0  # s, the one socket's (blocking) timeout when there is one
 
     def serve(self, timeout: float = WAIT) -> int:
-        """Wait up to ``timeout`` s for frames, answer those that came; the count answered."""
-        ready, _, _ = select.select(self.sockets, [], [], timeout)
+        """Wait up to ``timeout`` s for frames, answer those that came; the count answered.
+
+        One datagram per instance and call: ArduPilot sends its next frame only once
+        answered, so nothing else waits behind it but re-sends (see CROSSING)."""
+        received = []
+        if len(self.sockets) == 1:  # block in the one socket itself: no select()
+            sock = self.sockets[0]
+            if timeout != self._timeout:
+                sock.settimeout(timeout)
+                self._timeout = timeout
+            received.append((0, sock))
+        else:
+            ready, _, _ = select.select(self.sockets, [], [], timeout)
+            received = [(self._index[sock.fileno()], sock) for sock in ready]
         frames: dict[int, ServoFrame] = {}
-        for sock in ready:
-            index = self._index[sock.fileno()]
-            while True:  # all that is queued: the newest frame of each instance counts
-                try:
-                    data, address = sock.recvfrom(DATAGRAM)
-                except (BlockingIOError, InterruptedError):
-                    break
-                except OSError as error:  # e.g. ICMP unreachable from a peer that left
-                    self.physics.notice_once(index, f"receive failed: {error}")
-                    break
-                try:
-                    frames[index] = parse_servo_packet(data)
-                except PacketError as error:
-                    text = f"ignored a datagram from {address}: {error}"
-                    self.physics.notice_once(index, text, key=str(error))
-                    continue
-                self.addresses[index] = address
         now = time.monotonic()
-        for index in list(frames):
-            peer = self.physics.peers[index]
-            crossed = now - self.answered[index] < CROSSING
-            if frames[index].frame_count == peer.frame_count and crossed:
-                del frames[index]  # sent again just as our answer went out: it has one
+        for index, sock in received:
+            try:
+                data, address = sock.recvfrom(DATAGRAM)
+            except (TimeoutError, BlockingIOError, InterruptedError):
+                continue
+            except OSError as error:  # e.g. ICMP unreachable from a peer that left
+                self.physics.notice_once(index, f"receive failed: {error}")
+                continue
+            try:
+                frame = parse_servo_packet(data)
+            except PacketError as error:
+                text = f"ignored a datagram from {address}: {error}"
+                self.physics.notice_once(index, text, key=str(error))
+                continue
+            repeat = frame.frame_count == self.physics.peers[index].frame_count
+            if repeat and now - self.answered[index] < CROSSING:
+                continue  # sent again just as our answer went out: it has one
+            frames[index] = frame
+            self.addresses[index] = address
         if not frames:
             return 0
         replies = self.physics.answer(frames)
