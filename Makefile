@@ -34,6 +34,7 @@ bench: venv
 	$(BIN)/python benchmarks/envs.py
 	$(BIN)/python benchmarks/sitl.py
 	$(BIN)/python benchmarks/sitl_load.py
+	$(BIN)/python benchmarks/ardupilot.py
 	$(BIN)/python benchmarks/mavlink_env.py
 	$(BIN)/python benchmarks/mavlink_training.py
 	$(BIN)/python benchmarks/replay.py

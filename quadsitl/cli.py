@@ -10,6 +10,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from quadsitl import __version__
+from quadsitl.bridges import FLIGHT_STACKS
 
 
 def _build_parser() -> argparse.ArgumentParser:
@@ -116,7 +117,8 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         default=1,
         metavar="N",
         help="vehicles in this process, their physics stepped as one batch; each is a "
-        "complete MAVLink vehicle on every link (default: 1)",
+        "complete MAVLink vehicle on every link (with --flight-stack: the aircraft of one "
+        "autopilot instance each) (default: 1)",
     )
     _add_weather_options(sim)
     sim.add_argument(
@@ -158,7 +160,34 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         help="home position: degrees, degrees, metres above sea level "
         "(default: 47.397742,8.545594,488)",
     )
-    sim.add_argument("--airframe", default="paper", help="airframe preset (default: paper)")
+    sim.add_argument(
+        "--airframe",
+        default=None,
+        help="airframe preset (default: paper; with --flight-stack: iris)",
+    )
+    sim.add_argument(
+        "--flight-stack",
+        choices=FLIGHT_STACKS,
+        default=None,
+        help="be only the aircraft of a real autopilot, which serves MAVLink itself: "
+        "ardupilot (ArduCopter's JSON backend, in lockstep); quadsitl's own flight software "
+        "and links are off (docs/autopilots.md)",
+    )
+    sim.add_argument(
+        "--flight-stack-port",
+        type=int,
+        default=None,
+        metavar="PORT",
+        help="port of the first autopilot instance; instance i uses PORT + 10 i "
+        "(default: UDP 9002 for ardupilot)",
+    )
+    sim.add_argument(
+        "--flight-stack-bind",
+        default="127.0.0.1",
+        metavar="ADDR",
+        help="address the autopilot ports listen on (default: 127.0.0.1; 0.0.0.0 lets "
+        "autopilots on other hosts in)",
+    )
     sim.add_argument(
         "--physics-rate",
         type=float,
@@ -334,7 +363,7 @@ def _sim_config(args: argparse.Namespace) -> object:
         spacing=args.spacing,
         autopilot_id=args.autopilot_id,
         home=home,
-        airframe=args.airframe,
+        airframe=args.airframe or "paper",
         physics_rate=args.physics_rate,
         control_rate=args.control_rate,
         speed=args.speed,
@@ -378,6 +407,47 @@ def _motor_faults(items: list[str]) -> dict[int, float]:
                 f"--fail-motor must be N or N:EFFICIENCY (e.g. 2 or 2:0.6), got {item!r}"
             ) from None
     return faults
+
+
+def _flight_stack_config(args: argparse.Namespace) -> Any:
+    """``quadsitl sim --flight-stack ardupilot``'s configuration; ValueError for options
+    that belong to quadsitl's own flight software, which is off in this mode."""
+    from quadsitl.bridges.ardupilot_json import PORT
+    from quadsitl.bridges.ardupilot_udp import ArduPilotConfig
+
+    own = {  # given with a value other than its default
+        "--autopilot": args.autopilot,
+        "--lockstep": args.lockstep,
+        "--hil": args.hil,
+        "--link": args.link,
+        "--param": args.param,
+        "--rerun": args.rerun or args.rerun_save or args.rerun_web,
+        "--signing-key": args.signing_key or args.signing_passphrase,
+        "--home": args.home,  # the autopilot's own (ArduCopter: --home)
+        "--speed": args.speed != 1.0,  # lockstep: the autopilot sets the pace
+        "--physics-rate": args.physics_rate != 1000.0,  # one step per autopilot frame
+        "--control-rate": args.control_rate != 250.0,
+        "--sysid": args.sysid != 1,
+        "--fail-motor": bool(args.fail_motor),  # quadsitl's failure injection, not yet here
+        "--sensor-noise": args.sensor_noise != 1.0,  # the autopilot's own sensor models
+    }
+    for option, value in own.items():
+        if value:
+            raise ValueError(
+                f"{option} has no effect with --flight-stack: the {args.flight_stack} "
+                "autopilot flies the vehicle, sets the pace in lockstep and serves MAVLink"
+            )
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise ValueError(f"--duration must be a positive number of seconds, got {args.duration}")
+    return ArduPilotConfig(
+        vehicles=args.vehicles,
+        airframe=args.airframe or "iris",
+        bind=args.flight_stack_bind,
+        port=PORT if args.flight_stack_port is None else args.flight_stack_port,
+        duration=args.duration,
+        quiet=args.quiet,
+        wind=_weather(args.wind, args.turbulence),
+    )
 
 
 def _weather(wind: str | None, turbulence: str | None) -> Any:
@@ -494,6 +564,13 @@ def _main(argv: Sequence[str] | None = None) -> int:
 
         options = (["-o", args.output] if args.output else []) + (["--web"] if args.web else [])
         return replay_main([args.tlog, *options], prog="quadsitl replay")
+    if args.command == "sim" and args.flight_stack:
+        from quadsitl.bridges.ardupilot_udp import run_ardupilot
+
+        try:
+            return run_ardupilot(_flight_stack_config(args))
+        except (ValueError, OSError) as error:
+            parser.exit(2, f"quadsitl sim: error: {error}\n")
     if args.command == "sim":
         from quadsitl.mavlink.runner import run_simulator
 

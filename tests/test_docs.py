@@ -54,6 +54,8 @@ FOREIGN = {
     "mypy",
     "mavsdk_server",
     "wsl",
+    "arducopter",  # ArduPilot's SITL binary and build tool (docs/autopilots.md)
+    "waf",
 }
 OPTION = re.compile(r"(?<![\w-])--[a-z][a-z0-9]*(?:-[a-z0-9]+)*")
 
@@ -166,7 +168,7 @@ def _command_at(words: list[str], i: int, current: str | None) -> str | None:
     if word == "-m" and following == "quadsitl.cli":
         sub = f"quadsitl {words[i + 2].strip('`[](),;:')}" if i + 2 < len(words) else ""
         return sub if sub in command_options() else "quadsitl"
-    if word in FOREIGN:
+    if word.rsplit("/", 1)[-1] in FOREIGN:  # also by path: build/sitl/bin/arducopter
         return "foreign"
     return current
 

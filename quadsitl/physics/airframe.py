@@ -169,7 +169,36 @@ PAPER_X = Airframe(
 )
 """The same vehicle with its arms in an X (PX4 motor order)."""
 
-AIRFRAMES: dict[str, Airframe] = {a.name: a for a in (PAPER, PAPER_X)}
+PAPER_X_FAST = PAPER_X.replace(name="paper-x-fast", motor_rate=1.0 / 0.03)
+"""paper-x with a 0.03 s motor (1/s: 1/0.03), typical of real quadrotor motors (0.02–0.05 s):
+the paper's 0.18 s motor makes ArduPilot's and PX4's stock gains unstable (docs/autopilots.md)."""
+
+# 3DR Iris as PX4's Gazebo-classic model (models/iris/iris.sdf) gives it; docs/autopilots.md.
+_IRIS_ROTORS_M = ((0.13, -0.22), (-0.13, 0.20), (0.13, 0.22), (-0.13, -0.20))  # body FLU, m
+_IRIS_ARM = math.hypot(0.13, 0.22)  # m, the longer (front) arms
+_IRIS_KT = 5.84e-6  # N/(rad/s)², motorConstant
+_IRIS_MAX_ROTOR_SPEED = 1100.0  # rad/s, maxRotVelocity
+IRIS = Airframe(
+    name="iris",
+    mass=1.5,  # kg, base_link
+    inertia=(0.029125, 0.029125, 0.055225),  # kg·m², base_link
+    arm_length=_IRIS_ARM,
+    thrust_coeff=_IRIS_KT,
+    torque_coeff=0.06 * _IRIS_KT,  # N·m/(rad/s)², momentConstant (m) × motorConstant
+    # 1/s: the model's single lag takes the mean of timeConstantUp 0.0125 s and Down 0.025 s
+    motor_rate=1.0 / (0.5 * (0.0125 + 0.025)),
+    # hover thrust / thrust at maxRotVelocity, so that Ω_max is the model's 1,100 rad/s
+    hover_thrust_fraction=1.5 * 9.81 / (L.N_ROTORS * _IRIS_KT * _IRIS_MAX_ROTOR_SPEED**2),
+    rotor_radius=0.128,  # m, rotor collision cylinder
+    # PX4 numbering as paper-x; rotors 1 and 2 turn counter-clockwise ("ccw" in the model)
+    rotor_xy=tuple((x / _IRIS_ARM, y / _IRIS_ARM) for x, y in _IRIS_ROTORS_M),
+    rotor_yaw_sign=(-1.0, -1.0, 1.0, 1.0),
+)
+"""The 3DR Iris of PX4's and ArduPilot's default Gazebo vehicle (quad X, PX4 motor order);
+drag, aerodynamic moment and landing gear are the paper's (the Gazebo model has none of those
+in this form)."""
+
+AIRFRAMES: dict[str, Airframe] = {a.name: a for a in (PAPER, PAPER_X, PAPER_X_FAST, IRIS)}
 
 
 def get_airframe(airframe: str | Airframe) -> Airframe:

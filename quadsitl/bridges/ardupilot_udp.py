@@ -1,0 +1,221 @@
+"""``quadsitl sim --flight-stack ardupilot``: ArduPilot's JSON physics over UDP.
+
+One UDP socket per ArduPilot instance (port 9002 + 10 i, as ArduPilot's ``-I i`` sends),
+on loopback unless asked otherwise. Each datagram that arrives is a servo frame; the
+answer goes back to the address it came from. The protocol and the physics are
+:mod:`.ardupilot_json`; this module only moves bytes, prints and stops.
+"""
+
+from __future__ import annotations
+
+import errno
+import math
+import select
+import signal
+import socket
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from quadsitl.bridges.ardupilot_json import (
+    ARDUPILOT_QUAD_FRAMES,
+    PORT,
+    PORT_STRIDE,
+    JsonPhysics,
+    PacketError,
+    ServoFrame,
+    parse_servo_packet,
+)
+from quadsitl.mavlink.links import is_loopback
+from quadsitl.physics.fleet import Fleet
+from quadsitl.physics.wind import Wind
+
+PARAMETER_FOLDER = Path(__file__).resolve().parent / "ardupilot"
+WAIT = 0.2  # wall s, longest sleep in select() (signals, --duration)
+DATAGRAM = 2048  # bytes, more than the largest servo frame (72)
+# s: a frame sent again sooner than this after our answer to it crossed that answer on
+# the way (ArduPilot sends again only after 1 s without one); answering it twice would
+# leave an extra answer queued, which ArduPilot would take for the next frame's. Queued
+# re-sends are dropped by this rule one by one, so no socket needs draining.
+CROSSING = 0.5
+
+
+def parameter_file(airframe: str) -> Path | None:
+    """The shipped ArduCopter parameter file of preset ``airframe`` (None: there is none)."""
+    path = PARAMETER_FOLDER / f"{airframe}.parm"
+    return path if path.is_file() else None
+
+
+@dataclass
+class ArduPilotConfig:
+    """What ``quadsitl sim --flight-stack ardupilot`` is told; see ``quadsitl sim --help``."""
+
+    vehicles: int = 1  # ArduPilot instances, one vehicle each, one batched physics
+    airframe: str = "iris"
+    bind: str = "127.0.0.1"  # address the sockets listen on
+    port: int = PORT  # of instance 0; instance i listens on port + 10 i
+    duration: float | None = None  # wall seconds, None: until a signal
+    quiet: bool = False
+    wind: Wind | None = None  # the weather every vehicle flies in (None: still air)
+    wind_seed: int = 0
+
+
+class ArduPilotJsonServer:
+    """The sockets of N ArduPilot instances around one :class:`JsonPhysics`.
+
+    Raises OSError naming the port when a port cannot be opened (in use, say)."""
+
+    def __init__(self, physics: JsonPhysics, bind: str = "127.0.0.1", port: int = PORT) -> None:
+        self.physics = physics
+        self.sockets: list[socket.socket] = []
+        self.ports = [port + PORT_STRIDE * i for i in range(physics.fleet.n)]
+        self.addresses: list[Any] = [None] * physics.fleet.n  # where each instance sends from
+        self.answered = [-math.inf] * physics.fleet.n  # monotonic s of each one's last answer
+        try:
+            for index, number in enumerate(self.ports):
+                sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                self.sockets.append(sock)
+                try:
+                    sock.bind((bind, number))
+                except OSError as error:
+                    why = "is in use" if error.errno == errno.EADDRINUSE else f"({error})"
+                    raise OSError(
+                        f"UDP port {number} (ArduPilot instance {index}) on {bind} {why}"
+                    ) from None
+                sock.setblocking(False)
+        except OSError:
+            self.close()
+            raise
+        self._index = {sock.fileno(): i for i, sock in enumerate(self.sockets)}
+        self._timeout = 0.0  # s, the one socket's (blocking) timeout when there is one
+
+    def serve(self, timeout: float = WAIT) -> int:
+        """Wait up to ``timeout`` s for frames, answer those that came; the count answered.
+
+        One datagram per instance and call: ArduPilot sends its next frame only once
+        answered, so nothing else waits behind it but re-sends (see CROSSING)."""
+        received = []
+        if len(self.sockets) == 1:  # block in the one socket itself: no select()
+            sock = self.sockets[0]
+            if timeout != self._timeout:
+                sock.settimeout(timeout)
+                self._timeout = timeout
+            received.append((0, sock))
+        else:
+            ready, _, _ = select.select(self.sockets, [], [], timeout)
+            received = [(self._index[sock.fileno()], sock) for sock in ready]
+        frames: dict[int, ServoFrame] = {}
+        now = time.monotonic()
+        for index, sock in received:
+            try:
+                data, address = sock.recvfrom(DATAGRAM)
+            except (TimeoutError, BlockingIOError, InterruptedError):
+                continue
+            except OSError as error:  # e.g. ICMP unreachable from a peer that left
+                self.physics.notice_once(index, f"receive failed: {error}")
+                continue
+            try:
+                frame = parse_servo_packet(data)
+            except PacketError as error:
+                text = f"ignored a datagram from {address}: {error}"
+                self.physics.notice_once(index, text, key=str(error))
+                continue
+            repeat = frame.frame_count == self.physics.peers[index].frame_count
+            if repeat and now - self.answered[index] < CROSSING:
+                continue  # sent again just as our answer went out: it has one
+            frames[index] = frame
+            self.addresses[index] = address
+        if not frames:
+            return 0
+        replies = self.physics.answer(frames)
+        for index, reply in replies.items():
+            self.answered[index] = now
+            try:
+                self.sockets[index].sendto(reply, self.addresses[index])
+            except OSError as error:
+                self.physics.notice_once(
+                    index, f"could not answer {self.addresses[index]}: {error}"
+                )
+        return len(replies)
+
+    def close(self) -> None:
+        for sock in self.sockets:
+            sock.close()
+
+
+def run_ardupilot(config: ArduPilotConfig, say: Callable[[str], None] | None = None) -> int:
+    """Serve ArduPilot instances until a signal or ``config.duration``; the exit status."""
+    if not 1 <= config.vehicles <= 1000:
+        raise ValueError(f"--vehicles must be 1 .. 1000, got {config.vehicles}")
+    last_port = config.port + PORT_STRIDE * (config.vehicles - 1)
+    if not config.port >= 1 or last_port > 65535:
+        raise ValueError(f"ports {config.port} .. {last_port} are not all valid UDP ports")
+    if say is None:
+
+        def say(text: str) -> None:
+            print(f"quadsitl sim: {text}", file=sys.stderr, flush=True)
+
+    fleet = Fleet(config.vehicles, config.airframe, dt=1.0 / 1200)
+    if config.wind is not None:
+        fleet.set_wind(config.wind, seed=config.wind_seed)
+    physics = JsonPhysics(fleet, notice=say)
+    server = ArduPilotJsonServer(physics, config.bind, config.port)
+    if not is_loopback(config.bind):
+        say(
+            f"warning: the ArduPilot ports on {config.bind} can be reached from other hosts: "
+            "anyone there can fly the vehicles, and each 40-byte datagram is answered with "
+            "~300 bytes to its claimed sender (docs/security.md)"
+        )
+    stopping: list[int] = []
+    previous = [signal.signal(s, lambda n, _: stopping.append(n)) for s in _SIGNALS]
+    try:
+        if not config.quiet:
+            _banner(config, physics, server, lambda text: print(text, flush=True))
+        started = time.monotonic()
+        end = None if config.duration is None else started + config.duration
+        while not stopping and (end is None or time.monotonic() < end):
+            server.serve(WAIT if end is None else max(0.0, min(WAIT, end - time.monotonic())))
+        wall = time.monotonic() - started
+        simulated = max(peer.time_s for peer in physics.peers)
+        frames = sum(peer.frames for peer in physics.peers)
+        print(
+            f"quadsitl sim: {frames} frames answered in {wall:.1f} s; "
+            f"the longest-flying vehicle flew {simulated:.1f} s of physics",
+            flush=True,
+        )
+    finally:
+        for s, handler in zip(_SIGNALS, previous, strict=True):
+            signal.signal(s, handler)
+        server.close()
+    return 0
+
+
+_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def _banner(
+    config: ArduPilotConfig,
+    physics: JsonPhysics,
+    server: ArduPilotJsonServer,
+    out: Callable[[str], None],
+) -> None:
+    """Say where each instance connects and how to start ArduCopter against it."""
+    frame_name, _ = ARDUPILOT_QUAD_FRAMES[physics.frame_types[0]]
+    parm = parameter_file(config.airframe)
+    defaults = f" --defaults {parm}" if parm else ""
+    out(
+        f"quadsitl sim: the aircraft for ArduPilot's JSON backend, {config.vehicles} "
+        f"vehicle(s), airframe {config.airframe} (FRAME_CLASS 1, FRAME_TYPE "
+        f"{physics.frame_types[0]} {frame_name}); quadsitl's own flight software is off"
+    )
+    for index, port in enumerate(server.ports):
+        target = "" if config.bind in ("127.0.0.1", "0.0.0.0") else f":{config.bind}"
+        out(
+            f"  vehicle {index}: UDP {config.bind}:{port}  <-  arducopter --model JSON{target}"
+            f"{defaults} -I {index}"
+        )
+    if parm is None:
+        out(f"  (no parameter file ships for {config.airframe}; see docs/autopilots.md)")

@@ -1,0 +1,218 @@
+"""``quadsitl sim --flight-stack ardupilot`` as a process on real UDP, flown by the fake
+ArduPilot: closed loop, re-sends, restarts, fleets, the 32-channel form and bad input."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import pytest
+
+from quadsitl.bridges.ardupilot_json import ServoFrame, encode_servo_packet
+from quadsitl.bridges.fake_ardupilot import FakeArduPilot, HoverController
+from quadsitl.physics.airframe import get_airframe
+
+START_TIMEOUT = 60.0  # s for the process to open its ports (numba loads its cache)
+
+
+class Sim:
+    """A running simulator: its process and what it has said on stderr so far."""
+
+    def __init__(self, process: subprocess.Popen[str]) -> None:
+        self.process = process
+        self.said: list[str] = []
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.process.stderr is not None
+        for line in self.process.stderr:
+            self.said.append(line.rstrip("\n"))
+
+    def wait_for_line(self, text: str, timeout: float = 10.0) -> str:
+        """The first stderr line containing ``text``; fails after ``timeout`` s."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            for line in list(self.said):
+                if text in line:
+                    return line
+            time.sleep(0.01)
+        raise AssertionError(f"no line with {text!r} in {self.said}")
+
+
+def free_port_base(vehicles: int) -> int:
+    """A base port whose instance ports (base + 10 i) are free now."""
+    while True:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.bind(("127.0.0.1", 0))
+            base = probe.getsockname()[1]
+        if base + 10 * vehicles > 65535:
+            continue
+        try:
+            held = []
+            for i in range(vehicles):
+                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                held.append(s)
+                s.bind(("127.0.0.1", base + 10 * i))
+            return base
+        except OSError:
+            continue
+        finally:
+            for s in held:
+                s.close()
+
+
+@contextmanager
+def running_sim(*options: str, vehicles: int = 1) -> Iterator[tuple[Sim, int]]:
+    """``quadsitl sim --flight-stack ardupilot`` on free ports, until the block ends."""
+    port = free_port_base(vehicles)
+    command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", "ardupilot"]
+    command += ["--flight-stack-port", str(port), "--vehicles", str(vehicles), *options]
+    process = subprocess.Popen(
+        command,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    assert process.stdout is not None
+    deadline = time.monotonic() + START_TIMEOUT
+    banner = []
+    while time.monotonic() < deadline and f"vehicle {vehicles - 1}:" not in "".join(banner):
+        line = process.stdout.readline()
+        if not line:
+            raise AssertionError(f"the simulator exited: {process.stderr.read()}")
+        banner.append(line)
+    sim = Sim(process)
+    try:
+        yield sim, port
+    finally:
+        process.terminate()
+        process.wait(timeout=30)
+
+
+def hover(fake: FakeArduPilot, airframe: str, seconds: float, altitude: float = 2.0) -> tuple:
+    controller = HoverController(get_airframe(airframe).hover_thrust_fraction, altitude=altitude)
+    pwm = [1000] * 4
+    for _ in range(int(seconds * fake.frame_rate)):
+        k = fake.exchange(pwm)
+        pwm = controller(k)
+    return k, pwm
+
+
+def test_the_fake_flies_the_simulator_to_a_hover_over_udp() -> None:
+    with running_sim("--airframe", "paper-x-fast") as (_, port):
+        fake = FakeArduPilot(port=port)
+        k, pwm = hover(fake, "paper-x-fast", 12.0)
+        assert k.timestamp == pytest.approx(12.0)
+        assert k.position[2] == pytest.approx(-2.0, abs=0.05)
+        assert abs(k.velocity[2]) < 0.05 and fake.resends == 0
+        assert all(abs(p - 1707) <= 3 for p in pwm)  # throttle √0.5: half the full thrust
+        fake.close()
+
+
+def test_a_frame_sent_before_the_simulator_listens_is_sent_again_and_answered() -> None:
+    port = free_port_base(1)
+    fake = FakeArduPilot(port=port, resend_after=0.6)
+    fake.send([1000] * 4)  # nobody listens: lost
+    command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", "ardupilot"]
+    process = subprocess.Popen([*command, "--flight-stack-port", str(port)], text=True)
+    try:
+        k = fake.receive(attempts=int(START_TIMEOUT / 0.6))
+        assert fake.resends >= 1 and k.timestamp == pytest.approx(1 / 1200)
+        assert fake.exchange([1000] * 4).timestamp == pytest.approx(2 / 1200)
+    finally:
+        process.terminate()
+        process.wait(timeout=30)
+        fake.close()
+
+
+def test_a_restarted_ardupilot_finds_its_vehicle_back_at_the_start() -> None:
+    with running_sim("--airframe", "iris") as (sim, port):
+        fake = FakeArduPilot(port=port)
+        k, _ = hover(fake, "iris", 3.0)
+        assert k.position[2] < -0.5
+        fake.restart()
+        k = fake.exchange([1000] * 4)
+        assert k.timestamp == pytest.approx(1 / 1200) and k.position == (0, 0, 0)
+        sim.wait_for_line("vehicle 0: ArduPilot restarted (frame 0 after 3599)")
+        fake.close()
+
+
+def test_a_fleet_flies_each_vehicle_by_its_own_instance_and_a_silent_one_blocks_none() -> None:
+    """Three instances on ports base, base + 10, base + 20; the middle one never sends."""
+    with running_sim("--airframe", "paper-x-fast", vehicles=3) as (_, port):
+        fakes = [FakeArduPilot(instance=i, port=port) for i in (0, 2)]
+        controllers = [HoverController(0.5, altitude=a) for a in (1.0, 3.0)]
+        pwm = [[1000] * 4, [1000] * 4]
+        for _ in range(12 * 1200):
+            for fake, out in zip(fakes, pwm, strict=True):
+                fake.send(out)
+            states = [fake.receive() for fake in fakes]
+            pwm = [c(k) for c, k in zip(controllers, states, strict=True)]
+        assert states[0].position[2] == pytest.approx(-1.0, abs=0.05)
+        assert states[1].position[2] == pytest.approx(-3.0, abs=0.05)
+        for fake in fakes:
+            fake.close()
+
+
+def test_the_32_channel_form_flies_too() -> None:
+    with running_sim("--airframe", "paper-x-fast") as (_, port):
+        fake = FakeArduPilot(port=port, channels=32)
+        k, _ = hover(fake, "paper-x-fast", 4.0, altitude=1.0)
+        assert k.position[2] < -0.5
+        fake.close()
+
+
+def test_bad_datagrams_are_said_once_and_the_simulator_keeps_serving() -> None:
+    with running_sim("--airframe", "iris") as (sim, port):
+        fake = FakeArduPilot(port=port)
+        fake.exchange([1000] * 4)
+        bad_magic = b"\x01\x02" + bytes(38)
+        short = encode_servo_packet(ServoFrame(1200, 7, (1000,) * 16))[:-4]
+        for datagram in (bad_magic, bad_magic, short, b"", short):
+            fake.sock.sendto(datagram, fake.target)
+        assert fake.exchange([1000] * 4).timestamp == pytest.approx(2 / 1200)
+        sim.wait_for_line("magic 513 is not a servo frame's (18458 or 29569)")
+        sim.wait_for_line("has 40 bytes, got 36")
+        assert sum("magic 513" in line for line in sim.said) == 1
+        assert sum("got 36" in line for line in sim.said) == 1
+        fake.frame_rate = 400  # SIM_RATE_HZ changed in flight
+        fake.exchange([1000] * 4)
+        sim.wait_for_line("frame rate changed mid-flight from 1200 to 400 Hz")
+        assert sim.process.poll() is None
+        fake.close()
+
+
+def test_a_port_in_use_is_a_one_line_error_naming_it() -> None:
+    port = free_port_base(2)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as holder:
+        holder.bind(("127.0.0.1", port + 10))
+        command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", "ardupilot"]
+        command += ["--flight-stack-port", str(port), "--vehicles", "2"]
+        done = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        f"quadsitl sim: error: UDP port {port + 10} (ArduPilot instance 1) on 127.0.0.1 is in use"
+    ]
+
+
+@pytest.mark.parametrize(
+    ("options", "says"),
+    [
+        (["--flight-stack", "betaflight"], "invalid choice: 'betaflight'"),
+        (["--flight-stack", "ardupilot", "--lockstep"], "--lockstep has no effect with"),
+        (["--flight-stack", "ardupilot", "--speed", "4"], "--speed has no effect with"),
+        (["--flight-stack", "ardupilot", "--airframe", "blimp"], "unknown airframe 'blimp'"),
+    ],
+)
+def test_wrong_options_are_refused(options: list[str], says: str) -> None:
+    command = [sys.executable, "-m", "quadsitl.cli", "sim", *options]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and says in done.stderr
