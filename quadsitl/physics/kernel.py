@@ -203,6 +203,14 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
     WIND = wind
     # Block scratch: state, previous state, RK4 temp, k1..k4, parameters, commands, sums.
     scratch_size = (7 * L.STATE_SIZE + L.N_PARAMS + L.N_ROTORS + SUMS_ROWS) * B
+    # The world's block arrays after them, in the same allocation: slices of one array
+    # at constant offsets are provably apart, so the loops that read one and write
+    # another vectorise (separate arrays defeated the compiler).
+    w_params = scratch_size
+    w_state = w_params + L.N_WIND_PARAMS * B
+    w_scratch = w_state + L.N_WIND_STATE * B
+    w_air = w_scratch + wind_kernel.N_SCRATCH * B
+    world_size = w_air + wind_kernel.AIR_ROWS * B
 
     def advance(
         state,
@@ -232,19 +240,16 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
         size = L.STATE_SIZE
         # One allocation cut into the block arrays (each a run of rows of B values).
         z = size * B
-        scratch = np.empty(scratch_size)
+        scratch = np.zeros(world_size)  # zeros: the air stays still without weather
         s, prev, tmp = scratch[0:z], scratch[z : 2 * z], scratch[2 * z : 3 * z]
         k1, k2 = scratch[3 * z : 4 * z], scratch[4 * z : 5 * z]
         k3, k4 = scratch[5 * z : 6 * z], scratch[6 * z : 7 * z]
         p = scratch[7 * z : 7 * z + L.N_PARAMS * B]
         cmd = scratch[7 * z + L.N_PARAMS * B : 7 * z + (L.N_PARAMS + L.N_ROTORS) * B]
-        sums = scratch[7 * z + (L.N_PARAMS + L.N_ROTORS) * B :]
-        # The weather's block arrays (empty in the still-air build).
-        wp = np.empty(L.N_WIND_PARAMS * B if WIND else 0)
-        ws = np.empty(L.N_WIND_STATE * B if WIND else 0)
-        wscratch = np.empty(wind_kernel.N_SCRATCH * B if WIND else 0)
-        air = np.zeros(wind_kernel.AIR_ROWS * B if WIND else 0)  # still unless weather
-        rng = np.empty(B if WIND else 0, np.uint64)
+        sums = scratch[7 * z + (L.N_PARAMS + L.N_ROTORS) * B : scratch_size]
+        wp, ws = scratch[w_params:w_state], scratch[w_state:w_scratch]
+        wscratch, air = scratch[w_scratch:w_air], scratch[w_air:world_size]
+        rng = np.empty(B, np.uint64)
         sixth = dt / 6.0
         for first in range(0, state.shape[0], B):
             m = min(B, state.shape[0] - first)
@@ -255,19 +260,35 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
                     p[k * B + j] = params[first + j, k]
                 for k in range(L.N_ROTORS):
                     cmd[k * B + j] = commands[(first + j) * L.N_ROTORS + k]
-                if WIND and weather:
+                if weather:
                     for k in range(L.N_WIND_PARAMS):
                         wp[k * B + j] = wind_params[first + j, k]
                     for k in range(L.N_WIND_STATE):
                         ws[k * B + j] = wind_state[first + j, k]
                     rng[j] = streams[first + j]
+            # A short block is padded with copies of its first vehicle (finite values,
+            # computed and never written back): the weather's loops then run over the
+            # whole block, a count the compiler knows, and vectorise (1.5x the speed of
+            # loops to m, measured; the RK4 loops are faster to m, so they stay so).
+            for j in range(m, B):
+                for k in range(size):
+                    s[k * B + j] = s[k * B]
+                for k in range(L.N_PARAMS):
+                    p[k * B + j] = p[k * B]
+                for k in range(L.N_ROTORS):
+                    cmd[k * B + j] = cmd[k * B]
+                for k in range(L.N_WIND_PARAMS):
+                    wp[k * B + j] = wp[k * B]
+                for k in range(L.N_WIND_STATE):
+                    ws[k * B + j] = ws[k * B]
+                rng[j] = rng[0]
             for _ in range(n_substeps):
                 for j in range(m):  # a crashed vehicle keeps its pose: remember it
                     if contact[first + j] == L.CRASHED:
                         for k in range(size):
                             prev[k * B + j] = s[k * B + j]
-                if WIND and weather:
-                    wind_kernel.advance_block(s, p, wp, ws, rng, wscratch, air, m, B, dt)
+                if weather:
+                    wind_kernel.advance_block(s, p, wp, ws, rng, wscratch, air, B, B, dt)
                 _derivative(s, p, cmd, k1, m, sums, air, B, WIND)
                 _axpy(tmp, s, 0.5 * dt, k1, m, B)
                 _derivative(tmp, p, cmd, k2, m, sums, air, B, WIND)
@@ -293,7 +314,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
             for j in range(m):
                 for k in range(size):
                     state[first + j, k] = s[k * B + j]
-                if WIND and weather:
+                if weather:
                     for k in range(L.N_WIND_STATE):
                         wind_state[first + j, k] = ws[k * B + j]
                     streams[first + j] = rng[j]
