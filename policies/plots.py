@@ -17,6 +17,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 COLORS = {"gae": "tab:orange", "ppo": "tab:blue", "trpo": "tab:green"}
+MARKERS = "osD^v*"
 
 
 def _read_run(run: Path) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # type: ignore[type-arg]
@@ -148,10 +149,17 @@ def ladder_plot(ladders: list[Any], path: Path) -> Path:
     )
     for k, axis in enumerate(axes_names):
         ax = panels[k // columns, k % columns]
-        for lad in ladders:
+        for j, lad in enumerate(ladders):
             points = [(r.rung, r.success_rate) for r in lad.rows if r.axis == axis]
-            labels = [p[0] for p in points]
-            ax.plot(labels, [100 * p[1] for p in points], marker="o", label=lad.policy)
+            # Policies side by side around each rung, so that equal rates stay visible.
+            shift = 0.08 * (j - (len(ladders) - 1) / 2)
+            ax.plot(
+                np.arange(len(points)) + shift,
+                [100 * p[1] for p in points],
+                marker=MARKERS[j % len(MARKERS)],
+                label=lad.policy,
+            )
+        ax.set_xticks(range(len(points)), [p[0] for p in points])
         ax.set_title(f"{axis}: {LADDER[axis][0]}", fontsize=9)
         ax.set_ylim(-5, 105)
         ax.grid(alpha=0.3)
