@@ -39,6 +39,7 @@ bench: venv
 	$(BIN)/python benchmarks/mavlink_training.py
 	$(BIN)/python benchmarks/replay.py
 	$(BIN)/python benchmarks/export.py
+	$(BIN)/python benchmarks/robustness.py
 
 bench-training: venv
 	$(BIN)/python benchmarks/training.py

@@ -1,6 +1,6 @@
-"""``quadsitl train``, ``quadsitl eval``, ``quadsitl plot``, ``quadsitl sweep`` and
-``quadsitl export`` (policies/export/cli.py): parsed here, run lazily (torch is imported
-only by these commands)."""
+"""``quadsitl train``, ``quadsitl eval``, ``quadsitl robustness``, ``quadsitl plot``,
+``quadsitl sweep`` and ``quadsitl export`` (policies/export/cli.py): parsed here, run
+lazily (torch is imported only by these commands)."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from pathlib import Path
 
 from policies.config import ALGORITHMS, MAX_TOTAL_STEPS, TASK_NAMES, TrainConfig
 from policies.export import cli as export_cli
+from policies.ladder import AXES
 
 
 def add_parsers(commands: argparse._SubParsersAction) -> None:
@@ -108,6 +109,38 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         const="",
         metavar="RRD",
         help="record the first env's episodes in Rerun (a viewer, or the file RRD)",
+    )
+
+    robustness = commands.add_parser(
+        "robustness",
+        help="the robustness ladder: success under turbulence, wind, delay, mass, a weak "
+        "motor and sensor noise",
+        description="Fly each policy on every rung of each axis (deterministic episodes "
+        "on fixed test seeds, all episodes of a rung in one vector env); prints a table "
+        "per policy and writes OUT/robustness.md, .csv, .json and .png (success against "
+        "rung, one panel per axis, one line per policy).",
+    )
+    robustness.add_argument(
+        "checkpoint",
+        nargs="+",
+        help="policies: .pt files written by quadsitl train, or their exports (.onnx, .h)",
+    )
+    robustness.add_argument(
+        "--episodes",
+        type=_count(1),
+        default=100,
+        help="episodes per rung, ≥ 1 (default: 100)",
+    )
+    robustness.add_argument(
+        "--axes",
+        nargs="+",
+        metavar="AXIS",
+        help=f"axes to climb (default: all): {', '.join(AXES)}",
+    )
+    robustness.add_argument(
+        "--out",
+        default="robustness",
+        help="folder for the tables and the plot, made if missing (default: robustness)",
     )
 
     plot = commands.add_parser(
@@ -220,6 +253,8 @@ def run(args: argparse.Namespace) -> int:
         return _sweep(args)
     if args.command == "export":
         return export_cli.run(args)
+    if args.command == "robustness":
+        return _robustness(args)
     return _plot(args)
 
 
@@ -373,6 +408,36 @@ def _eval(args: argparse.Namespace) -> int:
         if view is not None:
             view.close()
     print("\n".join(result.lines()))
+    return 0
+
+
+def _robustness(args: argparse.Namespace) -> int:
+    """Every input checked (policies, axes, the output folder) before any episode flies;
+    nothing is written unless every ladder ran."""
+    from policies.export.runtimes import load_policy
+    from policies.ladder import check_axes
+    from policies.robustness import check_task, climb, markdown, seeds_text, write
+
+    axes = check_axes(args.axes)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file, not a folder (nothing was written)")
+    paths = [Path(p) for p in args.checkpoint]
+    names = [p.stem for p in paths]
+    if len(set(names)) < len(names):  # two best.pt: tell them apart by their paths
+        names = [str(p) for p in paths]
+    policies = [load_policy(path) for path in paths]
+    for name, (_, config) in zip(names, policies, strict=True):
+        check_task(name, config)
+    print(f"robustness ladder: {args.episodes} episodes a rung, {seeds_text(args.episodes)}")
+    ladders = []
+    for name, (net, config) in zip(names, policies, strict=True):
+        ladder = climb(name, net, config, axes, args.episodes)
+        print(markdown(ladder))
+        print(f"robustness_ladder_seconds: {ladder.seconds:.1f} ({name})")
+        ladders.append(ladder)
+    for path in write(ladders, args.episodes, out):
+        print(path)
     return 0
 
 

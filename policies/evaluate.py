@@ -65,6 +65,7 @@ class Evaluation:
     metric_unit: str
     metric_mean: float  # over episodes where it is defined (NaN-free)
     reached_rate: float  # episodes that came within the goal radius at some time
+    crash_rate: float = 0.0  # episodes that ended crashed or flipped (the engine's `crashed`)
     outcomes: dict[str, int] = field(default_factory=dict)
     trajectories: list[np.ndarray] = field(default_factory=list)  # (T, 3) positions
     goals: list[np.ndarray] = field(default_factory=list)  # (T, 3) goal positions
@@ -95,19 +96,26 @@ def evaluate(
     keep_trajectories: int = 0,
     on_step: Any = None,
     seed: int = EVAL_SEED,
+    env_options: dict[str, Any] | None = None,
 ) -> Evaluation:
     """Run ``episodes`` of ``task`` (default: the one trained for) with the policy's mean
     action (``net``: a network, or an exported ONNX or C policy), from the trained start
-    distribution. ``on_step(engine, reward)`` is called
+    distribution, in ``num_envs`` envs stepped together (one batched forward pass a step).
+    ``env_options``: task options on top of the trained ones (e.g. ``wind=``, a rung of
+    the robustness ladder). ``on_step(engine, reward)`` is called
     after each reset (reward None) and step of env 0 (e.g. to record it); when env 0's
-    episode ends (and it resets at once), as ``on_step(engine, None, outcome)``."""
+    episode ends (and it resets at once), as ``on_step(engine, None, outcome)``.
+
+    Env i flies the episodes i, i + num_envs, i + 2·num_envs, ... (< ``episodes``) and no
+    others: which episodes are counted does not depend on how long they last (counting
+    the first ``episodes`` to end would favour short ones, crashes)."""
     task = task or config.task
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
         raise ValueError(f"episodes must be an integer ≥ 1, got {episodes!r}")
     num_envs = min(num_envs, episodes)
     if task not in TASK_METRICS:
         raise ValueError(f"evaluation needs a quadsitl task ({sorted(TASK_METRICS)}), got {task!r}")
-    env = make_vector_env(task, num_envs, backend, **config.task_options)
+    env = make_vector_env(task, num_envs, backend, **{**config.task_options, **(env_options or {})})
     engine = env.engine  # type: ignore[attr-defined]  # the native vector env's
     try:
         checkpoint.check_fits(net, config, task, engine.obs_size)
@@ -117,6 +125,9 @@ def evaluate(
     low, high = env.single_action_space.low, env.single_action_space.high  # type: ignore[attr-defined]
     returns, success, metric, outcomes = [], [], [], {}  # type: ignore[var-annotated]
     reached: list[bool] = []
+    crashed: list[bool] = []
+    quota = np.array([len(range(i, episodes, num_envs)) for i in range(num_envs)])
+    flown = np.zeros(num_envs, int)  # episodes counted per env
     tracks: list[list[np.ndarray]] = [[] for _ in range(num_envs)]
     goal_tracks: list[list[np.ndarray]] = [[] for _ in range(num_envs)]
     trajectories: list[np.ndarray] = []
@@ -127,7 +138,7 @@ def evaluate(
         on_step(engine, None)
     try:
         while len(returns) < episodes:
-            for i in range(num_envs):
+            for i in range(num_envs if len(trajectories) < keep_trajectories else 0):
                 tracks[i].append(engine.fleet.state[i, L.POS].copy())
                 goal_tracks[i].append(engine.goal[i, F.GOAL_POS].copy())
             action = net.mean_action(obs)
@@ -139,6 +150,12 @@ def evaluate(
             elif on_step is not None:
                 on_step(engine, float(reward[0]))
             for i in ended.tolist():
+                track, goal_track = tracks[i], goal_tracks[i]
+                tracks[i], goal_tracks[i] = [], []
+                if flown[i] == quota[i]:
+                    continue  # this env has flown its share; others are still flying
+                flown[i] += 1
+                crashed.append(bool(metrics["crashed"][i]))
                 returns.append(float(metrics["episode_return"][i]))
                 success.append(bool(metrics["success"][i]))
                 reached.append(bool(np.isfinite(metrics["reach_time"][i])))
@@ -148,12 +165,10 @@ def evaluate(
                 outcome = str(metrics["outcome"][i])
                 outcomes[outcome] = outcomes.get(outcome, 0) + 1
                 if len(trajectories) < keep_trajectories:
-                    trajectories.append(np.array(tracks[i]))
-                    goals.append(np.array(goal_tracks[i]))
-                tracks[i], goal_tracks[i] = [], []
+                    trajectories.append(np.array(track))
+                    goals.append(np.array(goal_track))
     finally:
         env.close()
-    returns, success = returns[:episodes], success[:episodes]
     return Evaluation(
         task,
         len(returns),
@@ -163,8 +178,9 @@ def evaluate(
         name,
         unit,
         float(np.mean(metric)) if metric else float("nan"),
-        float(np.mean(reached[:episodes])),
-        outcomes,
-        trajectories,
-        goals,
+        float(np.mean(reached)),
+        crash_rate=float(np.mean(crashed)),
+        outcomes=outcomes,
+        trajectories=trajectories,
+        goals=goals,
     )

@@ -1,5 +1,6 @@
 """PNG plots: learning curves like the paper's Fig. 2–3 (per-iteration mean episode
-return, mean ± std over seeds, against environment steps) and trajectories like Fig. 4."""
+return, mean ± std over seeds, against environment steps), trajectories like Fig. 4, and
+the robustness ladder (success against rung, per axis)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import csv
 import json
 from collections import defaultdict
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -15,6 +17,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 COLORS = {"gae": "tab:orange", "ppo": "tab:blue", "trpo": "tab:green"}
+MARKERS = "osD^v*"
 
 
 def _read_run(run: Path) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # type: ignore[type-arg]
@@ -127,6 +130,46 @@ def trajectories(task: str, tracks: list[np.ndarray], goals: list[np.ndarray], p
     ax2.set_ylabel("distance to goal (m)")
     ax2.grid(alpha=0.3)
     fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def ladder_plot(ladders: list[Any], path: Path) -> Path:
+    """Success rate against rung, one panel per axis, one line per policy
+    (``ladders``: :class:`policies.robustness.Ladder`)."""
+    from policies.ladder import LADDER
+
+    axes_names = list(dict.fromkeys(row.axis for lad in ladders for row in lad.rows))
+    columns = min(3, len(axes_names))
+    rows = -(-len(axes_names) // columns)
+    fig, panels = plt.subplots(
+        rows, columns, figsize=(4.2 * columns, 3.4 * rows), squeeze=False, sharey=True
+    )
+    for k, axis in enumerate(axes_names):
+        ax = panels[k // columns, k % columns]
+        for j, lad in enumerate(ladders):
+            points = [(r.rung, r.success_rate) for r in lad.rows if r.axis == axis]
+            # Policies side by side around each rung, so that equal rates stay visible.
+            shift = 0.08 * (j - (len(ladders) - 1) / 2)
+            ax.plot(
+                np.arange(len(points)) + shift,
+                [100 * p[1] for p in points],
+                marker=MARKERS[j % len(MARKERS)],
+                label=lad.policy,
+            )
+        ax.set_xticks(range(len(points)), [p[0] for p in points])
+        ax.set_title(f"{axis}: {LADDER[axis][0]}", fontsize=9)
+        ax.set_ylim(-5, 105)
+        ax.grid(alpha=0.3)
+        if k % columns == 0:
+            ax.set_ylabel("success (%)")
+    for k in range(len(axes_names), rows * columns):
+        panels[k // columns, k % columns].axis("off")
+    handles, labels = panels[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(5, len(labels)), fontsize=9)
+    fig.tight_layout(rect=(0, 0.07 if rows > 1 else 0.12, 1, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -544,7 +544,7 @@ def _main(argv: Sequence[str] | None = None) -> int:
             )
         except ValueError as error:
             parser.exit(2, f"quadsitl demo: error: {error}\n")
-    if args.command in ("train", "eval", "plot", "sweep", "export"):
+    if args.command in ("train", "eval", "robustness", "plot", "sweep", "export"):
         from policies.cli import run as run_policy_command
 
         try:
