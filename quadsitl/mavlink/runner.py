@@ -37,6 +37,7 @@ from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.physics import Airframe, get_airframe
 from quadsitl.physics.wind import Wind
 from quadsitl.vehicle.controller import Autopilot, Setpoint
+from quadsitl.vehicle.episodes import EpisodeOptions
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.param_binding import show_weather
@@ -75,6 +76,7 @@ class SimConfig:
     flown_by: str | None = None  # what flies instead of the cascaded controller (banner)
     wind: Wind | None = None  # the weather every vehicle flies in (None: still air)
     wind_seed: int = 0  # of the turbulence (vehicle i: the i-th stream of this seed)
+    episodes: EpisodeOptions | None = None  # delays, airframe draws (motor path)
 
     def validate(self) -> None:
         get_identity(self.autopilot_id)
@@ -103,6 +105,10 @@ class SimConfig:
             )
         if not (math.isfinite(self.speed) and 0.01 <= self.speed <= 100):
             raise ValueError(f"speed factor must be 0.01..100, got {self.speed}")
+        if self.episodes is not None:
+            self.episodes.check(1.0 / self.physics_rate)
+            if self.episodes.delays and not self.lockstep:
+                raise ValueError("--delay acts on lockstep motor commands: add --lockstep")
         if not [u for u in (self.gcs_url, self.api_url, self.hil_url, *self.extra_urls) if u]:
             raise ValueError("at least one link is needed")
         if self.lockstep and self.hil_url and self.signing_key is None:
@@ -195,6 +201,7 @@ class Simulator:
             control_period=1.0 / config.control_rate,
             spacing=config.spacing,
             make_autopilot=(lambda: make_autopilot(airframe)) if make_autopilot else None,
+            episodes=config.episodes,
         )
         self.vehicle = self.group.vehicles[0]
         if config.wind is not None and not config.wind.calm:
@@ -230,6 +237,8 @@ class Simulator:
                 lockstep=config.lockstep,
                 signing_key=config.signing_key,
                 identity=get_identity(config.autopilot_id),
+                episodes=self.group.episodes,
+                row=i,
             )
             for i, vehicle in enumerate(self.group.vehicles)
         ]
@@ -409,6 +418,9 @@ def run_simulator(
         form = "MIL-F-8785C" if wind.turbulence_model == "8785C" else "MIL-HDBK-1797"
         gusts = "" if wind.turbulence is None else f", {wind.turbulence} turbulence ({form})"
         sim._print(f"quadsitl sim: wind {wind.speed:g} m/s from {wind.from_deg:g}°{gusts}")
+    if config.episodes is not None:  # what each vehicle drew (again at each reset)
+        for i, drawn in enumerate(sim.group.episodes.drawn):
+            sim._print(f"quadsitl sim: system {config.system_id + i}: {drawn}")
     exposed = [link for link in sim.links if link.exposed]
     if exposed and config.signing_key is None:
         names = ", ".join(f"{link.name} ({link.url})" for link in exposed)
