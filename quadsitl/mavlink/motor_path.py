@@ -130,6 +130,7 @@ class MotorPath:
         self.vehicle = vehicle
         self.episodes, self.row = episodes, row
         self.staged_airframe: np.ndarray | None = None
+        self.flown_since_reset = True  # a reset before any command repeats the last one
         self.always_lockstep = lockstep
         self.last_lockstep_wall = -math.inf
         self.last_command_usec = 0
@@ -201,6 +202,7 @@ class MotorPath:
         or None."""
         v = self.vehicle
         warning = None
+        self.flown_since_reset = True
         if not v.armed and armed:
             self.counters["while_disarmed"] += 1
             if self.counters["while_disarmed"] % 1000 == 1:
@@ -270,7 +272,8 @@ class MotorPath:
         result = X.reset_state(v, state)
         if result.ok:
             if self.episodes is not None:
-                self.episodes.new_episode(self.row, self.staged_airframe)
+                self.episodes.new_episode(self.row, self.staged_airframe, self.flown_since_reset)
+            self.flown_since_reset = False
             self.staged, self.staged_airframe = None, None
             self.last_frame = None  # a command after a reset is never a repeat
             self.resets += 1

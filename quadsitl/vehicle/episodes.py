@@ -119,15 +119,20 @@ class MotorEpisodes:
         self.seen = self._truth(np.arange(n))  # (N, OBSERVED_SIZE) what answers carry
         self.drawn = [self.new_episode(i) for i in range(n)]  # what each drew at start
 
-    def new_episode(self, i: int, factors: NDArray[np.float64] | None = None) -> str:
+    def new_episode(
+        self, i: int, factors: NDArray[np.float64] | None = None, draw: bool = True
+    ) -> str:
         """Vehicle i starts afresh (at start and after each reset): its airframe is the
         client's ``factors`` (one per AIRFRAME_NAMES, of the preset), else drawn, else
         the scaled preset; it draws its delays; its delay line holds its present state.
-        Returns what it flies, in words."""
+        ``draw`` False keeps what it drew last (a reset repeated before any motor
+        command: a client's resend must not draw again). Returns what it flies, in words."""
         params = self.physics.params
         words = []
         if factors is not None:
             params[i] = self.nominal[i] * _factor_row(factors)
+        elif not draw:
+            pass
         elif self.randomization is not None:
             params[i] = self.randomization.draw_airframes([self.rngs[i]], self.base[i : i + 1])[0]
         else:
@@ -141,7 +146,8 @@ class MotorEpisodes:
         row = np.array([i])
         self.seen[i] = self._truth(row)[0]
         if self.line is not None:
-            self.line.draw(row, self.rngs)
+            if draw:
+                self.line.draw(row, self.rngs)
             self.periods[i] = 0
             airborne = self.physics.contact[i] == L.AIRBORNE
             self.line.reset(row, self.seen[row], self.hover if airborne else 0.0)
