@@ -299,14 +299,14 @@ class MotorPath:
             state, v.airframe.gear_height, time_usec, contact, float(touchdown)
         )
         messages = [self._hil_state_quaternion(wire, state)] if hil_state else []
-        state = (
+        columns = (
             wire.position_ned.tolist(),
             wire.q_ned_frd.tolist(),
             wire.velocity_frd.tolist(),
             wire.rates_frd.tolist(),
             wire.rotor_speeds.tolist(),
         )
-        parts = answer_parts(time_usec, state, contact, wire.touchdown_speed, self.resets)
+        parts = answer_parts(time_usec, columns, contact, wire.touchdown_speed, self.resets)
         return messages + [FC.message(cls, values) for cls, values in parts]
 
     def _hil_state_quaternion(self, wire: WireState, state: np.ndarray) -> Any:

@@ -173,7 +173,7 @@ class MotorEpisodes:
 
     def observed(
         self, rows: list[int]
-    ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.integer], NDArray[np.float64]]:
         """(state (k, 17), contact (k,), touchdown speed (k,)) of vehicles ``rows`` as
         an answer carries them: the truth, or the delayed observation."""
         physics = self.physics
