@@ -139,6 +139,31 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         "(0..1) of its thrust, e.g. 2:0.6 (repeatable; default: healthy motors)",
     )
     sim.add_argument(
+        "--delay",
+        metavar="OBS,ACT",
+        help="observation and actuation delay of lockstep motor commands, in physics steps, "
+        "each K or LOW:HIGH (drawn per vehicle and reset), e.g. 2,0:5 (needs --lockstep; "
+        "default: none)",
+    )
+    sim.add_argument(
+        "--randomize",
+        action="store_true",
+        help="draw each vehicle's airframe (mass, inertia, rotor coefficients, motor rate, "
+        "drag) at start and at each reset, from the task envs' default spreads",
+    )
+    sim.add_argument(
+        "--airframe-scale",
+        metavar="NAME=F,...",
+        help="exact airframe scales, e.g. mass=1.3 (names as the task envs' airframe_scale)",
+    )
+    sim.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the draws (delays, airframes, turbulence); vehicle i draws from "
+        "SEED+i (default: 0)",
+    )
+    sim.add_argument(
         "--spacing",
         type=float,
         default=2.0,
@@ -375,6 +400,8 @@ def _sim_config(args: argparse.Namespace) -> object:
         wind=wind,
         sensor_noise=args.sensor_noise,
         motor_faults=_motor_faults(args.fail_motor),
+        wind_seed=args.seed,
+        episodes=_episodes(args.delay, args.randomize, args.airframe_scale, args.seed),
     )
 
 
@@ -430,6 +457,9 @@ def _flight_stack_config(args: argparse.Namespace) -> Any:
         "--sysid": args.sysid != 1,
         "--fail-motor": bool(args.fail_motor),  # quadsitl's failure injection, not yet here
         "--sensor-noise": args.sensor_noise != 1.0,  # the autopilot's own sensor models
+        "--delay": args.delay,  # of quadsitl's lockstep motor path
+        "--randomize": args.randomize,
+        "--airframe-scale": args.airframe_scale,
     }
     for option, value in own.items():
         if value:
@@ -470,6 +500,42 @@ def _weather(wind: str | None, turbulence: str | None) -> Any:
         except ValueError:
             level = turbulence.lower()
     return Wind(speed=speed, from_deg=from_deg, turbulence=level)
+
+
+def _episodes(delay: str | None, randomize: bool, scale: str | None, seed: int) -> Any:
+    """``--delay``, ``--randomize``, ``--airframe-scale`` and ``--seed`` as
+    EpisodeOptions (None: none given); a one-line ValueError for what does not parse."""
+    from quadsitl.tasks.randomization import airframe_scale_row
+    from quadsitl.vehicle.episodes import EpisodeOptions
+
+    if delay is None and not randomize and scale is None:
+        return None
+    steps = [(0, 0), (0, 0)]
+    if delay is not None:
+        parts = delay.split(",")
+        try:
+            if len(parts) != 2:
+                raise ValueError
+            bounds = [part.split(":") for part in parts]
+            steps = [(int(b[0]), int(b[-1])) for b in bounds if 1 <= len(b) <= 2]
+            if len(steps) != 2:
+                raise ValueError
+        except ValueError:
+            raise ValueError(
+                f"--delay must be OBS,ACT in whole physics steps, each K or LOW:HIGH, got {delay!r}"
+            ) from None
+    factors: dict[str, float] = {}
+    for item in (scale or "").split(",") if scale else []:
+        name, sep, value = item.partition("=")
+        try:
+            factors[name.strip()] = float(value) if sep else math.nan
+        except ValueError:
+            factors[name.strip()] = math.nan
+    try:
+        airframe_scale_row(factors)  # the delays are checked against the physics rate
+    except ValueError as error:
+        raise ValueError(str(error).replace("airframe_scale", "--airframe-scale")) from None
+    return EpisodeOptions(steps[0], steps[1], randomize, factors, seed)
 
 
 def _sim_collaborators(args: argparse.Namespace) -> tuple[Any, Any]:

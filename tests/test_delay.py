@@ -157,5 +157,5 @@ def test_bad_delays_are_refused_with_one_line(delay, message):
 def test_no_delay_is_the_plain_env():
     env = gym.make("QuadSITL/Hover-v0", delay={"observation": 0, "action": 0.0})
     assert env.unwrapped.engine.delay is None
-    with pytest.raises(ValueError, match="delay is not available with backend='mavlink'"):
+    with pytest.raises(ValueError, match="backend='mavlink' steps whole control periods"):
         gym.make("QuadSITL/Hover-v0", backend="mavlink", delay={"action": 0.02})

@@ -251,5 +251,5 @@ def test_backend_options_are_checked():
         gym.make("QuadSITL/Hover-v0", backend="gazebo")
     with pytest.raises(ValueError, match="need backend='mavlink'"):
         gym.make("QuadSITL/Hover-v0", gcs="udpout:127.0.0.1:14550")
-    with pytest.raises(ValueError, match="param_randomization"):
-        gym.make("QuadSITL/Hover-v0", backend="mavlink", param_randomization={"mass": 0.1})
+    with pytest.raises(ValueError, match="steps whole control periods"):
+        gym.make("QuadSITL/Hover-v0", backend="mavlink", delay={"action": 0.01})

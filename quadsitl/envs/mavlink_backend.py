@@ -25,6 +25,8 @@ from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.mavlink.signing import checked_key
 from quadsitl.physics import AIRFRAMES, get_airframe
 from quadsitl.tasks import TaskEngine, TaskOptions, TaskSpec
+from quadsitl.tasks.delay import DELAY_KINDS, Delay
+from quadsitl.tasks.randomization import Randomization
 
 START_TIMEOUT = 30.0  # s for a new simulator process to answer (imports, kernel load)
 MAX_TIMEOUT = 3600.0  # s: longer than this, a stuck simulator looks like a hang
@@ -131,6 +133,33 @@ def ray_address(ray: Any, sim_address: Any) -> str | None:
     return LOCAL if ray is True else ray.strip()
 
 
+def _check_wire_options(options: TaskOptions, task: TaskSpec) -> None:
+    """One-line ValueError for the task options that cannot cross the wire. Airframes
+    (``airframe_scale``, ``randomize``'s airframe draws) go to the simulator with each
+    reset; a delay stays in this process and steps whole control periods, as the
+    simulator answers once a period."""
+    randomization = options.randomize
+    if isinstance(randomization, Randomization) and randomization.wind is not None:
+        raise ValueError(
+            "randomize['wind'] is not available with backend='mavlink' yet (the simulator "
+            "process flies in still air); use the in-process backend"
+        )
+    delay = options.delay
+    if delay is None and isinstance(randomization, Randomization):
+        delay = randomization.delay
+    if isinstance(delay, Delay):
+        period = options.control_period
+        for kind in DELAY_KINDS:
+            low, high = getattr(delay, kind)
+            periods = high / period
+            if low != high or abs(periods - round(periods)) > 1e-9:
+                raise ValueError(
+                    f"{kind} delay {low:g}..{high:g} s: backend='mavlink' steps whole control "
+                    f"periods ({period:g} s), so its delays are fixed whole periods (finer or "
+                    "drawn ones: the in-process backend, or quadsitl sim --delay)"
+                )
+
+
 def _check_options(
     sizes: list[int], spawned_here: bool, gcs: Any, system_id: Any, timeout: Any, signing_key: Any
 ) -> None:
@@ -206,9 +235,7 @@ class MavlinkBackend:
         simulators: int | None = None,
         ray: bool | str | None = None,
     ) -> None:
-        for name in ("param_randomization", "randomize", "airframe_scale", "delay"):
-            if getattr(options, name):  # their per-episode draws live in this process
-                raise ValueError(f"{name} is not available with backend='mavlink'")
+        _check_wire_options(options, task)
         if options.wind is not None:
             raise ValueError(
                 "wind is not available with backend='mavlink' yet (the simulator process "
@@ -241,8 +268,12 @@ class MavlinkBackend:
                 f"got {len(addresses)} simulator addresses for {len(self.sizes)} simulators"
             )
         self.n, self.options, self.airframe = n, options, airframe
+        randomization = options.randomize
+        varies = bool(options.airframe_scale) or bool(
+            isinstance(randomization, Randomization) and randomization.airframe
+        )
         self.fleet = RemoteFleet(
-            n, airframe, options.physics_dt, options.control_period, task.ground
+            n, airframe, options.physics_dt, options.control_period, task.ground, varies
         )
         self.addresses = [parse_address(a) for a in addresses] if addresses else None
         self.timeout = timeout

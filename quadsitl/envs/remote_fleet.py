@@ -35,6 +35,7 @@ from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe
 from quadsitl.physics.fleet import VehicleStates
+from quadsitl.tasks.randomization import AIRFRAME_COLUMNS
 
 FLYING_ALTITUDE = 20.0  # m: where the task origin of tasks without a ground is flown
 
@@ -45,8 +46,21 @@ class RemoteFleet(VehicleStates):
     ``ground``: whether the task has the ground plane (landing), else the task is flown
     at altitude."""
 
-    def __init__(self, n: int, airframe: Airframe, dt: float, period: float, ground: bool) -> None:
+    def __init__(
+        self,
+        n: int,
+        airframe: Airframe,
+        dt: float,
+        period: float,
+        ground: bool,
+        send_airframes: bool = False,
+    ) -> None:
+        """``send_airframes``: each reset sends every reset vehicle's airframe (its
+        ``params`` row, scaled or drawn by the task) to its simulator."""
         super().__init__(n, airframe, dt=dt, ground_z=0.0 if ground else -math.inf)
+        # The first column of each airframe scale: the factors a reset sends.
+        self.factor_columns = [columns[0] for columns in AIRFRAME_COLUMNS.values()]
+        self.nominal = self.params[0, self.factor_columns].copy() if send_airframes else None
         self.clients: list[FleetClient] = []
         self.rows: list[slice] = []  # the vehicles of each client
         self.period_usec = round(period * 1e6)
@@ -96,7 +110,12 @@ class RemoteFleet(VehicleStates):
                 states = self.state[rows][local].copy()
                 states[:, L.POS] += self.offset
                 wire = WireState.from_physics(states, self.gear, 0, None, None)
-                answer = client.reset(local.tolist(), wire, frames.enu_to_ned(states[:, L.VEL]))
+                airframes = None
+                if self.nominal is not None:
+                    params = self.params[rows][local]
+                    airframes = params[:, self.factor_columns] / self.nominal
+                velocity = frames.enu_to_ned(states[:, L.VEL])
+                answer = client.reset(local.tolist(), wire, velocity, airframes)
                 self._take(rows, answer, local)
 
     def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:

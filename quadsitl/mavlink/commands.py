@@ -17,7 +17,7 @@ from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink import telemetry as T
 from quadsitl.mavlink.identity import AVAILABLE_MODES, available_modes_message
 from quadsitl.mavlink.links import Link
-from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_MOTION
+from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_AIRFRAME, STAGE_MOTION
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import ACCEPTED, Outcome, Result, Severity
 
@@ -91,6 +91,7 @@ class Commands:
             mav.MAV_CMD_INJECT_FAILURE: self._cmd_inject_failure,
             RESET_STATE: self._cmd_reset_state,
             STAGE_MOTION: lambda c, link: self.server.motors.stage_motion(c.params),
+            STAGE_AIRFRAME: lambda c, link: self.server.motors.stage_airframe(c.params),
         }
 
     def _cmd_arm_disarm(self, c: Command, link: Link) -> Result:

@@ -42,7 +42,12 @@ from quadsitl.mavlink.motor_client import (
     refusal,
     resend_wait,
 )
-from quadsitl.mavlink.motor_path import RELEASE_LOCKSTEP, RESET_STATE, STAGE_MOTION
+from quadsitl.mavlink.motor_path import (
+    RELEASE_LOCKSTEP,
+    RESET_STATE,
+    STAGE_AIRFRAME,
+    STAGE_MOTION,
+)
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
 
@@ -244,17 +249,27 @@ class FleetClient:
         return self.answer
 
     def reset(
-        self, rows: list[int], wire: WireState, velocity_ned: NDArray[np.float64]
+        self,
+        rows: list[int],
+        wire: WireState,
+        velocity_ned: NDArray[np.float64],
+        airframes: NDArray[np.float64] | None = None,
     ) -> WireState:
         """Put vehicles ``rows`` in the states of ``wire`` ((len(rows), ·) arrays, local
         NED, see docs/mavlink.md; ``velocity_ned`` (len(rows), 3) m/s) and arm them; the
-        answer of every vehicle."""
+        answer of every vehicle. ``airframes``: (len(rows), 7) factors of the preset's
+        parameters each vehicle flies from this reset on (MAV_CMD_USER_4; None: the
+        simulator's choice)."""
         groups = []
         for k, i in enumerate(rows):
             motion = [*velocity_ned[k], *wire.rates_frd[k], float(wire.rotor_speeds[k, 0])]
             pose = [*wire.position_ned[k], *wire.q_ned_frd[k]]
+            staged = (
+                [] if airframes is None else [self._command_frame(STAGE_AIRFRAME, i, *airframes[k])]
+            )
             groups.append(
                 [
+                    *staged,
                     self._command_frame(STAGE_MOTION, i, *motion),
                     self._command_frame(RESET_STATE, i, *pose),
                     self._command_frame(mav.MAV_CMD_COMPONENT_ARM_DISARM, i, 1, FORCE_MAGIC),
@@ -264,7 +279,9 @@ class FleetClient:
         self._send([f for group in groups for f in group])
         self._sent_at = time.monotonic()
         # A state counts only once its reset is acknowledged (the state follows the ACK).
-        self._collect(groups, rows, lambda i, t: RESET_STATE in acks[i], acks, "reset answer")
+        needed = RESET_COMMANDS + (airframes is not None)
+        fresh = lambda i, t: RESET_STATE in acks[i]  # noqa: E731
+        self._collect(groups, rows, fresh, acks, "reset answer", needed)
         self.time_usec = int(self.answer.time_usec)  # the next round starts there
         return self.answer
 

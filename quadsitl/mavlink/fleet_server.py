@@ -301,17 +301,19 @@ class FleetServer:
         physics = self.group.physics
         time_usec = round(self.group.vehicles[0].time * 1e6)
         gears = physics.params[rows, P_GEAR_HEIGHT]  # each vehicle's airframe's
+        # The state each answer carries: the truth, or what the observation delay shows.
+        states, contact_rows, touchdown_rows = self.group.episodes.observed(rows)
         if len(rows) <= ROW_BY_ROW:  # a whole-array conversion costs more for a few
             wires = [
-                WireState.from_physics(physics.state[i], gear, 0, 0, 0.0)
-                for i, gear in zip(rows, gears.tolist(), strict=True)
+                WireState.from_physics(state, gear, 0, 0, 0.0)
+                for state, gear in zip(states, gears.tolist(), strict=True)
             ]
             columns = [[getattr(w, f).tolist() for w in wires] for f in WIRE_FIELDS]
         else:
-            batch = WireState.from_physics(physics.state[rows], gears, 0, None, None)
+            batch = WireState.from_physics(states, gears, 0, None, None)
             columns = [getattr(batch, f).tolist() for f in WIRE_FIELDS]
-        contacts = physics.contact[rows].tolist()
-        touchdowns = physics.touchdown_speed[rows].tolist()
+        contacts = contact_rows.tolist()
+        touchdowns = touchdown_rows.tolist()
         out: list[bytes] = []
         for k, i in enumerate(rows):
             p, q, v, r, rotors = (column[k] for column in columns)

@@ -10,7 +10,11 @@ changes nothing: its answer carries the unchanged time.
 
 Reset for training episodes is two ``COMMAND_LONG``\\s, each ACKed: MAV_CMD_USER_2
 stages velocity, body rates and rotor speed; MAV_CMD_USER_1 sets position and attitude
-and applies what was staged, then answers with the state after its ACK.
+and applies what was staged, then answers with the state after its ACK. Before them,
+MAV_CMD_USER_4 may stage the airframe of the episode (seven factors of the preset's
+parameters, :data:`~quadsitl.vehicle.episodes.AIRFRAME_NAMES`); without it the reset
+draws one (``quadsitl sim --randomize``) or flies the preset. A reset also starts the
+vehicle's delay line afresh (:mod:`quadsitl.vehicle.episodes`).
 
 Pure: no sockets. The server sends what the methods return.
 """
@@ -29,12 +33,14 @@ from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.physics import layout as L
 from quadsitl.vehicle import external_control as X
+from quadsitl.vehicle.episodes import MotorEpisodes, check_factors
 from quadsitl.vehicle.results import ACCEPTED, Outcome, Result
 from quadsitl.vehicle.vehicle import Vehicle
 
 RESET_STATE = mav.MAV_CMD_USER_1  # 31010
 STAGE_MOTION = mav.MAV_CMD_USER_2  # 31011
 RELEASE_LOCKSTEP = mav.MAV_CMD_USER_3  # 31012: the owner hands the motor link back
+STAGE_AIRFRAME = mav.MAV_CMD_USER_4  # 31013: the next reset's airframe factors
 ARMED_FLAG = mav.MAV_MODE_FLAG_SAFETY_ARMED  # 128
 LOCKSTEP_FLAG = 1
 LOCKSTEP_IDLE = 5.0  # wall s without lockstep commands before real time resumes
@@ -110,10 +116,21 @@ def check_controls(controls: Any) -> tuple[str, str] | None:
 
 
 class MotorPath:
-    """State of the motor path for one vehicle. ``lockstep``: started with --lockstep."""
+    """State of the motor path for one vehicle. ``lockstep``: started with --lockstep;
+    ``episodes``: the airframes and delays of its group, ``row`` its row there (None: a
+    vehicle on its own, the preset, no delay)."""
 
-    def __init__(self, vehicle: Vehicle, lockstep: bool = False) -> None:
+    def __init__(
+        self,
+        vehicle: Vehicle,
+        lockstep: bool = False,
+        episodes: MotorEpisodes | None = None,
+        row: int = 0,
+    ) -> None:
         self.vehicle = vehicle
+        self.episodes, self.row = episodes, row
+        self.staged_airframe: np.ndarray | None = None
+        self.flown_since_reset = True  # a reset before any command repeats the last one
         self.always_lockstep = lockstep
         self.last_lockstep_wall = -math.inf
         self.last_command_usec = 0
@@ -175,7 +192,7 @@ class MotorPath:
         self.last_frame = frame if lockstep else None
         if lockstep:
             self.last_lockstep_wall = time.monotonic()
-            X.advance(self.vehicle)
+            X.advance(self.vehicle, self.episodes.step if self.episodes else None)
         return warning
 
     def apply(self, controls: Any, armed: bool = True, speeds: bool = True) -> str | None:
@@ -185,6 +202,7 @@ class MotorPath:
         or None."""
         v = self.vehicle
         warning = None
+        self.flown_since_reset = True
         if not v.armed and armed:
             self.counters["while_disarmed"] += 1
             if self.counters["while_disarmed"] % 1000 == 1:
@@ -198,6 +216,18 @@ class MotorPath:
         return warning
 
     # --- reset ------------------------------------------------------------------------
+    def stage_airframe(self, params: list[float]) -> Result:
+        """MAV_CMD_USER_4: the next reset's airframe, seven factors of the preset's
+        parameters (mass, inertia, thrust, torque, drag, aerodynamic moment
+        coefficients, motor rate), each in [0.1, 10]."""
+        if self.episodes is None:
+            return Result(Outcome.UNSUPPORTED, "airframe staging needs a simulator's group")
+        problem = check_factors(params[:7])
+        if problem is not None:
+            return Result(Outcome.DENIED, problem)
+        self.staged_airframe = np.array(params[:7], dtype=np.float64)
+        return ACCEPTED
+
     def stage_motion(self, params: list[float]) -> Result:
         """MAV_CMD_USER_2: velocity NED (m/s), body rates FRD (rad/s), rotor speed
         (rad/s, all four; NaN: hover speed if airborne), used by the next reset."""
@@ -241,7 +271,10 @@ class MotorPath:
         state[L.ROTORS] = rotor
         result = X.reset_state(v, state)
         if result.ok:
-            self.staged = None
+            if self.episodes is not None:
+                self.episodes.new_episode(self.row, self.staged_airframe, self.flown_since_reset)
+            self.flown_since_reset = False
+            self.staged, self.staged_airframe = None, None
             self.last_frame = None  # a command after a reset is never a repeat
             self.resets += 1
             self._previous_velocity = None
@@ -257,25 +290,29 @@ class MotorPath:
         airborne) and last ODOMETRY (float32 pose and body-frame velocity)."""
         v = self.vehicle
         time_usec = round(v.time * 1e6)
-        contact = int(v.fleet.contact[0])
+        if self.episodes is None:
+            state, contact, touchdown = v.state, int(v.fleet.contact[0]), v.fleet.touchdown_speed[0]
+        else:  # what the delay line lets the controller see
+            states, contacts, touchdowns = self.episodes.observed([self.row])
+            state, contact, touchdown = states[0], int(contacts[0]), touchdowns[0]
         wire = WireState.from_physics(
-            v.state, v.airframe.gear_height, time_usec, contact, float(v.fleet.touchdown_speed[0])
+            state, v.airframe.gear_height, time_usec, contact, float(touchdown)
         )
-        messages = [self._hil_state_quaternion(wire)] if hil_state else []
-        state = (
+        messages = [self._hil_state_quaternion(wire, state)] if hil_state else []
+        columns = (
             wire.position_ned.tolist(),
             wire.q_ned_frd.tolist(),
             wire.velocity_frd.tolist(),
             wire.rates_frd.tolist(),
             wire.rotor_speeds.tolist(),
         )
-        parts = answer_parts(time_usec, state, contact, wire.touchdown_speed, self.resets)
+        parts = answer_parts(time_usec, columns, contact, wire.touchdown_speed, self.resets)
         return messages + [FC.message(cls, values) for cls, values in parts]
 
-    def _hil_state_quaternion(self, wire: WireState) -> Any:
+    def _hil_state_quaternion(self, wire: WireState, state: np.ndarray) -> Any:
         v = self.vehicle
         lat, lon, alt = wire.global_position(v.origin)
-        velocity_ned = frames.enu_to_ned(v.state[L.VEL])
+        velocity_ned = frames.enu_to_ned(state[L.VEL])
         # Specific force (what an accelerometer reads), body FRD, over the last period:
         # the acceleration minus the simulated gravity.
         accel_ned = np.array([0.0, 0.0, -v.airframe.gravity])

@@ -38,6 +38,7 @@ from quadsitl.physics import Airframe, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.wind import Wind
 from quadsitl.vehicle.controller import Autopilot, Setpoint
+from quadsitl.vehicle.episodes import EpisodeOptions
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.motor_faults import check_efficiency, check_motor
@@ -81,6 +82,7 @@ class SimConfig:
     sensor_seed: int = 0  # of the sensors' noise
     # motor (1-based) -> its efficiency, on every vehicle from power-on (--fail-motor)
     motor_faults: dict[int, float] = field(default_factory=dict)
+    episodes: EpisodeOptions | None = None  # delays, airframe draws (motor path)
 
     def validate(self) -> None:
         get_identity(self.autopilot_id)
@@ -114,6 +116,10 @@ class SimConfig:
         for motor, efficiency in self.motor_faults.items():
             check_motor(motor)
             check_efficiency(efficiency)
+        if self.episodes is not None:
+            self.episodes.check(1.0 / self.physics_rate)
+            if self.episodes.delays and not self.lockstep:
+                raise ValueError("--delay acts on lockstep motor commands: add --lockstep")
         if not [u for u in (self.gcs_url, self.api_url, self.hil_url, *self.extra_urls) if u]:
             raise ValueError("at least one link is needed")
         if self.lockstep and self.hil_url and self.signing_key is None:
@@ -211,6 +217,7 @@ class Simulator:
             make_autopilot=(lambda: make_autopilot(airframe)) if make_autopilot else None,
             sensor_noise=config.sensor_noise,
             sensor_seed=config.sensor_seed,
+            episodes=config.episodes,
         )
         self.vehicle = self.group.vehicles[0]
         if config.wind is not None and not config.wind.calm:
@@ -251,6 +258,8 @@ class Simulator:
                 lockstep=config.lockstep,
                 signing_key=config.signing_key,
                 identity=get_identity(config.autopilot_id),
+                episodes=self.group.episodes,
+                row=i,
             )
             for i, vehicle in enumerate(self.group.vehicles)
         ]
@@ -433,6 +442,9 @@ def run_simulator(
     for motor, efficiency in sorted(config.motor_faults.items()):
         state = "off" if efficiency == 0 else f"at {efficiency:.0%} thrust"
         sim._print(f"quadsitl sim: motor {motor} {state} on every vehicle (--fail-motor)")
+    if config.episodes is not None:  # what each vehicle drew (again at each reset)
+        for i, drawn in enumerate(sim.group.episodes.drawn):
+            sim._print(f"quadsitl sim: system {config.system_id + i}: {drawn}")
     exposed = [link for link in sim.links if link.exposed]
     if exposed and config.signing_key is None:
         names = ", ".join(f"{link.name} ({link.url})" for link in exposed)

@@ -100,7 +100,7 @@ class Delay:
                 )
 
 
-ObserveRows = Callable[[NDArray[np.int64]], NDArray[np.float32]]
+ObserveRows = Callable[[NDArray[np.int64]], NDArray[np.floating]]
 
 
 class DelayLine:
@@ -111,7 +111,13 @@ class DelayLine:
     """
 
     def __init__(
-        self, delay: Delay, n: int, physics_dt: float, substeps: int, obs_size: int
+        self,
+        delay: Delay,
+        n: int,
+        physics_dt: float,
+        substeps: int,
+        obs_size: int,
+        dtype: type[np.floating] = np.float32,
     ) -> None:
         steps = delay.steps(physics_dt)
         self.observation_range, self.action_range = steps["observation"], steps["action"]
@@ -121,11 +127,12 @@ class DelayLine:
         self.delays_observation = self.observation_range[1] > 0
         # Ring of each env's observations, one per env step (slot m mod size), deep enough
         # for the longest delay; and of its rotor commands (rad/s), one more.
+        # (The simulator's lockstep delay keeps whole physics rows: ``dtype`` float64.)
         self.observations = np.zeros(
-            (n, self.observation_range[1] // substeps + 1, obs_size), np.float32
+            (n, self.observation_range[1] // substeps + 1, obs_size), dtype
         )
         self.commands = np.zeros((n, self.action_range[1] // substeps + 2, L.N_ROTORS))
-        self.taken = np.zeros((n, obs_size), np.float32)  # this step's observation to keep
+        self.taken = np.zeros((n, obs_size), dtype)  # this step's observation to keep
         self._envs = np.arange(n)
         self._pieces: list[int] | None = None  # where a period splits (None: recompute)
 
@@ -141,11 +148,11 @@ class DelayLine:
                     steps[i] = rngs[i].integers(low, high + 1)
         self._pieces = None
 
-    def reset(self, rows: NDArray[np.int64], first_obs: NDArray[np.float32], hover: float) -> None:
+    def reset(self, rows: NDArray[np.int64], first_obs: NDArray[np.floating], hover: Any) -> None:
         """New episodes in ``rows``: every slot holds the first observation and the hover
-        command (rad/s)."""
+        command (rad/s: one speed, or one per row of ``rows``)."""
         self.observations[rows] = first_obs[:, None, :]
-        self.commands[rows] = hover
+        self.commands[rows] = np.reshape(hover, (-1, 1, 1))
 
     def step(
         self,
@@ -182,7 +189,7 @@ class DelayLine:
                     self.taken[rows] = observe_rows(rows)
             start = end
 
-    def delay_observations(self, obs: NDArray[np.float32], steps: NDArray[np.int64]) -> None:
+    def delay_observations(self, obs: NDArray[np.floating], steps: NDArray[np.int64]) -> None:
         """Replace the step's true observations ``obs`` (in place) by the delayed ones."""
         if not self.delays_observation:
             return

@@ -6,6 +6,7 @@ kept apart because the onboard flight software never uses them.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -69,12 +70,13 @@ def reset_state(v: Vehicle, state: Vec) -> Result:
     return ACCEPTED
 
 
-def advance(v: Vehicle) -> None:
-    """One control period. Under motor control the physics takes it in one call."""
+def advance(v: Vehicle, step_physics: Callable[..., None] | None = None) -> None:
+    """One control period. Under motor control the physics takes it in one call
+    (``step_physics``: the delays of :mod:`quadsitl.vehicle.episodes`, else the fleet's)."""
     if not v.motor_control:
         for _ in range(v.substeps):
             v.step()
         return
     before = v.begin_period()
-    v.fleet.step(v.rotor_cmd, n_substeps=v.substeps)
+    (step_physics or v.fleet.step)(v.rotor_cmd, n_substeps=v.substeps)
     v.end_step(before, v.control_period)

@@ -23,6 +23,7 @@ from quadsitl.physics.sensors import SensorSlot, SensorSuite
 from quadsitl.vehicle import ground_contact as GC
 from quadsitl.vehicle.battery import shaft_power
 from quadsitl.vehicle.controller import Autopilot
+from quadsitl.vehicle.episodes import EpisodeOptions, MotorEpisodes
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.vehicle import Vehicle
 
@@ -46,6 +47,8 @@ class VehicleGroup:
         sensor_noise: noise scale of every vehicle's sensors (0: the truth, 1: the
             defaults of docs/physics.md).
         sensor_seed: of the sensors' noise.
+        episodes: airframe draws and delays of the vehicles under external motor control
+            (:mod:`quadsitl.vehicle.episodes`; None: the preset, no delay).
     """
 
     def __init__(
@@ -59,6 +62,7 @@ class VehicleGroup:
         make_autopilot: Callable[[], Autopilot] | None = None,
         sensor_noise: float = 1.0,
         sensor_seed: int = 0,
+        episodes: EpisodeOptions | None = None,
     ) -> None:
         if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_VEHICLES:
             raise ValueError(f"the number of vehicles must be 1..{MAX_VEHICLES}, got {n!r}")
@@ -90,6 +94,8 @@ class VehicleGroup:
             )
         self.substeps = self.vehicles[0].substeps
         self.control_period = self.vehicles[0].control_period
+        hover = self.vehicles[0].airframe.hover_rotor_speed
+        self.episodes = MotorEpisodes(self.physics, self.substeps, hover, episodes)
         # The vehicles whose controller runs at each physics step of a control period.
         self._due_at = [
             [v for v in self.vehicles if (step + v.control_phase) % self.substeps == 0]
@@ -115,17 +121,18 @@ class VehicleGroup:
         for v in self.vehicles:
             v.control()
         self._steps += self.substeps
-        self._move(self.substeps, self.control_period)
+        self._move(self.substeps, self.control_period, self.episodes.step)
 
-    def _move(self, substeps: int, seconds: float) -> None:
+    def _move(self, substeps: int, seconds: float, step_physics: Callable | None = None) -> None:
         """The physics of all vehicles, their sensors, then what each vehicle's flight
         software does about it: contact events for the vehicles whose ground contact
         changed, and, once per control period, the batteries (each drawing its rotors'
         shaft power of that moment for the whole period: the power changes little in
-        one)."""
+        one). ``step_physics``: what steps the physics (motor commands: with their
+        delays)."""
         physics = self.physics
         before = physics.contact.tolist()
-        physics.step(self.rotor_cmd, n_substeps=substeps)
+        (step_physics or physics.step)(self.rotor_cmd, n_substeps=substeps)
         self.sensors.update(
             physics.time, physics.state, physics.params, physics.contact, physics.air_velocity
         )
