@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from quadsitl import frames
-from quadsitl.bridges.fake_px4 import HilState, Px4HoverController
+from quadsitl.bridges.fake_px4 import HilState, Px4HoverController, state_from
 from quadsitl.bridges.px4_airframe import (
     SCRIPT_NAME,
     SHIPPED,
@@ -47,11 +47,6 @@ def received(data: bytes) -> dict[int, list[tuple]]:
     for frame in FrameReader().feed(data):
         out.setdefault(frame.msgid, []).append(frame.unpack())
     return out
-
-
-def state_of(values: tuple) -> HilState:
-    v = values
-    return HilState(v[0], v[1:5], v[5:8], *v[8:11], v[11:14], v[16:19])
 
 
 @pytest.mark.parametrize("airframe", sorted(AIRFRAMES))
@@ -201,7 +196,7 @@ def test_closed_loop_hover_through_the_adapter_matches_in_process_physics(airfra
     u_through = u_local = [0.0] * 4
     for k in range(10 * 250):
         got = received(physics.answer({0: [actuators(u_through)]})[0])
-        state = state_of(got[mav.MAVLINK_MSG_ID_HIL_STATE_QUATERNION][-1])
+        state = state_from(got[mav.MAVLINK_MSG_ID_HIL_STATE_QUATERNION][-1])
         u_through = through(state)
         fleet.step(np.array(u_local) * spec.max_rotor_speed, 4)
         s = fleet.state[0]

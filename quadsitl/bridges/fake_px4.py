@@ -80,6 +80,11 @@ class HilState(NamedTuple):
     accel: tuple[int, int, int]  # mG, body FRD
 
 
+def state_from(v: tuple) -> HilState:
+    """A HIL_STATE_QUATERNION's values in wire order as a HilState."""
+    return HilState(v[0], v[1:5], v[5:8], v[8], v[9], v[10], v[11:14], v[16:19])
+
+
 @dataclass
 class Received:
     """Everything the simulator sent, in order of arrival."""
@@ -171,7 +176,7 @@ class FakePx4:
         elif frame.msgid == mav.MAVLINK_MSG_ID_HIL_GPS:
             r.gps.append(HilGps(*v[:13]))
         elif frame.msgid == mav.MAVLINK_MSG_ID_HIL_STATE_QUATERNION:
-            r.states.append(HilState(v[0], v[1:5], v[5:8], *v[8:11], v[11:14], v[16:19]))
+            r.states.append(state_from(v))
         elif frame.msgid == mav.MAVLINK_MSG_ID_COMMAND_ACK:
             r.acks.append((v[0], v[1]))
 

@@ -19,6 +19,7 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 from quadsitl.bridges.px4_airframe import parameter_folder
@@ -119,7 +120,7 @@ class Px4TcpServer:
         writers = [c.sock for c in self.connections if c is not None and c.outgoing]
         readable, writable, _ = select.select(watched, writers, [], timeout)
         for sock in writable:
-            self._guard(owner[sock.fileno()], lambda c: c.flush())
+            self._guard(owner[sock.fileno()], Connection.flush)
         messages = {}
         count = 0
         for sock in readable:
@@ -151,7 +152,7 @@ class Px4TcpServer:
             for index, data in self.physics.tick(waiting).items():
                 replies[index] = replies.get(index, b"") + data
         for index, data in replies.items():
-            self._guard(index, lambda c, d=data: c.send(d))
+            self._guard(index, partial(Connection.send, data=data))
         return count
 
     def _accept(self, index: int) -> None:
