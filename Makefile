@@ -35,6 +35,7 @@ bench: venv
 	$(BIN)/python benchmarks/sitl.py
 	$(BIN)/python benchmarks/sitl_load.py
 	$(BIN)/python benchmarks/ardupilot.py
+	$(BIN)/python benchmarks/px4.py
 	$(BIN)/python benchmarks/mavlink_env.py
 	$(BIN)/python benchmarks/mavlink_training.py
 	$(BIN)/python benchmarks/replay.py

@@ -127,7 +127,8 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         default=1.0,
         metavar="SCALE",
         help="scale of the sensor models' noise in HIGHRES_IMU, SCALED_IMU, RAW_IMU, "
-        "SCALED_PRESSURE and GPS_RAW_INT: 0 the truth, 1 the defaults of docs/physics.md, "
+        "SCALED_PRESSURE and GPS_RAW_INT (with --flight-stack px4: in HIL_SENSOR and "
+        "HIL_GPS): 0 the truth, 1 the defaults of docs/physics.md, "
         "3 three times as much (default: 1)",
     )
     sim.add_argument(
@@ -195,8 +196,8 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         choices=FLIGHT_STACKS,
         default=None,
         help="be only the aircraft of a real autopilot, which serves MAVLink itself: "
-        "ardupilot (ArduCopter's JSON backend, in lockstep); quadsitl's own flight software "
-        "and links are off (docs/autopilots.md)",
+        "ardupilot (ArduCopter's JSON backend) or px4 (PX4's simulator_mavlink), in "
+        "lockstep; quadsitl's own flight software and links are off (docs/autopilots.md)",
     )
     sim.add_argument(
         "--flight-stack-port",
@@ -204,7 +205,7 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         default=None,
         metavar="PORT",
         help="port of the first autopilot instance; instance i uses PORT + 10 i "
-        "(default: UDP 9002 for ardupilot)",
+        "(ardupilot; px4: PORT + i) (default: UDP 9002 for ardupilot, TCP 4560 for px4)",
     )
     sim.add_argument(
         "--flight-stack-bind",
@@ -355,13 +356,7 @@ def _sim_config(args: argparse.Namespace) -> object:
     def url(value: str) -> str | None:
         return None if value.lower() == "none" else value
 
-    home = Home()
-    if args.home is not None:
-        try:
-            lat, lon, alt = (float(x) for x in args.home.split(","))
-        except ValueError:
-            raise ValueError(f"--home must be LAT,LON,ALT, got {args.home!r}") from None
-        home = Home(lat, lon, alt)
+    home = _home(args.home) or Home()
     params = {}
     for item in args.param:
         name, sep, value = item.partition("=")
@@ -436,11 +431,29 @@ def _motor_faults(items: list[str]) -> dict[int, float]:
     return faults
 
 
+def _home(value: str | None) -> Any:
+    """``--home LAT,LON,ALT`` as a Home (None when not given); ValueError in one line."""
+    from quadsitl.vehicle.geo import Home
+
+    if value is None:
+        return None
+    try:
+        lat, lon, alt = (float(x) for x in value.split(","))
+    except ValueError:
+        raise ValueError(f"--home must be LAT,LON,ALT, got {value!r}") from None
+    return Home(lat, lon, alt)
+
+
 def _flight_stack_config(args: argparse.Namespace) -> Any:
-    """``quadsitl sim --flight-stack ardupilot``'s configuration; ValueError for options
-    that belong to quadsitl's own flight software, which is off in this mode."""
+    """``quadsitl sim --flight-stack ardupilot|px4``'s configuration; ValueError for
+    options that belong to quadsitl's own flight software, which is off in this mode."""
     from quadsitl.bridges.ardupilot_json import PORT
     from quadsitl.bridges.ardupilot_udp import ArduPilotConfig
+    from quadsitl.bridges.px4_hil import PORT as PX4_PORT
+    from quadsitl.bridges.px4_tcp import Px4Config
+    from quadsitl.physics.sensors.suite import check_noise_scale
+
+    px4 = args.flight_stack == "px4"
 
     own = {  # given with a value other than its default
         "--autopilot": args.autopilot,
@@ -450,13 +463,13 @@ def _flight_stack_config(args: argparse.Namespace) -> Any:
         "--param": args.param,
         "--rerun": args.rerun or args.rerun_save or args.rerun_web,
         "--signing-key": args.signing_key or args.signing_passphrase,
-        "--home": args.home,  # the autopilot's own (ArduCopter: --home)
+        "--home": args.home and not px4,  # ArduCopter's own (--home); PX4's comes from GPS
         "--speed": args.speed != 1.0,  # lockstep: the autopilot sets the pace
         "--physics-rate": args.physics_rate != 1000.0,  # one step per autopilot frame
         "--control-rate": args.control_rate != 250.0,
         "--sysid": args.sysid != 1,
         "--fail-motor": bool(args.fail_motor),  # quadsitl's failure injection, not yet here
-        "--sensor-noise": args.sensor_noise != 1.0,  # the autopilot's own sensor models
+        "--sensor-noise": args.sensor_noise != 1.0 and not px4,  # ArduCopter's own models
         "--delay": args.delay,  # of quadsitl's lockstep motor path
         "--randomize": args.randomize,
         "--airframe-scale": args.airframe_scale,
@@ -469,6 +482,18 @@ def _flight_stack_config(args: argparse.Namespace) -> Any:
             )
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be a positive number of seconds, got {args.duration}")
+    if px4:
+        return Px4Config(
+            vehicles=args.vehicles,
+            airframe=args.airframe or "iris",
+            bind=args.flight_stack_bind,
+            port=PX4_PORT if args.flight_stack_port is None else args.flight_stack_port,
+            duration=args.duration,
+            quiet=args.quiet,
+            wind=_weather(args.wind, args.turbulence),
+            home=_home(args.home),
+            sensor_noise=check_noise_scale(args.sensor_noise),
+        )
     return ArduPilotConfig(
         vehicles=args.vehicles,
         airframe=args.airframe or "iris",
@@ -632,9 +657,11 @@ def _main(argv: Sequence[str] | None = None) -> int:
         return replay_main([args.tlog, *options], prog="quadsitl replay")
     if args.command == "sim" and args.flight_stack:
         from quadsitl.bridges.ardupilot_udp import run_ardupilot
+        from quadsitl.bridges.px4_tcp import run_px4
 
+        run = run_px4 if args.flight_stack == "px4" else run_ardupilot
         try:
-            return run_ardupilot(_flight_stack_config(args))
+            return run(_flight_stack_config(args))
         except (ValueError, OSError) as error:
             parser.exit(2, f"quadsitl sim: error: {error}\n")
     if args.command == "sim":

@@ -9,5 +9,5 @@ live in a module of their own.
 
 from __future__ import annotations
 
-FLIGHT_STACKS = ("ardupilot",)
+FLIGHT_STACKS = ("ardupilot", "px4")
 """Names accepted by ``quadsitl sim --flight-stack``."""

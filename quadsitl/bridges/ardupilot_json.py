@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from quadsitl.bridges.lockstep import step_vehicles
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe
 from quadsitl.physics.fleet import Fleet, initial_state
@@ -257,10 +258,7 @@ class JsonPhysics:
         fleet = self.fleet
         before = fleet.state[rows, L.I_VX : L.I_VZ + 1].tolist()  # m/s ENU
         fleet.dt = dt  # this Fleet is ours: its step is the frame's
-        if len(rows) == fleet.n:
-            fleet.step(self._commands)
-        else:
-            self._step_some(rows)
+        step_vehicles(fleet, self._commands, rows)
         replies = {}
         for index, velocity in zip(rows, before, strict=True):
             peer = self.peers[index]
@@ -276,19 +274,6 @@ class JsonPhysics:
             )
             replies[index] = peer.reply
         return replies
-
-    def _step_some(self, rows: list[int]) -> None:
-        """Step the whole batch, then put back the vehicles not in ``rows``."""
-        fleet = self.fleet
-        keep = np.ones(fleet.n, bool)
-        keep[rows] = False
-        arrays: list[np.ndarray] = [fleet.state, fleet.contact, fleet.touchdown_speed]
-        if fleet.windy:
-            arrays += [fleet.wind_state, fleet.wind_streams]
-        saved = [a[keep].copy() for a in arrays]
-        fleet.step(self._commands)
-        for a, rows_kept in zip(arrays, saved, strict=True):
-            a[keep] = rows_kept
 
     def _put_on_ground(self, index: int) -> None:
         """Vehicle ``index`` at rest on the ground at its start, nose north, rotors

@@ -1,0 +1,265 @@
+"""``quadsitl sim --flight-stack px4``: PX4's simulator_mavlink over TCP.
+
+One listening TCP socket per PX4 instance (port 4560 + i, as PX4's instance i connects
+to), on loopback unless asked otherwise. PX4 connects out to it; what it sends is read
+as MAVLink 2 frames and answered by :class:`~quadsitl.bridges.px4_hil.HilPhysics`. A
+PX4 that disconnects is said, and the next connection on that port starts its vehicle
+again; the other instances are served throughout. This module only moves bytes,
+prints and stops.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import select
+import signal
+import socket
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
+from typing import Any
+
+from quadsitl.bridges.px4_airframe import parameter_folder
+from quadsitl.bridges.px4_hil import PORT, ROUND_US, FrameReader, HilPhysics
+from quadsitl.mavlink.links import is_loopback
+from quadsitl.physics.fleet import Fleet
+from quadsitl.physics.wind import Wind
+from quadsitl.vehicle.geo import Home
+
+WAIT = 0.2  # wall s, longest sleep in select() (signals, --duration)
+RECEIVE = 65536  # bytes per read
+SEND_LIMIT = 4 << 20  # bytes queued for a PX4 that does not read: it is dropped
+
+
+@dataclass
+class Px4Config:
+    """What ``quadsitl sim --flight-stack px4`` is told; see ``quadsitl sim --help``."""
+
+    vehicles: int = 1  # PX4 instances, one vehicle each, one batched physics
+    airframe: str = "iris"
+    bind: str = "127.0.0.1"  # address the ports listen on
+    port: int = PORT  # of instance 0; instance i listens on port + i
+    duration: float | None = None  # wall seconds, None: until a signal
+    quiet: bool = False
+    wind: Wind | None = None  # the weather every vehicle flies in (None: still air)
+    wind_seed: int = 0
+    home: Home | None = None  # where the GPS puts the vehicles (None: PX4's Zurich field)
+    sensor_noise: float = 1.0  # scale of the sensor models' noise
+
+
+class Connection:
+    """One PX4's TCP connection: frames in, bytes out (queued while the socket is full)."""
+
+    def __init__(self, sock: socket.socket, address: Any) -> None:
+        self.sock, self.address = sock, address
+        sock.setblocking(False)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.reader = FrameReader()
+        self.outgoing = bytearray()
+
+    def send(self, data: bytes) -> None:
+        """Send ``data`` after what is queued; OSError when PX4 stopped reading."""
+        if not self.outgoing:
+            with contextlib.suppress(BlockingIOError):
+                data = data[self.sock.send(data) :]
+        self.outgoing += data
+        if len(self.outgoing) > SEND_LIMIT:
+            raise OSError(f"{len(self.outgoing)} bytes wait for a PX4 that does not read")
+
+    def flush(self) -> None:
+        if self.outgoing:
+            with contextlib.suppress(BlockingIOError):
+                del self.outgoing[: self.sock.send(self.outgoing)]
+
+
+class Px4TcpServer:
+    """The ports of N PX4 instances around one :class:`HilPhysics`.
+
+    Raises OSError naming the port when a port cannot be opened (in use, say)."""
+
+    def __init__(self, physics: HilPhysics, bind: str = "127.0.0.1", port: int = PORT) -> None:
+        self.physics = physics
+        self.ports = [port + i for i in range(physics.fleet.n)]
+        self.listeners: list[socket.socket] = []
+        self.connections: list[Connection | None] = [None] * physics.fleet.n
+        try:
+            for index, number in enumerate(self.ports):
+                sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                self.listeners.append(sock)
+                try:
+                    sock.bind((bind, number))
+                    sock.listen(1)
+                except OSError as error:
+                    why = "is in use" if error.errno == errno.EADDRINUSE else f"({error})"
+                    raise OSError(
+                        f"TCP port {number} (PX4 instance {index}) on {bind} {why}"
+                    ) from None
+                sock.setblocking(False)
+        except OSError:
+            self.close()
+            raise
+        self._clock = time.monotonic()  # wall s of the next round on the server's clock
+
+    def serve(self, timeout: float = WAIT) -> int:
+        """Wait up to ``timeout`` s, accept, read and answer; also move the vehicles the
+        server's clock moves when their round is due. The count of messages read."""
+        waiting = self.physics.waiting_for_clock()
+        now = time.monotonic()
+        if waiting:
+            timeout = max(0.0, min(timeout, self._clock - now))
+        watched: list[socket.socket] = list(self.listeners)
+        owner: dict[int, int] = {}
+        for index, conn in enumerate(self.connections):
+            if conn is not None:
+                watched.append(conn.sock)
+                owner[conn.sock.fileno()] = index
+        writers = [c.sock for c in self.connections if c is not None and c.outgoing]
+        readable, writable, _ = select.select(watched, writers, [], timeout)
+        for sock in writable:
+            self._guard(owner[sock.fileno()], Connection.flush)
+        messages = {}
+        count = 0
+        for sock in readable:
+            if sock in self.listeners:
+                self._accept(self.listeners.index(sock))
+                continue
+            index = owner[sock.fileno()]
+            conn = self.connections[index]
+            if conn is None:
+                continue
+            try:
+                data = sock.recv(RECEIVE)
+            except (BlockingIOError, InterruptedError):
+                continue
+            except OSError as error:
+                self._drop(index, f"the connection failed ({error})")
+                continue
+            if not data:
+                self._drop(index, "PX4 disconnected")
+                continue
+            frames = conn.reader.feed(data)
+            if frames:
+                messages[index] = frames
+                count += len(frames)
+        replies = self.physics.answer(messages) if messages else {}
+        waiting = self.physics.waiting_for_clock()
+        if waiting and time.monotonic() >= self._clock:
+            self._clock = max(self._clock + ROUND_US * 1e-6, time.monotonic() - 0.1)
+            for index, data in self.physics.tick(waiting).items():
+                replies[index] = replies.get(index, b"") + data
+        for index, data in replies.items():
+            self._guard(index, partial(Connection.send, data=data))
+        return count
+
+    def _accept(self, index: int) -> None:
+        try:
+            sock, address = self.listeners[index].accept()
+        except (BlockingIOError, InterruptedError):
+            return
+        if self.connections[index] is not None:
+            self._drop(index, "a new connection replaces this one")
+        self.connections[index] = Connection(sock, address)
+        self.physics.connect(index)
+        self._clock = min(self._clock, time.monotonic())
+        self.physics.notice(
+            f"vehicle {index}: PX4 connected from {address[0]}:{address[1]} "
+            f"(port {self.ports[index]}); its vehicle is at rest at home"
+        )
+
+    def _guard(self, index: int, action: Callable[[Connection], None]) -> None:
+        conn = self.connections[index]
+        if conn is None:
+            return
+        try:
+            action(conn)
+        except OSError as error:
+            self._drop(index, f"the connection failed ({error})")
+
+    def _drop(self, index: int, why: str) -> None:
+        conn = self.connections[index]
+        if conn is None:
+            return
+        self.connections[index] = None
+        conn.sock.close()
+        self.physics.disconnect(index)
+        self.physics.notice(
+            f"vehicle {index}: {why}; waiting for PX4 on port {self.ports[index]} again "
+            "(the other vehicles fly on)"
+        )
+
+    def close(self) -> None:
+        for conn in self.connections:
+            if conn is not None:
+                conn.sock.close()
+        for sock in self.listeners:
+            sock.close()
+
+
+def run_px4(config: Px4Config, say: Callable[[str], None] | None = None) -> int:
+    """Serve PX4 instances until a signal or ``config.duration``; the exit status."""
+    if not 1 <= config.vehicles <= 1000:
+        raise ValueError(f"--vehicles must be 1 .. 1000, got {config.vehicles}")
+    last_port = config.port + config.vehicles - 1
+    if not config.port >= 1 or last_port > 65535:
+        raise ValueError(f"ports {config.port} .. {last_port} are not all valid TCP ports")
+    if say is None:
+
+        def say(text: str) -> None:
+            print(f"quadsitl sim: {text}", file=sys.stderr, flush=True)
+
+    fleet = Fleet(config.vehicles, config.airframe)
+    if config.wind is not None:
+        fleet.set_wind(config.wind, seed=config.wind_seed)
+    physics = HilPhysics(fleet, config.home, config.sensor_noise, notice=say)
+    server = Px4TcpServer(physics, config.bind, config.port)
+    if not is_loopback(config.bind):
+        say(
+            f"warning: the PX4 simulator ports on {config.bind} can be reached from other "
+            "hosts: anyone there can fly the vehicles (docs/security.md)"
+        )
+    stopping: list[int] = []
+    previous = [signal.signal(s, lambda n, _: stopping.append(n)) for s in _SIGNALS]
+    try:
+        if not config.quiet:
+            _banner(config, server, lambda text: print(text, flush=True))
+        started = time.monotonic()
+        end = None if config.duration is None else started + config.duration
+        while not stopping and (end is None or time.monotonic() < end):
+            server.serve(WAIT if end is None else max(0.0, min(WAIT, end - time.monotonic())))
+        wall = time.monotonic() - started
+        rounds = sum(peer.rounds for peer in physics.peers)
+        simulated = max(peer.time_us for peer in physics.peers) / 1e6
+        print(
+            f"quadsitl sim: {rounds} sensor rounds in {wall:.1f} s; the vehicle flying "
+            f"longest since its PX4 connected has flown {simulated:.1f} s of physics",
+            flush=True,
+        )
+    finally:
+        for s, handler in zip(_SIGNALS, previous, strict=True):
+            signal.signal(s, handler)
+        server.close()
+    return 0
+
+
+_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def _banner(config: Px4Config, server: Px4TcpServer, out: Callable[[str], None]) -> None:
+    """Say where each instance connects and how to start PX4 against it."""
+    folder = parameter_folder(config.airframe)
+    out(
+        f"quadsitl sim: the aircraft for PX4's simulator_mavlink, {config.vehicles} "
+        f"vehicle(s), airframe {config.airframe}; quadsitl's own flight software is off"
+    )
+    path = f"PATH={folder}:$PATH " if folder else ""
+    for index, port in enumerate(server.ports):
+        out(
+            f"  vehicle {index}: TCP {config.bind}:{port}  <-  {path}PX4_SIM_MODEL=none_iris "
+            f"px4 -i {index}"
+        )
+    if folder is None:
+        out(f"  (no PX4 parameter file ships for {config.airframe}; see docs/autopilots.md)")
