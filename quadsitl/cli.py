@@ -129,6 +129,13 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         "3 three times as much (default: 1)",
     )
     sim.add_argument(
+        "--estimator",
+        choices=("truth", "ekf"),
+        default="truth",
+        help="what the flight software flies on and reports: the true state, or the onboard "
+        "EKF's estimate from the sensors (the EKF2_EN parameter; default: truth)",
+    )
+    sim.add_argument(
         "--spacing",
         type=float,
         default=2.0,
@@ -300,7 +307,7 @@ def _sim_config(args: argparse.Namespace) -> object:
         except ValueError:
             raise ValueError(f"--home must be LAT,LON,ALT, got {args.home!r}") from None
         home = Home(lat, lon, alt)
-    params = {}
+    params = {"EKF2_EN": 1.0} if args.estimator == "ekf" else {}  # --param may override
     for item in args.param:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():

@@ -34,7 +34,6 @@ ATT = slice(6, 9)  # rad, a small rotation in world ENU: R_true = (I + [δθ]×)
 ACCEL_BIAS = slice(9, 12)  # m/s², body FLU
 GYRO_BIAS = slice(12, 15)  # rad/s, body FLU
 BARO_OFFSET = 15  # m, barometric altitude minus local height
-I_YAW = 8  # δθ about world up: the heading error
 SIZE = 16
 
 
@@ -189,7 +188,13 @@ class Estimator:
         self._gravity = np.array([0.0, 0.0, gravity])  # m/s², world ENU: up
         self._transition = np.tile(np.eye(SIZE), (n, 1, 1))  # F, its constant parts set
         self._eye3, self._diagonal = np.eye(3), np.arange(SIZE)
-        self._field_heading = horizontal_angle(suite.field_enu)  # rad, of the Earth's field
+        field = suite.field_enu  # (N, 3) gauss, world ENU: the Earth's field at home
+        self._field_heading = horizontal_angle(field)  # rad
+        # ∂(heading error)/∂δθ = B × ∇ψ, ψ = atan2(B_n, B_e): (0, 0, 1) plus the tilt
+        # terms the field's inclination brings (≈ tan 63° at home).
+        gradient = np.stack([-field[:, 1], field[:, 0], np.zeros(n)], axis=1)
+        gradient /= (field[:, :2] ** 2).sum(axis=1, keepdims=True)
+        self._heading_row = np.cross(field, gradient)
         self.pending = np.ones(n, bool)  # rows to start from the sensors at the next update
         self.time = -math.inf
         self._seen = (-1, -1, -1, -1)  # sample counts of IMU, barometer, magnetometer, GPS
@@ -320,17 +325,18 @@ class Estimator:
         return self._history[i] + self._corrections
 
     # --- corrections --------------------------------------------------------------------
-    def _fuse(self, terms: tuple[int, ...], innovation: Array, variance: Array) -> None:
-        """One scalar measurement per vehicle, y = Σ δx[terms] + noise of ``variance``
-        (N,), with ``innovation`` (N,) = measured − predicted; NaN rows are skipped."""
+    def _fuse(
+        self, terms: dict[int, Array | float], innovation: Array, variance: Array
+    ) -> None:
+        """One scalar measurement per vehicle, y = Σ h_k·δx_k + noise of ``variance``
+        (N,), the terms {k: h_k} (h_k one per vehicle or one for all), with
+        ``innovation`` (N,) = measured − predicted; NaN rows are skipped."""
         ok = np.isfinite(innovation) & np.isfinite(variance) & ~self.pending
         if not ok.any():
             return
         p = self.covariance
-        ph = p[:, :, terms[0]].copy()  # P·Hᵀ, (N, 16)
-        for k in terms[1:]:
-            ph += p[:, :, k]
-        s = ph[:, list(terms)].sum(axis=1) + variance
+        ph = sum(p[:, :, k] * np.reshape(h, (-1, 1)) for k, h in terms.items())  # P·Hᵀ
+        s = sum(ph[:, k] * h for k, h in terms.items()) + variance
         gain = np.where(ok[:, None], ph / s[:, None], 0.0)  # (N, 16)
         self.covariance = p - gain[:, :, None] * ph[:, None, :]
         self._inject(gain * np.where(ok, innovation, 0.0)[:, None])
@@ -350,15 +356,17 @@ class Estimator:
         """The barometric altitude (N,) m: h = z + offset."""
         predicted = self.position[:, 2] + self.baro_offset
         variance = np.full(self.n, self.params.baro_noise**2)
-        self._fuse((2, BARO_OFFSET), altitude - predicted, variance)
+        self._fuse({2: 1.0, BARO_OFFSET: 1.0}, altitude - predicted, variance)
 
     def _fuse_heading(self, field_body: Array) -> None:
         """The heading of the magnetometer's field (N, 3) gauss, body FLU, seen through
-        the estimated attitude, against the Earth's field at home: the heading error."""
+        the estimated attitude, against the Earth's field at home: the heading error,
+        and through the field's inclination the tilt error too."""
         seen = np.einsum("nij,nj->ni", rotation_matrices(self.quaternion), field_body)
         innovation = frames.wrap_angle(self._field_heading - horizontal_angle(seen))
         variance = np.full(self.n, self.params.heading_noise**2)
-        self._fuse((I_YAW,), innovation, variance)
+        h = self._heading_row
+        self._fuse({6: h[:, 0], 7: h[:, 1], 8: h[:, 2]}, innovation, variance)
 
     def _fuse_gps(self) -> None:
         """The GPS fix: position and velocity, compared with the estimate when they were
@@ -376,7 +384,7 @@ class Estimator:
         sigmas = (sigma_h, sigma_h, sigma_v, sigma_speed, sigma_speed, sigma_speed)
         for k, sigma in enumerate(sigmas):
             before = self._corrections.copy()
-            self._fuse((k,), innovation[:, k], sigma**2)
+            self._fuse({k: 1.0}, innovation[:, k], sigma**2)
             # The correction moved the estimate of the axes still to come as well.
             innovation[:, k + 1 :] -= (self._corrections - before)[:, k + 1 :]
 
