@@ -110,7 +110,17 @@ class EstimatorParams:
 def rotation_matrices(q: Array) -> Array:
     """(N, 3, 3) body -> world rotation matrices of (N, 4) unit quaternions."""
     w, x, y, z = q.T
-    xx, yy, zz, xy, xz, yz, wx, wy, wz = x * x, y * y, z * z, x * y, x * z, y * z, w * x, w * y, w * z
+    xx, yy, zz, xy, xz, yz, wx, wy, wz = (
+        x * x,
+        y * y,
+        z * z,
+        x * y,
+        x * z,
+        y * z,
+        w * x,
+        w * y,
+        w * z,
+    )
     return np.stack(
         [1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy),
          2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx),
@@ -325,9 +335,7 @@ class Estimator:
         return self._history[i] + self._corrections
 
     # --- corrections --------------------------------------------------------------------
-    def _fuse(
-        self, terms: dict[int, Array | float], innovation: Array, variance: Array
-    ) -> None:
+    def _fuse(self, terms: dict[int, Array | float], innovation: Array, variance: Array) -> None:
         """One scalar measurement per vehicle, y = Σ h_k·δx_k + noise of ``variance``
         (N,), the terms {k: h_k} (h_k one per vehicle or one for all), with
         ``innovation`` (N,) = measured − predicted; NaN rows are skipped."""
