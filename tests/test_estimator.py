@@ -20,7 +20,6 @@ from quadsitl.mavlink import telemetry as T
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.physics import layout as L
 from quadsitl.vehicle.group import VehicleGroup
-from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.params import ParamError
 from quadsitl.vehicle.vehicle import Vehicle
 from tests.conftest import cli

@@ -122,7 +122,8 @@ class MissionRunner:
             return
         if isinstance(v.activity, Leg) and item.command == M.NAV_LOITER_TURNS:
             cruise = v.limits().cruise_xy
-            v.activity = Orbit(v.activity.end, item.param(3, 1.0), item.param1, cruise, v.nav_position)
+            here = v.nav_position
+            v.activity = Orbit(v.activity.end, item.param(3, 1.0), item.param1, cruise, here)
             return
         if item.command == M.NAV_LOITER_UNLIM:
             return  # holds until the mission is changed

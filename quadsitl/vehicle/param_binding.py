@@ -1,6 +1,7 @@
 """Where each parameter goes: gains to the cascaded controller, capacity and cells to the
-battery, the airframe and the weather to the physics, EKF2_EN to the estimator; and the checks that depend on the vehicle (an
-airframe change in flight, voltages that cross)."""
+battery, the airframe and the weather to the physics, EKF2_EN to the estimator; and the
+checks that depend on the vehicle (an airframe or estimator change in flight, voltages
+that cross)."""
 
 from __future__ import annotations
 
