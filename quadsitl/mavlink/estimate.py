@@ -18,7 +18,7 @@ import numpy as np
 from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics import layout as L
-from quadsitl.vehicle import estimator as E
+from quadsitl.vehicle import estimator_params as E
 
 if TYPE_CHECKING:
     from quadsitl.mavlink.telemetry import Snapshot
@@ -46,7 +46,7 @@ def odometry_covariances(
     covariance: np.ndarray, state: np.ndarray, rate_variance: float
 ) -> tuple[list[float], list[float]]:
     """(pose_covariance, velocity_covariance), 21 values each, of an estimate: its
-    error covariance ``covariance`` (16, 16) (:mod:`quadsitl.vehicle.estimator`), its
+    error covariance ``covariance`` (16, 16) (:mod:`quadsitl.vehicle.estimator_params`), its
     physics row ``state`` (world ENU, body FLU) and the variance (rad/s)² of one gyro
     reading's white noise (the body rates are the gyroscope less its bias)."""
     enu_to_ned = _enu_to_ned_matrix()
