@@ -165,6 +165,13 @@ def _add_sim_parser(commands: argparse._SubParsersAction) -> None:
         "SEED+i (default: 0)",
     )
     sim.add_argument(
+        "--estimator",
+        choices=("truth", "ekf"),
+        default="truth",
+        help="what the flight software flies on and reports: the true state, or the onboard "
+        "EKF's estimate from the sensors (the EKF2_EN parameter; default: truth)",
+    )
+    sim.add_argument(
         "--spacing",
         type=float,
         default=2.0,
@@ -357,7 +364,7 @@ def _sim_config(args: argparse.Namespace) -> object:
         return None if value.lower() == "none" else value
 
     home = _home(args.home) or Home()
-    params = {}
+    params = {"EKF2_EN": 1.0} if args.estimator == "ekf" else {}  # --param may override
     for item in args.param:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():
@@ -473,6 +480,7 @@ def _flight_stack_config(args: argparse.Namespace) -> Any:
         "--delay": args.delay,  # of quadsitl's lockstep motor path
         "--randomize": args.randomize,
         "--airframe-scale": args.airframe_scale,
+        "--estimator": args.estimator != "truth",  # the autopilot's own estimator
     }
     for option, value in own.items():
         if value:

@@ -4,7 +4,10 @@ One ``build_*`` function per message. World ENU -> local NED, body FLU -> FRD, t
 :mod:`quadsitl.frames` only. The sensor messages (HIGHRES_IMU, SCALED_IMU, RAW_IMU,
 SCALED_PRESSURE) and ODOMETRY are streamed on request only; the sensor messages and
 GPS_RAW_INT carry the vehicle's sensor models (:mod:`quadsitl.physics.sensors`: noise,
-bias, GPS latency), the others the truth (there is no estimator).
+bias, GPS latency); the pose and velocity messages (ATTITUDE, ATTITUDE_QUATERNION,
+LOCAL_POSITION_NED, GLOBAL_POSITION_INT, VFR_HUD, ODOMETRY) what the flight software
+knows: the truth, or with EKF2_EN = 1 the onboard estimate (ODOMETRY then with its
+covariance, :mod:`.estimate`).
 Rates are per link and per message (SET_MESSAGE_INTERVAL, REQUEST_DATA_STREAM), paced
 by simulated time; the heartbeat is paced by the wall
 clock so that ground stations keep the link even when simulated time stands still.
@@ -24,6 +27,7 @@ from quadsitl import frames
 from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.degrade import SLOWEST_RATE
+from quadsitl.mavlink.estimate import build_estimate_odometry
 from quadsitl.mavlink.hil_state import WireState
 from quadsitl.mavlink.identity import (
     AVAILABLE_MODES,
@@ -91,7 +95,7 @@ class Snapshot:
         self.resets = resets  # state resets through the motor path (ODOMETRY reset_counter)
         self.comm_errors = min(comm_errors, 65535)  # malformed frames received
         self.error_counts = [min(n, 65535) for n in error_counts]  # signing, motor commands
-        s = vehicle.state
+        s = vehicle.nav_state  # the truth itself unless EKF2_EN selects the estimate
         self.time_boot_ms = int(vehicle.time * 1000) & 0xFFFFFFFF
         self.time_usec = int(vehicle.time * 1e6)
         # Local origin: the start position on the ground (the resting centre of mass is
@@ -382,7 +386,10 @@ def build_autopilot_version(s: Snapshot) -> Any:
 
 
 def build_odometry(s: Snapshot) -> Any:
-    """The motor path's ODOMETRY (local NED pose, body FRD velocity and rates)."""
+    """The motor path's ODOMETRY (local NED pose, body FRD velocity and rates); with
+    EKF2_EN = 1 the estimate's, with its covariance."""
+    if s.vehicle.estimator.enabled:
+        return build_estimate_odometry(s)
     values = odometry_values(
         s.time_usec,
         s.position_ned.tolist(),

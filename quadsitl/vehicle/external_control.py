@@ -62,6 +62,8 @@ def reset_state(v: Vehicle, state: Vec) -> Result:
     state[L.ROTORS] = np.minimum(state[L.ROTORS], v.airframe.max_rotor_speed)
     resting = state[L.I_PZ] <= gear + 1e-6 and not np.any(state[L.VEL])
     v.fleet.reset(state, contact=L.ON_GROUND if resting else L.AIRBORNE)
+    if v.estimator.enabled:
+        v.estimator.reset_to(state)  # the flight software is told where it was put
     v.flew = not resting
     v.landed_at = v.time if resting else None
     if not v.motor_control:

@@ -95,7 +95,7 @@ def check(v: Vehicle) -> None:
     """Each control tick: the battery and the geofence."""
     p = v.params.values
     react(v, v.failsafes.battery(v.battery.remaining, p))
-    x, y, z = v.position.tolist()
+    x, y, z = v.nav_position.tolist()
     home_x, home_y, home_z = v.home_position.tolist()
     height = z - home_z - v.airframe.gear_height
     react(v, v.failsafes.geofence(math.hypot(x - home_x, y - home_y), height, p))

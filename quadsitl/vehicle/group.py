@@ -24,6 +24,7 @@ from quadsitl.vehicle import ground_contact as GC
 from quadsitl.vehicle.battery import shaft_power
 from quadsitl.vehicle.controller import Autopilot
 from quadsitl.vehicle.episodes import EpisodeOptions, MotorEpisodes
+from quadsitl.vehicle.estimator import Estimator, EstimatorSlot
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.vehicle import Vehicle
 
@@ -77,6 +78,8 @@ class VehicleGroup:
         self.sensors = SensorSuite(
             n, lats, lons, alts - gear, noise_scale=sensor_noise, seed=sensor_seed
         )
+        # One estimator for all: it runs (as one batch) once a vehicle's EKF2_EN is 1.
+        self.estimator = Estimator(self.sensors, gear, get_airframe(airframe).gravity)
         self.vehicles = []
         for i, (lat, lon, alt) in enumerate(homes):
             self.vehicles.append(
@@ -90,6 +93,7 @@ class VehicleGroup:
                     rotor_cmd=self.rotor_cmd[i],
                     control_phase=i,  # the controllers take turns: no step runs them all
                     sensors=SensorSlot(self.sensors, i),
+                    estimator=EstimatorSlot(self.estimator, i),
                 )
             )
         self.substeps = self.vehicles[0].substeps

@@ -55,7 +55,7 @@ def reposition(
 ) -> Leg | None:
     """The leg to a local point (NaN keeps the current coordinate; ``up`` above the
     ground), or None if the point is not finite or farther than 50 km."""
-    here = v.position
+    here = v.nav_position
     target = np.array(
         [
             here[0] if math.isnan(east) else east,

@@ -76,7 +76,7 @@ class MissionRunner:
         """Make the current item the vehicle's activity (after acting on the items that
         are not flown); at the end, finish."""
         v = self.v
-        here = v.position.copy()
+        here = v.nav_position.copy()
         self.hold_until = None
         self._run_sequence_items()
         if self.current >= len(self.items):
@@ -122,14 +122,15 @@ class MissionRunner:
             return
         if isinstance(v.activity, Leg) and item.command == M.NAV_LOITER_TURNS:
             cruise = v.limits().cruise_xy
-            v.activity = Orbit(v.activity.end, item.param(3, 1.0), item.param1, cruise, v.position)
+            here = v.nav_position
+            v.activity = Orbit(v.activity.end, item.param(3, 1.0), item.param1, cruise, here)
             return
         if item.command == M.NAV_LOITER_UNLIM:
             return  # holds until the mission is changed
         hold = item.param(1) if item.command in (M.NAV_WAYPOINT, M.NAV_LOITER_TIME) else 0.0
         if self.hold_until is None:
             self.hold_until = v.time + max(hold, 0.0)
-            end = v.activity.end if isinstance(v.activity, Leg) else v.position.copy()
+            end = v.activity.end if isinstance(v.activity, Leg) else v.nav_position.copy()
             v.activity = Hold(end, v.activity.yaw)
             v.activity.done = True
         if v.time >= self.hold_until:
@@ -141,7 +142,7 @@ class MissionRunner:
         if self.current < len(self.items) or (self.v.armed and not self.v.on_ground):
             self.start_item()  # the next item, or (at the end, in the air) hold
         else:
-            self._finish(self.v.position.copy())
+            self._finish(self.v.nav_position.copy())
 
     def _run_sequence_items(self) -> None:
         """Act on the items that are not flown (jumps, speed changes, payload) until the

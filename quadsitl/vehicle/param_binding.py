@@ -1,6 +1,7 @@
 """Where each parameter goes: gains to the cascaded controller, capacity and cells to the
-battery, the airframe and the weather to the physics; and the checks that depend on the vehicle (an
-airframe change in flight, voltages that cross)."""
+battery, the airframe and the weather to the physics, EKF2_EN to the estimator; and the
+checks that depend on the vehicle (an airframe or estimator change in flight, voltages
+that cross)."""
 
 from __future__ import annotations
 
@@ -28,6 +29,8 @@ def check(v: Vehicle, name: str, value: float) -> float:
                 "SIM_AIRFRAME: the autopilot flying was made for this airframe",
                 ParamError.PERMISSION_DENIED,
             )
+    if name == "EKF2_EN" and value != v.params[name] and not v.on_ground:
+        raise ParamError("EKF2_EN can only change on the ground", ParamError.PERMISSION_DENIED)
     full = value if name == "BAT1_V_CHARGED" else v.params["BAT1_V_CHARGED"]
     empty = value if name == "BAT1_V_EMPTY" else v.params["BAT1_V_EMPTY"]
     if empty >= full:
@@ -66,6 +69,11 @@ def apply(v: Vehicle, name: str) -> None:
             v.event(Severity.INFO, f"airframe {airframe.name}")
     elif name in WEATHER_PARAMS:
         _set_weather(v)
+    elif name == "EKF2_EN":
+        enabled = value == 1
+        if enabled and not v.estimator.enabled:
+            v.estimator.restart()  # from the sensors, at the next control period
+        v.estimator.enabled = enabled
 
 
 def _set_weather(v: Vehicle) -> None:

@@ -137,6 +137,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               "clockwise from north"),
     ParamSpec("SIM_WIND_TURB", 0.0, 0.0, 10.0, "m/s", "Dryden turbulence intensity σ_w "
               "(0: none; light 0.77, moderate 1.54, severe 2.31)"),
+    # The estimator (PX4's name; its default differs: here the truth unless asked).
+    _int("EKF2_EN", 0, 0, 1, "-", "flight software flies on: 0 the true state, 1 the "
+         "onboard EKF's estimate (on the ground only)"),
 )  # fmt: skip
 WEATHER_PARAMS = ("SIM_WIND_SPD", "SIM_WIND_DIR", "SIM_WIND_TURB")
 

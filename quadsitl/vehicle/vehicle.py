@@ -29,6 +29,7 @@ from quadsitl.vehicle import param_binding as P
 from quadsitl.vehicle.battery import Battery
 from quadsitl.vehicle.battery import shaft_power as battery_power
 from quadsitl.vehicle.controller import Autopilot, CascadedController, Setpoint, Vec
+from quadsitl.vehicle.estimator import Estimator, EstimatorSlot
 from quadsitl.vehicle.failsafe import Failsafes
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.mission_runner import MissionRunner
@@ -58,6 +59,9 @@ class Vehicle:
             group spreads its vehicles' controllers over the steps of a period).
         sensors: for a vehicle of a group, its row of the group's sensors (the group
             updates them); alone, it has sensors of its own at the default noise.
+        estimator: for a vehicle of a group, its row of the group's estimator; alone,
+            an estimator of its own. It runs, and the flight software flies on it, when
+            the EKF2_EN parameter is 1 (:attr:`nav_state`).
     """
 
     # Flight state, (re)set by _reset_flight_state.
@@ -88,6 +92,7 @@ class Vehicle:
         rotor_cmd: Vec | None = None,
         control_phase: int = 0,
         sensors: SensorSlot | None = None,
+        estimator: EstimatorSlot | None = None,
     ) -> None:
         self.origin = home or Home()
         self.home_position = np.zeros(3)  # m, ENU: where home is in the local frame
@@ -113,6 +118,9 @@ class Vehicle:
                 self.origin.altitude - self.airframe.gear_height,  # the ground is at z = gear
             ),
             0,
+        )
+        self.estimator = estimator or EstimatorSlot(
+            Estimator(self.sensors.suite, self.airframe.gear_height, self.airframe.gravity), 0
         )
         self.battery = Battery()
         self.motors = MotorFaults(self.fleet)
@@ -140,6 +148,19 @@ class Vehicle:
     @property
     def position(self) -> Vec:
         return self.fleet.state[0, L.POS]
+
+    @property
+    def nav_state(self) -> Vec:
+        """(17,) the state the flight software flies on and reports: the estimate when
+        EKF2_EN is 1, else the truth (:attr:`state` itself)."""
+        if self.estimator.enabled:
+            return self.estimator.state_row(self.state)
+        return self.state
+
+    @property
+    def nav_position(self) -> Vec:
+        """(3,) m, world ENU: the position the flight software knows (:attr:`nav_state`)."""
+        return self.nav_state[L.POS]
 
     @property
     def crashed(self) -> bool:
@@ -323,6 +344,7 @@ class Vehicle:
         self.motors.reset()
         self.failsafes.reset()
         self.sensors.reset()
+        self.estimator.restart()
         self.event(Severity.INFO, "rebooted")
 
     # --- stepping ---------------------------------------------------------------------
@@ -376,21 +398,24 @@ class Vehicle:
     def control(self) -> None:
         if self.motor_control and self.time - self.motor_command_time > MOTOR_TIMEOUT:
             X.release_motors(self, "no motor commands")
+        if self.estimator.enabled:
+            self.estimator.estimator.update()  # at every period, armed or not
         if not self.armed:
             self.rotor_cmd[:] = 0.0
             return
         if self.motor_control:
             return  # the external controller's command stands
         self._navigate()
+        state = self.nav_state
         if isinstance(self.activity, Sticks):
             fresh = self.time - self.stick_time <= STICK_TIMEOUT
-            heading = float(frames.euler_from_quat(self.state[L.QUAT])[2])
+            heading = float(frames.euler_from_quat(state[L.QUAT])[2])
             self.activity.update(self.sticks if fresh else np.zeros(4), heading)
-        setpoint = self._current_setpoint()
-        self.rotor_cmd[:] = self.controller.rotor_command(self.state, setpoint, self.control_period)
+        setpoint = self._current_setpoint(state)
+        self.rotor_cmd[:] = self.controller.rotor_command(state, setpoint, self.control_period)
 
-    def _current_setpoint(self) -> Setpoint:
-        position, velocity = self.position, self.fleet.state[0, L.VEL]
+    def _current_setpoint(self, state: Vec) -> Setpoint:
+        position, velocity = state[L.POS], state[L.VEL]
         if self.mode is Mode.OFFBOARD and self.offboard is not None:
             return self.offboard
         setpoint = self.activity.setpoint(position, velocity, self.time)
@@ -420,8 +445,9 @@ class Vehicle:
     # --- modes ------------------------------------------------------------------------
     def enter_mode(self, mode: Mode) -> None:
         self.mode = mode
-        here = self.position.copy()
-        yaw = float(frames.euler_from_quat(self.state[L.QUAT])[2])
+        state = self.nav_state
+        here = state[L.POS].copy()
+        yaw = float(frames.euler_from_quat(state[L.QUAT])[2])
         self.rtl_stages = []
         if mode is Mode.MISSION:
             self.missions.started = True
