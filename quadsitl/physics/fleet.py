@@ -58,9 +58,13 @@ class FleetLike(Protocol):
     params: NDArray[np.float64]
     contact: NDArray[np.int8]
     touchdown_speed: NDArray[np.float64]
+    wind_state: NDArray[np.float64]  # (n, N_WIND_STATE): the air at each vehicle
 
     @property
     def hover_rotor_speed(self) -> NDArray[np.float64]: ...
+
+    @property
+    def windy(self) -> bool: ...
 
     def reset(
         self,
