@@ -78,7 +78,10 @@ def test_draws_repeat_with_the_seed_and_env_i_is_the_single_env_seeded_s_plus_i(
         single = env.unwrapped.engine
         np.testing.assert_array_equal(single.fleet.params[0], params[i])
         assert single.fleet.winds[0] == engine.fleet.winds[i]
-        np.testing.assert_array_equal(np.array([env.step(a)[0] for a in actions]), trace[:, i])
+        # The same draws and turbulence; the observations agree to rounding (the
+        # batch's weather is vectorised, a single vehicle's not: ~1e-15 in the air).
+        alone = np.array([env.step(a)[0] for a in actions])
+        np.testing.assert_allclose(alone, trace[:, i], rtol=1e-5, atol=1e-7)
     vec.reset(seed=8)
     assert not np.array_equal(engine.fleet.params, params)
 
