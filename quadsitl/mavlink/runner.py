@@ -133,7 +133,7 @@ class SimConfig:
                 )
 
 
-def _compile(vehicles: int, airframe: str, wind: Wind | None = None) -> None:
+def compile_for_sim(vehicles: int, airframe: str, wind: Wind | None = None) -> None:
     """Load (or compile) the physics and the controller before the clock starts: their
     first calls take milliseconds to seconds, which real time cannot absorb. The physics'
     world build too: a motor failure injected in flight switches to it."""
@@ -222,7 +222,7 @@ class Simulator:
         self.vehicle = self.group.vehicles[0]
         if config.wind is not None and not config.wind.calm:
             self.group.physics.set_wind(config.wind, seed=config.wind_seed)
-        _compile(config.vehicles, config.airframe, config.wind)
+        compile_for_sim(config.vehicles, config.airframe, config.wind)
         fitted = np.ones(L.N_ROTORS)
         for motor, efficiency in config.motor_faults.items():
             fitted[motor - 1] = efficiency
