@@ -168,9 +168,18 @@ def test_slow_vertical_descent_onto_the_pad_lands():
     assert reward > 400
 
 
-def test_fast_descent_crashes():
+def test_touchdown_faster_than_the_airframe_allows_crashes():
+    reward, info = _land(_descent_policy(1.5))  # above 1 m/s, below the vortex-ring 2 m/s
+    assert info["outcome"] == "crashed" and info["crashed"] and not info["success"]
+    assert info["touchdown_speed"] == pytest.approx(1.5, abs=0.1)  # it did touch down,
+    assert info["final_distance"] == pytest.approx(np.hypot(0.2, 0.2), abs=0.02)  # on the pad
+    assert reward < -400
+
+
+def test_falling_faster_than_2_m_s_crashes_in_the_air():
     reward, info = _land(lambda obs: np.full(4, -6.0))  # rotors nearly off: falls
     assert info["outcome"] == "crashed" and not info["success"]
+    assert np.isnan(info["touchdown_speed"]) and info["final_distance"] > 2.0  # in the air
     assert reward < -400
 
 
@@ -244,6 +253,16 @@ def test_options_change_the_episode():
         if terminated or truncated:
             break
     assert length <= 20
+    # The X airframe is the one flown: rotor 1 (front right) alone rolls and pitches it
+    # about as much; on the plus airframe (rotor 1 in front) it only pitches it.
+    rotor_1 = np.array([2.0, 0.0, 0.0, 0.0])
+    env.reset(seed=0)
+    roll, pitch, _ = env.step(rotor_1)[0][F.OBS_RATES]  # rad/s, body
+    assert roll < -0.05 and pitch < -0.05 and roll == pytest.approx(pitch, rel=0.05)
+    plus = gym.make("QuadSITL/Hover-v0")
+    plus.reset(seed=0)
+    roll, pitch, _ = plus.step(rotor_1)[0][F.OBS_RATES]
+    assert abs(roll) < 1e-3 and pitch < -0.05
 
 
 def test_sb3_adapter_semantics_and_ppo_trains():

@@ -12,7 +12,10 @@ from pymavlink.dialects.v10 import common as mavlink1
 from pymavlink.dialects.v20 import common as mavlink2
 
 from gcs_tools.client import VehicleClient
+from quadsitl.mavlink import mavlink as mav
 from tests.conftest import start_sim
+
+HOLD_SECONDS = 2.0  # s of simulated time the height is watched after the attack
 
 
 def _frames(rng: random.Random) -> list[bytes]:
@@ -57,6 +60,22 @@ def _frames(rng: random.Random) -> list[bytes]:
     return out
 
 
+def _bad_frames(datagrams: list[bytes]) -> int:
+    """How many bad frames a robust pymavlink parser finds in ``datagrams`` read in
+    order from one sender: what the simulator counts if none of them is lost."""
+    parser = mav.MAVLink(None)
+    parser.robust_parsing = True
+    bad = 0
+    for data in datagrams:
+        try:
+            bad += sum(m.get_type() == "BAD_DATA" for m in parser.parse_buffer(data) or [])
+        except Exception:  # pymavlink raises on some input even when robust: start afresh
+            bad += 1
+            parser = mav.MAVLink(None)
+            parser.robust_parsing = True
+    return bad
+
+
 def test_fuzzed_vehicle_keeps_flying(tmp_path):
     running = start_sim(str(tmp_path), speed=2.0)
     process, port = running.process, running.port
@@ -68,26 +87,35 @@ def test_fuzzed_vehicle_keeps_flying(tmp_path):
         client.wait(lambda: client.position_enu()[2] > 2.9, 20, "take-off")
         attacker = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         rng = random.Random(0)
-        sent = 0
+        sent: list[bytes] = []
         for _ in range(300):
             for frame in _frames(rng):
                 attacker.sendto(frame, ("127.0.0.1", port))
-                sent += 1
+                sent.append(frame)
             client.pump(0.002)
         attacker.close()
-        assert sent > 10_000
-        heights = []
-        end = time.monotonic() + 2.0
-        while time.monotonic() < end:
+        heights, times = [], []  # m up, s of simulated time
+        deadline = time.monotonic() + 30
+        while not times or times[-1] - times[0] < HOLD_SECONDS:
+            assert time.monotonic() < deadline, f"{len(times)} positions in 30 s"
             if (msg := client.pump()) is not None and msg.get_type() == "LOCAL_POSITION_NED":
                 heights.append(-msg.z)
+                times.append(msg.time_boot_ms / 1000)
         assert process.poll() is None, "the simulator died"
-        assert client.armed and np.all(np.abs(np.array(heights) - 3.0) < 0.3)
+        assert client.armed
+        # 50 Hz, at worst slowed 8 times by a busy machine: at least 12 in 2 s
+        assert len(heights) >= 12 and np.all(np.abs(np.array(heights) - 3.0) < 0.3), heights
         client.conn.mav.param_request_read_send(1, 1, b"MPC_XY_P", -1)
         echo = client.wait_message("PARAM_VALUE", 3)
         assert echo.param_value == 1.5  # the NaN set was refused
         status = client.wait_message("SYS_STATUS", 3)
-        assert status.errors_comm > 100  # bad frames were counted
+        # Thousands reached the vehicle and were counted (a busy machine's UDP may drop
+        # some: a few % were lost in runs on 2 busy cores).
+        expected = _bad_frames(sent)
+        assert expected > 5000 and status.errors_comm >= expected // 2, (
+            status.errors_comm,
+            expected,
+        )
     finally:
         client.close()
         output = running.stop()

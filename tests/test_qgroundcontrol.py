@@ -276,8 +276,24 @@ def test_guided_takeoff_pause_change_altitude_and_return(qgc):
     # Change Altitude: DO_REPOSITION with an AMSL altitude, position NaN (stay here).
     qgc.command(mav.MAV_CMD_DO_REPOSITION, -1, 1, 0, NAN, NAN, NAN, amsl + 8.0)
     qgc.until(lambda: abs(qgc.altitude() - 8.0) < 0.2, 30, "8 m")
-    # Pause: DO_REPOSITION with everything NaN holds where the vehicle is.
+    # Go to Location 40 m north (DO_REPOSITION with a position), and on the way...
+    home = qgc.wait("HOME_POSITION", 5)
+    north_40 = home.latitude + round(40 / 111_320 * 1e7)
+    go_to = (-1, 1, 0, NAN, north_40, home.longitude, amsl + 8.0)  # ..., yaw, lat, lon, alt
+    qgc.conn.mav.command_int_send(1, 1, 0, mav.MAV_CMD_DO_REPOSITION, 0, 0, *go_to)  # AMSL
+    qgc.wait("COMMAND_ACK", 3, lambda m: m.command == mav.MAV_CMD_DO_REPOSITION)
+    qgc.wait("LOCAL_POSITION_NED", 30, lambda m: m.x > 5.0 and m.vx > 1.0)
+    # ... Pause: DO_REPOSITION with everything NaN holds where the vehicle is.
     qgc.command(mav.MAV_CMD_DO_REPOSITION, -1, 1, 0, NAN, NAN, NAN, NAN)
+    paused = qgc.wait("LOCAL_POSITION_NED")  # where the pause found it, at 4 m/s or so
+    track = []  # the next 10 s of simulated time
+    while not track or track[-1].time_boot_ms < paused.time_boot_ms + 10_000:
+        track.append(qgc.wait("LOCAL_POSITION_NED"))
+    assert max(m.x for m in track) < paused.x + 6.0  # it braked, and did not go on
+    held = track[-1]  # ... and came back to where it was paused, and holds there
+    # (within a telemetry interval of the pause: 20 ms, 160 ms when a busy machine slows it)
+    assert math.hypot(held.x - paused.x, held.y - paused.y) < 1.0 and abs(held.z + 8.0) < 0.3
+    assert math.hypot(held.vx, held.vy, held.vz) < 0.2
     qgc.set_mode(Mode.RTL)  # QGC's RTL is a mode change
     qgc.until(
         lambda: not qgc.wait("HEARTBEAT").base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED,

@@ -16,14 +16,39 @@ COMPOSER = ROOT / "quadsitl" / "cli.py"
 
 
 def _imports(path: Path) -> set[str]:
-    """Top-level names of every module ``path`` imports (at any depth of the file)."""
+    """Absolute names of every module ``path`` imports (at any depth of the file)."""
+    package = path.relative_to(ROOT).with_suffix("").parts[:-1]
+    return _imported(path.read_text(), ".".join(package))
+
+
+def _imported(source: str, package: str) -> set[str]:
+    """Absolute names of every module ``source`` imports, written in ``package``:
+    ``from a.b import c`` gives ``a.b`` and ``a.b.c`` (``c`` may be a module), and a
+    relative import is resolved against ``package``."""
     names = set()
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
             names |= {alias.name for alias in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            names.add(node.module)
+        elif isinstance(node, ast.ImportFrom):
+            parts = package.split(".")
+            base = parts[: len(parts) - node.level + 1] if node.level else []
+            module = ".".join([*base, *([node.module] if node.module else [])])
+            names.add(module)
+            names |= {f"{module}.{alias.name}" for alias in node.names}
     return names
+
+
+def test_every_form_of_import_is_seen():
+    forms = {
+        "import quadsitl.viz.sim_view": "quadsitl.viz.sim_view",
+        "from quadsitl import viz": "quadsitl.viz",
+        "from quadsitl.viz import sim_view": "quadsitl.viz.sim_view",
+        "from .. import viz": "quadsitl.viz",
+        "from ..viz.sim_view import SimView": "quadsitl.viz.sim_view",
+        "def f():\n    from . import server": "quadsitl.mavlink.server",
+    }
+    for source, module in forms.items():
+        assert module in _imported(source, "quadsitl.mavlink"), source
 
 
 def test_the_core_imports_neither_policies_nor_gcs_tools():
@@ -40,7 +65,7 @@ def test_the_core_imports_neither_policies_nor_gcs_tools():
 def test_mavlink_does_not_import_viz():
     offenders = {}
     for path in (ROOT / "quadsitl" / "mavlink").rglob("*.py"):
-        bad = {n for n in _imports(path) if n.startswith("quadsitl.viz")}
+        bad = {n for n in _imports(path) if n == "quadsitl.viz" or n.startswith("quadsitl.viz.")}
         if bad:
             offenders[path.name] = bad
     assert not offenders

@@ -9,8 +9,6 @@ situation fails.
 
 from __future__ import annotations
 
-import importlib
-
 import numpy as np
 import pytest
 
@@ -20,6 +18,15 @@ from quadsitl.tasks import TaskEngine, TaskOptions, get_task
 from quadsitl.tasks import spec as S
 
 ACTION_WEIGHT = 0.01
+# Eq. 18's weights α (position, attitude, velocity, rates) and the time term per step of
+# each task, as docs/tasks.md tables them: written here, not read from the tasks.
+PAPER_TERMS = {
+    "hover": ((100.0, 10.0, 0.1, 0.1), 10.0),
+    "static_waypoint": ((100.0, 10.0, 0.1, 0.1), 0.1),
+    "random_waypoint": ((100.0, 10.0, 0.1, 0.1), 0.1),
+    "land": ((100.0, 10.0, 1.0, 5.0), 0.0),
+    "target_follow": ((100.0, 10.0, 0.1, 0.1), 0.0),
+}
 
 
 def _engine(task: str, state: np.ndarray, contact: int = L.AIRBORNE) -> TaskEngine:
@@ -32,18 +39,21 @@ def _engine(task: str, state: np.ndarray, contact: int = L.AIRBORNE) -> TaskEngi
     return engine
 
 
-def _state(position, velocity=(0.0, 0.0, 0.0)) -> np.ndarray:
+def _state(position, velocity=(0.0, 0.0, 0.0), roll=0.0, rates=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Level (or rolled by ``roll`` rad), at ``position`` m ENU with ``velocity`` m/s
+    and body ``rates`` rad/s, rotors at hover speed."""
     s = np.zeros(L.STATE_SIZE)
-    s[L.POS], s[L.VEL], s[L.I_QW] = position, velocity, 1.0
+    s[L.POS], s[L.VEL], s[L.RATES] = position, velocity, rates
+    s[L.QUAT] = [np.cos(roll / 2), np.sin(roll / 2), 0.0, 0.0]
     s[L.ROTORS] = PAPER.hover_rotor_speed
     return s
 
 
 def _eq18(engine: TaskEngine, before: np.ndarray, action: np.ndarray) -> float:
     """Σ_c α_c (d_before − d_after) − 0.01‖a‖² + the time term."""
-    module = importlib.import_module(f"quadsitl.tasks.{engine.task.name}")
-    progress = float(np.dot(module.WEIGHTS, before[0] - engine.dist[0]))
-    return progress - ACTION_WEIGHT * float(action @ action) + getattr(module, "TIME_REWARD", 0.0)
+    weights, time_term = PAPER_TERMS[engine.task.name]
+    progress = float(np.dot(weights, before[0] - engine.dist[0]))
+    return progress - ACTION_WEIGHT * float(action @ action) + time_term
 
 
 def _step(engine: TaskEngine, action: np.ndarray | None = None) -> tuple[float, float, int]:
@@ -51,6 +61,28 @@ def _step(engine: TaskEngine, action: np.ndarray | None = None) -> tuple[float, 
     before = engine.dist.copy()
     reward, _terminated, _truncated = engine.step(action[None, :])
     return float(reward[0]), _eq18(engine, before, action), int(engine.outcome[0])
+
+
+@pytest.mark.parametrize(
+    ("task", "position"),
+    [
+        ("hover", (0.3, -0.2, 0.1)),
+        ("static_waypoint", (0.3, -0.2, 0.1)),  # 1.2 m from its goal: no bonus
+        ("random_waypoint", (0.3, -0.2, 0.1)),
+        ("land", (0.3, -0.2, 1.5)),  # in the air, descending slower than 2 m/s
+        ("target_follow", (2.8, 0.0, 0.0)),  # beyond 2 m of the target: no range bonus
+    ],
+)
+def test_each_task_weighs_every_distance_with_the_papers_weights(task, position):
+    """Moving, rolled and rotating, so that all four distances change in the step: a
+    wrong weight on any of them, or a wrong time term, changes the reward."""
+    state = _state(position, (0.4, -0.3, -0.5), roll=0.2, rates=(0.5, -0.4, 0.3))
+    engine = _engine(task, state)
+    before = engine.dist.copy()
+    reward, shaped, outcome = _step(engine, np.array([0.5, -0.5, 1.0, 0.0]))
+    assert outcome == S.RUNNING
+    assert np.all(np.abs(before - engine.dist) > 1e-3), before - engine.dist
+    assert reward == pytest.approx(shaped, abs=1e-9)
 
 
 @pytest.mark.parametrize(("offset", "bonus"), [(0.0, 100.0), (0.04, 100.0), (0.06, 0.0)])
