@@ -4,6 +4,7 @@ fleets, a PX4 that disconnects and comes back, and bad input."""
 
 from __future__ import annotations
 
+import itertools
 import os
 import socket
 import subprocess
@@ -138,7 +139,7 @@ def test_a_px4_that_disconnects_and_reconnects_is_said_and_the_others_fly_on() -
         # Vehicle 0 flies on, a round per message (its answers may lag ours by one that
         # was still on its way when the other PX4 left: they are consecutive rounds).
         times = [fakes[0].exchange([0.0] * 4).time_usec for _ in range(50)]
-        assert all(b - a == 4000 for a, b in zip(times, times[1:], strict=False)), times
+        assert all(b - a == 4000 for a, b in itertools.pairwise(times)), times
         assert before + 49 * 4000 <= times[-1] <= before + 51 * 4000
         again = FakePx4(instance=1, port=port)
         sim.wait_for_line("vehicle 1: PX4 connected", timeout=10)
