@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import sys
 import time
+from typing import Any
 
 import numpy as np
 
@@ -30,8 +31,9 @@ def main() -> int:
     compile_for_sim(1, "paper", Wind(speed=3.0, turbulence="light"))
     compile_for_sim(2, "paper")
     wind = {"speed": 3.0, "turbulence": "light"}
+    still_and_windy: tuple[dict[str, Any], ...] = ({}, {"wind": wind})
     for name in TASKS:
-        for options in ({}, {"wind": wind}):
+        for options in still_and_windy:
             env = gym.make(task_env_id(name), disable_env_checker=True, **options)
             env.reset(seed=0)
             env.step(np.zeros(4, np.float32))
