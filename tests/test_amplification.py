@@ -56,9 +56,11 @@ def _start(port: int, *options: str) -> subprocess.Popen[str]:
     if key is not None:
         probe.setup_signing(key, sign_outgoing=True)
     try:
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + 60
         while not probe.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5):
-            assert time.monotonic() < deadline, "the simulator did not start"
+            if time.monotonic() > deadline:
+                _stop(sim)  # never leave a simulator running behind a failed test
+                raise AssertionError("the simulator did not start within 60 s")
             probe.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
     finally:
         probe.close()
