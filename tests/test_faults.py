@@ -134,7 +134,8 @@ def _inject(client: VehicleClient, unit: int, kind: int, motor: float, param4: f
 
 def test_inject_failure_over_udp_stops_a_motor_and_the_vehicle_crashes():
     """Real UDP against ``quadsitl sim``: refused while SYS_FAILURE_EN = 0; then a motor
-    that does not exist is refused with its reason, a sensor is unsupported, and motor 1
+    that does not exist is refused with its reason, an airspeed sensor (there is none) is
+    unsupported, and motor 1
     (front, plus layout) OFF is acknowledged: the front arm's thrust gone, the nose drops
     (pitch down, FRD), the vehicle flips and crashes (PX4's outcome on a quadrotor with
     default parameters), disarmed."""
@@ -158,8 +159,8 @@ def test_inject_failure_over_udp_stops_a_motor_and_the_vehicle_crashes():
         result, text = _inject(client, mav.FAILURE_UNIT_SYSTEM_MOTOR, mav.FAILURE_TYPE_OFF, 7)
         assert result == mav.MAV_RESULT_DENIED
         assert "motor 7 does not exist" in text
-        result, text = _inject(client, mav.FAILURE_UNIT_SENSOR_GYRO, mav.FAILURE_TYPE_OFF, 0)
-        assert result == mav.MAV_RESULT_UNSUPPORTED and "GYRO" in text
+        result, text = _inject(client, mav.FAILURE_UNIT_SENSOR_AIRSPEED, mav.FAILURE_TYPE_OFF, 0)
+        assert result == mav.MAV_RESULT_UNSUPPORTED and "AIRSPEED" in text
         result, _ = _inject(client, mav.FAILURE_UNIT_SYSTEM_MOTOR, mav.FAILURE_TYPE_OFF, 1)
         assert result == mav.MAV_RESULT_ACCEPTED
         client.wait(lambda: any("motor 1 off" in t for t in client.texts), 5, "the report")
@@ -167,6 +168,58 @@ def test_inject_failure_over_udp_stops_a_motor_and_the_vehicle_crashes():
         assert nose_down is not None
         client.wait(lambda: any("crashed" in t for t in client.texts), 30, "the crash")
         client.wait(lambda: not client.armed, 10, "disarmed")
+    finally:
+        client.close()
+        process.terminate()
+        out = process.communicate(timeout=20)[0]
+    assert "Traceback" not in out
+
+
+def test_inject_failure_over_udp_turns_the_gps_off_and_sticks_the_barometer():
+    """Real UDP: the GPS OFF is acknowledged, GPS_RAW_INT then has no fix and no
+    satellites and SYS_STATUS calls the GPS unhealthy; OK brings the fix back. The
+    barometer STUCK keeps reporting one pressure while the vehicle climbs; a second
+    barometer does not exist; GARBAGE is not simulated."""
+    port = free_udp_port()
+    process = subprocess.Popen(
+        cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --speed 2 --logs none"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    client = VehicleClient(f"udpout:127.0.0.1:{port}")
+    gps_bit = mav.MAV_SYS_STATUS_SENSOR_GPS
+    try:
+        client.connect(timeout=60)
+        client.param_types["SYS_FAILURE_EN"] = mav.MAV_PARAM_TYPE_INT32
+        assert client.set_param("SYS_FAILURE_EN", 1) == 1
+        client.wait_message("GPS_RAW_INT", 10, lambda m: m.fix_type == 3)
+        result, _ = _inject(client, mav.FAILURE_UNIT_SENSOR_GPS, mav.FAILURE_TYPE_OFF, 0)
+        assert result == mav.MAV_RESULT_ACCEPTED
+        client.wait(lambda: any("gps off" in t for t in client.texts), 5, "the report")
+        client.wait_message(
+            "GPS_RAW_INT", 10, lambda m: m.fix_type <= 1 and m.satellites_visible == 0
+        )
+        status = client.wait_message("SYS_STATUS", 10)
+        assert status.onboard_control_sensors_present & gps_bit
+        assert not status.onboard_control_sensors_health & gps_bit
+        result, _ = _inject(client, mav.FAILURE_UNIT_SENSOR_GPS, mav.FAILURE_TYPE_OK, 0)
+        assert result == mav.MAV_RESULT_ACCEPTED
+        client.wait_message("GPS_RAW_INT", 10, lambda m: m.fix_type == 3)
+        client.wait_message("SYS_STATUS", 10, lambda m: m.onboard_control_sensors_health & gps_bit)
+        result, text = _inject(client, mav.FAILURE_UNIT_SENSOR_BARO, mav.FAILURE_TYPE_OFF, 2)
+        assert result == mav.MAV_RESULT_DENIED and "baro 2 does not exist" in text
+        result, text = _inject(client, mav.FAILURE_UNIT_SENSOR_BARO, mav.FAILURE_TYPE_GARBAGE, 0)
+        assert result == mav.MAV_RESULT_UNSUPPORTED and "GARBAGE" in text
+        result, _ = _inject(client, mav.FAILURE_UNIT_SENSOR_BARO, mav.FAILURE_TYPE_STUCK, 0)
+        assert result == mav.MAV_RESULT_ACCEPTED
+        client.command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_HIGHRES_IMU, 50_000)
+        stuck = client.wait_message("HIGHRES_IMU", 10).abs_pressure
+        client.arm()
+        client.takeoff(5.0)
+        client.wait(lambda: client.position_enu()[2] > 4.5, 60, "take-off")
+        # 5 m higher: about 0.6 hPa less air, and a barometer that still reads the same
+        assert client.wait_message("HIGHRES_IMU", 10).abs_pressure == stuck
     finally:
         client.close()
         process.terminate()

@@ -262,3 +262,43 @@ def test_bad_parameters_get_a_one_line_error(make, message):
     with pytest.raises(ValueError, match=message) as caught:
         make()
     assert "\n" not in str(caught.value)
+
+
+def test_a_stuck_sensor_holds_its_reading_one_that_is_off_stops_and_a_reset_heals():
+    """Vehicle 0's barometer STUCK and magnetometer OFF while the vehicles climb and
+    turn: its pressure and field stay what they were, the other vehicle's move; the
+    magnetometer that is off is not fresh; an unknown sensor is a one-line error; a
+    reset heals every sensor."""
+    from quadsitl.physics import Fleet
+    from quadsitl.physics.sensors import SensorSlot, SensorSuite
+    from quadsitl.physics.sensors import failures as FL
+
+    fleet = Fleet(2, dt=0.004, ground_z=-np.inf)
+    suite = SensorSuite(2, seed=3)
+    slots = [SensorSlot(suite, i) for i in range(2)]
+
+    def fly(steps: int) -> None:
+        command = np.tile([420.0, 380.0, 420.0, 380.0], (2, 1))  # climb and yaw
+        for _ in range(steps):
+            fleet.step(command)
+            suite.update(fleet.time, fleet.state, fleet.params, fleet.contact, fleet.air_velocity)
+            suite.sample_due()
+
+    fly(50)
+    slots[0].fresh()
+    before = [(s.pressure, s.magnetic_field.copy()) for s in slots]
+    suite.fail(0, "baro", FL.STUCK)
+    slots[0].fail("mag", FL.OFF)
+    fly(250)
+    assert slots[0].pressure == before[0][0]
+    np.testing.assert_array_equal(slots[0].magnetic_field, before[0][1])
+    assert slots[1].pressure != before[1][0]
+    assert not np.allclose(slots[1].magnetic_field, before[1][1])
+    imu, mag, baro, _ = slots[0].fresh()
+    assert imu and baro and not mag and slots[0].off("mag") and not slots[0].off("baro")
+    with pytest.raises(ValueError, match="unknown sensor 'lidar'"):
+        suite.fail(0, "lidar", FL.OFF)
+    suite.reset()
+    assert not suite.failed.any()
+    fly(50)
+    assert slots[0].pressure != before[0][0]

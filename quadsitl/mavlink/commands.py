@@ -18,6 +18,8 @@ from quadsitl.mavlink import telemetry as T
 from quadsitl.mavlink.identity import AVAILABLE_MODES, available_modes_message
 from quadsitl.mavlink.links import Link
 from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_AIRFRAME, STAGE_MOTION
+from quadsitl.physics.sensors.failures import FAILURE_NAMES, OFF, STUCK
+from quadsitl.physics.sensors.failures import OK as SENSOR_OK
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import ACCEPTED, Outcome, Result, Severity
 
@@ -28,6 +30,19 @@ if TYPE_CHECKING:
 # this project's clients send), and 2989, which QGroundControl's "force arm" sends
 # (src/Vehicle/Vehicle.cc).
 FORCE_MAGIC = 21196
+# MAV_CMD_INJECT_FAILURE's sensor units and failure types the sensor models simulate.
+SENSOR_UNITS = {
+    mav.FAILURE_UNIT_SENSOR_GYRO: "gyro",
+    mav.FAILURE_UNIT_SENSOR_ACCEL: "accel",
+    mav.FAILURE_UNIT_SENSOR_MAG: "mag",
+    mav.FAILURE_UNIT_SENSOR_BARO: "baro",
+    mav.FAILURE_UNIT_SENSOR_GPS: "gps",
+}
+SENSOR_FAILURES = {
+    mav.FAILURE_TYPE_OK: SENSOR_OK,
+    mav.FAILURE_TYPE_OFF: OFF,
+    mav.FAILURE_TYPE_STUCK: STUCK,
+}
 FORCE_VALUES = (FORCE_MAGIC, 2989)
 
 
@@ -268,14 +283,32 @@ class Commands:
         self.server.vehicle.reboot()
         return ACCEPTED
 
+    def _sensor_failure(self, sensor: str, kind: int, instance: int) -> Result:
+        """A sensor (there is one of each: instance 0 or 1) stuck, off, or back to OK."""
+        failure = SENSOR_FAILURES.get(kind)
+        if failure is None:
+            name = _enum_name("FAILURE_TYPE", kind)
+            return Result(Outcome.UNSUPPORTED, f"{sensor} {name} not simulated: OK, OFF, STUCK")
+        if instance not in (0, 1):
+            return Result(Outcome.DENIED, f"{sensor} {instance} does not exist: there is one")
+        v = self.server.vehicle
+        v.sensors.fail(sensor, failure)
+        state = FAILURE_NAMES[failure]
+        severity = Severity.NOTICE if failure == SENSOR_OK else Severity.CRITICAL
+        v.event(severity, f"{sensor} {state} (failure injection)")
+        return ACCEPTED
+
     def _cmd_inject_failure(self, c: Command, link: Link) -> Result:
         """PX4's failure injection, guarded by SYS_FAILURE_EN: param1 the unit, param2 the
-        type, param3 the instance (the motor, 1-based; 0 every one). Motors only: OK
-        restores, OFF stops, WRONG leaves it param4 (0 < η < 1) of its thrust."""
+        type, param3 the instance (the motor, 1-based; 0 every one). Motors: OK
+        restores, OFF stops, WRONG leaves it param4 (0 < η < 1) of its thrust. The
+        gyroscope, accelerometer, magnetometer, barometer and GPS: OK, OFF, STUCK."""
         v = self.server.vehicle
         if not v.params["SYS_FAILURE_EN"]:
             return Result(Outcome.DENIED, "failure injection off (SYS_FAILURE_EN 0)")
         unit, kind = _int(c.params[0], "failure unit"), _int(c.params[1], "failure type")
+        if unit in SENSOR_UNITS:
+            return self._sensor_failure(SENSOR_UNITS[unit], kind, _int(c.params[2], "instance"))
         if unit != mav.FAILURE_UNIT_SYSTEM_MOTOR:
             name = _enum_name("FAILURE_UNIT", unit)
             return Result(Outcome.UNSUPPORTED, f"{name} failure not simulated")

@@ -72,6 +72,14 @@ CAPABILITIES = (
     | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
     | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
 )
+# The SYS_STATUS health bit of each sensor that can fail (failures.SENSORS).
+SENSOR_HEALTH = {
+    "gyro": mav.MAV_SYS_STATUS_SENSOR_3D_GYRO,
+    "accel": mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL,
+    "mag": mav.MAV_SYS_STATUS_SENSOR_3D_MAG,
+    "baro": mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE,
+    "gps": mav.MAV_SYS_STATUS_SENSOR_GPS,
+}
 HEARTBEAT_PERIOD = 1.0  # s, wall clock
 # HIGHRES_IMU fields_updated bits (HIGHRES_IMU_UPDATED_FLAGS).
 HIGHRES_ACCEL, HIGHRES_GYRO, HIGHRES_MAG = 0x007, 0x038, 0x1C0
@@ -204,6 +212,9 @@ def build_sys_status(s: Snapshot) -> Any:
     fenced = v.params["GF_MAX_HOR_DIST"] > 0 or v.params["GF_MAX_VER_DIST"] > 0
     present = SENSORS | (fence if fenced else 0)
     health = SENSORS | fence
+    for sensor, bit in SENSOR_HEALTH.items():  # a sensor that failed off is unhealthy
+        if v.sensors.off(sensor):
+            health &= ~bit
     if v.crashed:
         health &= ~mav.MAV_SYS_STATUS_PREARM_CHECK
     if v.failsafes.fence_breached:

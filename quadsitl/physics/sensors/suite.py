@@ -17,9 +17,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from quadsitl.physics import layout as L
+from quadsitl.physics.sensors import failures as FL
 from quadsitl.physics.sensors.barometer import Barometer, BarometerParams
 from quadsitl.physics.sensors.environment import magnetic_field_enu
-from quadsitl.physics.sensors.gps import Gps, GpsParams
+from quadsitl.physics.sensors.gps import NO_FIX, Gps, GpsParams
 from quadsitl.physics.sensors.imu import Imu, ImuParams
 from quadsitl.physics.sensors.magnetometer import Magnetometer, MagnetometerParams
 from quadsitl.physics.sensors.processes import Array, check_number
@@ -124,6 +125,8 @@ class SensorSuite:
         self._last_time = 0.0
         self._next_due = 0.0
         self._truth: tuple[Array, Array, np.ndarray, Array] | None = None
+        # Per vehicle and sensor (failures.SENSORS): OK, OFF or STUCK.
+        self.failed = np.zeros((self.n, len(FL.SENSORS)), np.int8)
         self.reset()
 
     def set_noise_scale(self, scale: ArrayLike, mask: ArrayLike | None = None) -> None:
@@ -134,11 +137,19 @@ class SensorSuite:
         rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
         self.noise_scale[rows, 0] = values if values.size > 1 else values[0]
 
+    def fail(self, vehicle: int, sensor: str, kind: int) -> None:
+        """Sensor ``sensor`` of ``vehicle`` fails (failures.OFF or STUCK) or works again
+        (failures.OK); a reboot (:meth:`reset`) heals it."""
+        if kind not in FL.FAILURE_NAMES:
+            raise ValueError(f"unknown sensor failure {kind!r}; choose one of {FL.FAILURE_NAMES}")
+        self.failed[vehicle, FL.sensor_index(sensor)] = kind
+
     def reset(self, mask: ArrayLike | None = None, time: float | None = None) -> None:
         """Restart the selected vehicles' sensors (all by default): new turn-on biases,
         drifts at 0, the GPS without a fix until time_to_fix from ``time`` (default: the
-        last update's)."""
+        last update's), no failure."""
         rows = np.ones(self.n, bool) if mask is None else np.asarray(mask, dtype=bool)
+        self.failed[rows] = FL.OK
         when = self._last_time if time is None else time
         self.imu.reset(rows)
         self.barometer.reset(rows)
@@ -170,7 +181,9 @@ class SensorSuite:
             return
         if self.gps.clock.due(time):
             self.gps.sample(time, state[:, L.POS], state[:, L.VEL], self.noise_scale)
-        self.gps.deliver(time)
+        before = self.gps.fix
+        if self.gps.deliver(time) and self.failed[:, FL.GPS].any():
+            self._hold_gps(before)
         self._next_due = self.gps.clock.next_due
         if self.gps.queue:
             self._next_due = min(self._next_due, self.gps.queue[0][0])
@@ -182,14 +195,37 @@ class SensorSuite:
             return self
         time, scale = self._last_time, self.noise_scale
         state, params, contact, air_velocity = self._truth
-        if self.imu.clock.due(time):
+        failed, imu, baro, mag = self.failed, self.imu, self.barometer, self.magnetometer
+        before: list[np.ndarray]  # each sensor's readings before its sample
+        if imu.clock.due(time):
+            before = [imu.gyro.copy(), imu.accel.copy()]
             force = specific_force(state, params, contact, air_velocity)
-            self.imu.sample(time, state[:, L.RATES], force, scale)
-        if self.barometer.clock.due(time):
-            self.barometer.sample(time, self.altitude_offset + state[:, L.I_PZ], scale[:, 0])
-        if self.magnetometer.clock.due(time):
-            self.magnetometer.sample(time, body_from_world(state, self.field_enu), scale)
+            imu.sample(time, state[:, L.RATES], force, scale)
+            FL.hold(failed, FL.GYRO, [imu.gyro], before[:1])
+            FL.hold(failed, FL.ACCEL, [imu.accel], before[1:])
+        if baro.clock.due(time):
+            before = [baro.pressure.copy(), baro.temperature.copy(), baro.altitude.copy()]
+            baro.sample(time, self.altitude_offset + state[:, L.I_PZ], scale[:, 0])
+            FL.hold(failed, FL.BARO, [baro.pressure, baro.temperature, baro.altitude], before)
+        if mag.clock.due(time):
+            before = [mag.field.copy()]
+            mag.sample(time, body_from_world(state, self.field_enu), scale)
+            FL.hold(failed, FL.MAG, [mag.field], before)
         return self
+
+    def _hold_gps(self, before: Any) -> None:
+        """The GPS fix just delivered, for the vehicles whose GPS failed: the last one
+        (stuck), or no fix at all (off)."""
+        fix, failed = self.gps.fix, self.failed[:, FL.GPS]
+        stuck, off = failed == FL.STUCK, failed == FL.OFF
+        for name in ("position", "velocity", "eph", "epv", "speed_accuracy", "hdop", "vdop"):
+            now = getattr(fix, name).copy()
+            now[stuck | off] = getattr(before, name)[stuck | off]
+            setattr(fix, name, now)
+        satellites, fix_type = fix.satellites.copy(), fix.fix_type.copy()
+        satellites[stuck], fix_type[stuck] = before.satellites[stuck], before.fix_type[stuck]
+        satellites[off], fix_type[off] = 0, NO_FIX
+        fix.satellites, fix.fix_type = satellites, fix_type
 
 
 class SensorSlot:
@@ -254,9 +290,22 @@ class SensorSlot:
         call."""
         s = self.suite.sample_due()
         counts = (s.imu.samples, s.magnetometer.samples, s.barometer.samples, s.gps.samples)
-        fresh = tuple(now != seen for now, seen in zip(counts, self._seen, strict=True))
+        fresh = [now != seen for now, seen in zip(counts, self._seen, strict=True)]
         self._seen = counts
-        return fresh  # type: ignore[return-value]
+        off = self.suite.failed[self.index] == FL.OFF  # a sensor that is off sends nothing
+        fresh[0] = fresh[0] and not (off[FL.GYRO] and off[FL.ACCEL])
+        fresh[1] = fresh[1] and not off[FL.MAG]
+        fresh[2] = fresh[2] and not off[FL.BARO]
+        fresh[3] = fresh[3] and not off[FL.GPS]
+        return tuple(fresh)  # type: ignore[return-value]
+
+    def off(self, sensor: str) -> bool:
+        """Whether this vehicle's ``sensor`` (failures.SENSORS) is off (failed, gone)."""
+        return bool(self.suite.failed[self.index, FL.sensor_index(sensor)] == FL.OFF)
+
+    def fail(self, sensor: str, kind: int) -> None:
+        """This vehicle's ``sensor`` fails (OFF, STUCK) or works again (OK)."""
+        self.suite.fail(self.index, sensor, kind)
 
     def reset(self) -> None:
         """Restart this vehicle's sensors (a reboot)."""
