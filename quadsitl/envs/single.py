@@ -73,7 +73,10 @@ class QuadEnv(gym.Env):
         self._closed = False
         self.view: EpisodeView | None = None
         if render_mode == "rerun":  # episodes logged as they are flown; see quadsitl.viz
-            self.view = EpisodeView(f"{self.task_name}", rerun_save)
+            engine = self.engine
+            drawn = engine.randomization is not None and engine.randomization.wind is not None
+            windy = engine.options.wind is not None or drawn
+            self.view = EpisodeView(f"{self.task_name}", rerun_save, windy=windy)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None

@@ -88,7 +88,10 @@ class _Arrow:
 class EpisodeView:
     """Logs env ``index`` of an engine. ``save``: an .rrd path, else a viewer is spawned."""
 
-    def __init__(self, name: str, save: str | None = None, index: int = 0) -> None:
+    def __init__(
+        self, name: str, save: str | None = None, index: int = 0, windy: bool = False
+    ) -> None:
+        """``windy``: the env flies in wind (the layout sent at once has its panel)."""
         self.layout = lambda frame=None, windy=False: blueprint(
             (*EPISODE_PANELS, "wind") if windy else EPISODE_PANELS,
             state=False,
@@ -96,7 +99,7 @@ class EpisodeView:
             timeline=STEP_TIMELINE,
         )
         self.rec = open_recording(
-            "quadsitl_episodes", save, spawn=True, default_blueprint=self.layout()
+            "quadsitl_episodes", save, spawn=True, default_blueprint=self.layout(None, windy)
         )
         self.rec.send_recording_name(name)
         self.index = index
