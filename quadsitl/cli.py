@@ -490,27 +490,23 @@ def _flight_stack_config(args: argparse.Namespace) -> Any:
             )
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be a positive number of seconds, got {args.duration}")
-    if px4:
-        return Px4Config(
-            vehicles=args.vehicles,
-            airframe=args.airframe or "iris",
-            bind=args.flight_stack_bind,
-            port=PX4_PORT if args.flight_stack_port is None else args.flight_stack_port,
-            duration=args.duration,
-            quiet=args.quiet,
-            wind=_weather(args.wind, args.turbulence),
-            home=_home(args.home),
-            sensor_noise=check_noise_scale(args.sensor_noise),
-        )
-    return ArduPilotConfig(
+    common: dict[str, Any] = dict(  # what both stacks' simulators take
         vehicles=args.vehicles,
         airframe=args.airframe or "iris",
         bind=args.flight_stack_bind,
-        port=PORT if args.flight_stack_port is None else args.flight_stack_port,
         duration=args.duration,
         quiet=args.quiet,
         wind=_weather(args.wind, args.turbulence),
     )
+    if px4:
+        return Px4Config(
+            **common,
+            port=PX4_PORT if args.flight_stack_port is None else args.flight_stack_port,
+            home=_home(args.home),
+            sensor_noise=check_noise_scale(args.sensor_noise),
+        )
+    port = PORT if args.flight_stack_port is None else args.flight_stack_port
+    return ArduPilotConfig(**common, port=port)
 
 
 def _weather(wind: str | None, turbulence: str | None) -> Any:
