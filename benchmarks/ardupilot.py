@@ -62,7 +62,7 @@ def hover_pwm() -> list[int]:
 
 def one_vehicle() -> float:
     process, port = start_simulator(1)
-    fake = FakeArduPilot(port=port, frame_rate=FRAME_RATE)
+    fake = FakeArduPilot(port=port, frame_rate=FRAME_RATE, poll=True)
     pwm = hover_pwm()
 
     def run() -> int:

@@ -106,9 +106,12 @@ def hover(fake: FakeArduPilot, airframe: str, seconds: float, altitude: float = 
     return k, pwm
 
 
-def test_the_fake_flies_the_simulator_to_a_hover_over_udp() -> None:
+@pytest.mark.parametrize("poll", [False, True], ids=["asleep", "polling"])
+def test_the_fake_flies_the_simulator_to_a_hover_over_udp(poll: bool) -> None:
+    """Whether the peer waits asleep (as ArduPilot) or polls (as the benchmark's fake, to
+    which the simulator answers polling too), every frame gets its one answer."""
     with running_sim("--airframe", "paper-x-fast") as (_, port):
-        fake = FakeArduPilot(port=port)
+        fake = FakeArduPilot(port=port, poll=poll)
         k, pwm = hover(fake, "paper-x-fast", 12.0)
         assert k.timestamp == pytest.approx(12.0)
         assert k.position[2] == pytest.approx(-2.0, abs=0.05)
@@ -131,6 +134,20 @@ def test_a_frame_sent_before_the_simulator_listens_is_sent_again_and_answered() 
         process.terminate()
         process.wait(timeout=30)
         fake.close()
+
+
+def test_a_polling_fake_sends_again_after_each_wait_and_then_gives_up() -> None:
+    silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    silent.bind(("127.0.0.1", 0))
+    fake = FakeArduPilot(port=silent.getsockname()[1], resend_after=0.05, poll=True)
+    fake.send([1000] * 4)
+    with pytest.raises(TimeoutError, match="no answer"):
+        fake.receive(attempts=3)
+    assert fake.resends == 3 and fake.frame_count == 0
+    received = [silent.recv(100) for _ in range(4)]  # the frame and its three re-sends
+    assert len(set(received)) == 1
+    fake.close()
+    silent.close()
 
 
 def test_a_restarted_ardupilot_finds_its_vehicle_back_at_the_start() -> None:

@@ -41,6 +41,14 @@ DATAGRAM = 2048  # bytes, more than the largest servo frame (72)
 # leave an extra answer queued, which ArduPilot would take for the next frame's. Queued
 # re-sends are dropped by this rule one by one, so no socket needs draining.
 CROSSING = 0.5
+# Waiting for the next frame of one instance: a blocked process takes tens of µs to wake
+# on a busy machine, more than ArduPilot's own turn-around when it is quick. So the wait
+# first polls the socket for up to SPIN s, but only while the peer's recent turn-arounds
+# (moving average, each counted up to TURNAROUND_CAP s) are shorter than SPIN: a slow peer,
+# such as ArduCopter itself at ~150 µs a frame, is waited for asleep and costs no CPU.
+SPIN = 60e-6
+TURNAROUND_CAP = 1e-3
+TURNAROUND_WEIGHT = 1 / 16  # of the newest turn-around in the moving average
 
 
 def parameter_file(airframe: str) -> Path | None:
@@ -90,20 +98,16 @@ class ArduPilotJsonServer:
             self.close()
             raise
         self._index = {sock.fileno(): i for i, sock in enumerate(self.sockets)}
-        self._timeout = 0.0  # s, the one socket's (blocking) timeout when there is one
+        self._sent_at = 0.0  # perf_counter s of the last answer (one instance)
+        self.turnaround = TURNAROUND_CAP  # s, moving average: our answer to its next frame
 
     def serve(self, timeout: float = WAIT) -> int:
         """Wait up to ``timeout`` s for frames, answer those that came; the count answered.
 
         One datagram per instance and call: ArduPilot sends its next frame only once
         answered, so nothing else waits behind it but re-sends (see CROSSING)."""
-        received = []
-        if len(self.sockets) == 1:  # block in the one socket itself: no select()
-            sock = self.sockets[0]
-            if timeout != self._timeout:
-                sock.settimeout(timeout)
-                self._timeout = timeout
-            received.append((0, sock))
+        if len(self.sockets) == 1:
+            received = [(0, self.sockets[0])] if self._wait_one(timeout) else []
         else:
             ready, _, _ = select.select(self.sockets, [], [], timeout)
             received = [(self._index[sock.fileno()], sock) for sock in ready]
@@ -139,11 +143,40 @@ class ArduPilotJsonServer:
                 self.physics.notice_once(
                     index, f"could not answer {self.addresses[index]}: {error}"
                 )
+        self._sent_at = time.perf_counter()
         return len(replies)
+
+    def _wait_one(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` s for the one socket to hold a datagram; whether it does.
+
+        Polls for up to SPIN s first while the peer is quick (see SPIN), then sleeps."""
+        sock = self.sockets[0]
+        arrived = False
+        if self.turnaround < SPIN:
+            end = self._sent_at + SPIN
+            while not (arrived := _readable(sock)) and time.perf_counter() < end:
+                pass
+        if not arrived:
+            arrived = bool(select.select(self.sockets, [], [], timeout)[0])
+        if arrived:
+            waited = min(TURNAROUND_CAP, time.perf_counter() - self._sent_at)
+            self.turnaround += TURNAROUND_WEIGHT * (waited - self.turnaround)
+        return arrived
 
     def close(self) -> None:
         for sock in self.sockets:
             sock.close()
+
+
+def _readable(sock: socket.socket) -> bool:
+    """Whether a datagram waits in ``sock`` (non-blocking)."""
+    try:
+        sock.recv(1, socket.MSG_PEEK)
+    except (BlockingIOError, InterruptedError):
+        return False
+    except OSError:
+        return True  # a pending error (ICMP unreachable): recvfrom reports it
+    return True
 
 
 def run_ardupilot(config: ArduPilotConfig, say: Callable[[str], None] | None = None) -> int:
