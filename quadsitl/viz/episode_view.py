@@ -57,12 +57,17 @@ C_DIST = slice(C_GOAL.stop, C_GOAL.stop + len(TERMS))
 C_SPEED, C_DISTANCE, C_REWARD, C_EPISODE, C_STEP = range(C_DIST.stop, C_DIST.stop + 5)
 C_AIR = slice(C_STEP + 1, C_STEP + 4)
 ROW_SIZE = C_AIR.stop
+C_COUNT, C_EPISODE_NUMBER, C_STEP_NUMBER = range(3)  # the counters: rows, episode, step
+CLOCK_EVERY = 16  # rows between two looks at the clock (FLUSH_AFTER)
 
 
 @numba.njit(cache=True)
-def _copy_row(rows, k, state, goal, dist, wind_state, i, reward, episode, step):  # pragma: no cover
-    """Row ``k`` of ``rows`` from env ``i`` of the engine's arrays (one call: a step's
-    whole cost of recording is this copy)."""
+def _record(rows, counters, state, goal, dist, wind_state, outcome, i, reward):  # pragma: no cover
+    """The next row of ``rows`` from env ``i`` of the engine's arrays (one call: a step's
+    whole cost of recording is this copy). ``counters``: rows buffered, episode, step
+    (each row's own), moved on here. Returns the rows buffered, negated once env ``i``'s
+    episode has ended."""
+    k = counters[C_COUNT]
     row = rows[k]
     row[: L.STATE_SIZE] = state[i]
     row[C_GOAL] = goal[i, :3]
@@ -70,9 +75,12 @@ def _copy_row(rows, k, state, goal, dist, wind_state, i, reward, episode, step):
     row[C_SPEED] = np.sqrt(state[i, L.I_VX] ** 2 + state[i, L.I_VY] ** 2 + state[i, L.I_VZ] ** 2)
     row[C_DISTANCE] = np.sqrt(np.sum((state[i, :3] - goal[i, :3]) ** 2))
     row[C_REWARD] = reward
-    row[C_EPISODE] = episode
-    row[C_STEP] = step
+    row[C_EPISODE] = counters[C_EPISODE_NUMBER]
+    row[C_STEP] = counters[C_STEP_NUMBER]
     row[C_AIR] = wind_state[i, L.WS_AIR_VELOCITY]
+    counters[C_COUNT] = k + 1
+    counters[C_STEP_NUMBER] += 1
+    return k + 1 if outcome[i] == S.RUNNING else -(k + 1)
 
 
 class _Arrow:
@@ -104,7 +112,7 @@ class EpisodeView:
         self.rec.send_recording_name(name)
         self.index = index
         self.episode = -1
-        self.steps = 0
+        self.counters = np.zeros(3, np.int64)  # rows buffered, episode, next row's step
         self.episode_return = 0.0
         self.ended = False
         self.framed = False
@@ -112,7 +120,6 @@ class EpisodeView:
         self.windy = False  # the env flies in wind: its panel and arrow are sent
         self.goal_radius = 0.05
         self.rows = np.empty((CAPACITY, ROW_SIZE))
-        self.count = 0  # rows buffered
         self.oldest = 0.0  # wall time of the oldest buffered row
         self.track: list[np.ndarray] = []  # positions of this episode already sent
         self.last_goal = np.full((1, 4), np.nan)  # episode and goal last sent
@@ -124,7 +131,8 @@ class EpisodeView:
         if previous_outcome is not None and not self.ended and self.episode >= 0:
             self._outcome(previous_outcome)
         self.episode += 1
-        self.steps = 0
+        self.counters[C_EPISODE_NUMBER] = self.episode
+        self.counters[C_STEP_NUMBER] = 0
         self.episode_return = 0.0
         self.ended = False
         if not self.framed:
@@ -133,31 +141,33 @@ class EpisodeView:
         self._row(engine, math.nan)
 
     def step(self, engine: TaskEngine, reward: float) -> None:
-        self.steps += 1
         self.episode_return += reward
-        self._row(engine, reward)
-        if not self.ended and engine.outcome[self.index] != S.RUNNING:
+        if self._row(engine, reward) < 0 and not self.ended:
             self._outcome(S.OUTCOME_NAMES[int(engine.outcome[self.index])])
 
-    def _row(self, engine: TaskEngine, reward: float) -> None:
-        """One buffered row: all a step costs, unless the buffer is due to be sent."""
-        _copy_row(
+    def _row(self, engine: TaskEngine, reward: float) -> int:
+        """One buffered row: all a step costs, unless the buffer is due to be sent. The
+        rows buffered, negated once the episode has ended."""
+        fleet = engine.fleet
+        count = _record(
             self.rows,
-            self.count,
-            engine.fleet.state,
+            self.counters,
+            fleet.state,
             engine.goal,
             engine.dist,
-            engine.fleet.wind_state,
+            fleet.wind_state,
+            engine.outcome,
             self.index,
             reward,
-            self.episode,
-            self.steps,
         )
-        self.count += 1
-        if self.count == 1:
+        rows = abs(count)
+        if rows == 1:
             self.oldest = time.monotonic()
-        if self.count == CAPACITY or time.monotonic() - self.oldest > FLUSH_AFTER:
+        elif rows == CAPACITY or (
+            rows % CLOCK_EVERY == 0 and time.monotonic() - self.oldest > FLUSH_AFTER
+        ):
             self.flush()
+        return count
 
     def _frame(self, engine: TaskEngine) -> None:
         """Camera on the start, the goal and the ground under them (first reset); the
@@ -189,16 +199,18 @@ class EpisodeView:
 
     def _outcome(self, outcome: str) -> None:
         self.ended = True
+        steps = int(self.counters[C_STEP_NUMBER]) - 1  # of the row just recorded
         level = "INFO" if outcome in ("landed", "timed_out") else "WARN"
         text = (
-            f"episode {self.episode}: {outcome.replace('_', ' ')} after {self.steps} steps, "
+            f"episode {self.episode}: {outcome.replace('_', ' ')} after {steps} steps, "
             f"return {self.episode_return:.1f}"
         )
-        self.events.append((self.episode, self.steps, text, level))
+        self.events.append((self.episode, steps, text, level))
 
     def flush(self) -> None:
         """Send the buffered rows to Rerun, a column per series."""
-        rows, self.count = self.rows[: self.count], 0
+        rows = self.rows[: self.counters[C_COUNT]]
+        self.counters[C_COUNT] = 0
         if len(rows):
             self._send(rows.copy())
         if self.events:
