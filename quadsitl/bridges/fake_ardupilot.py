@@ -132,6 +132,8 @@ class FakeArduPilot:
         self.resend_after, self.poll = resend_after, poll
         self.frame_count = 0  # of the next frame
         self.resends = 0  # frames sent again after a timeout
+        self.stale = 0  # second answers to a frame sent again, dropped
+        self.last_timestamp: float | None = None  # s, of the last answer taken
         self._packet = b""
 
     def send(self, pwm: tuple[int, ...] | list[int]) -> None:
@@ -143,15 +145,25 @@ class FakeArduPilot:
 
     def receive(self, attempts: int = 10) -> Kinematics:
         """Wait for the answer, sending the frame again after each timeout (up to
-        ``attempts`` waits; TimeoutError after them); the count moves on once answered."""
-        for _ in range(attempts):
+        ``attempts`` waits; TimeoutError after them); the count moves on once answered.
+
+        An answer with the last answer's timestamp is a second answer to a frame sent
+        again (on a busy machine the first can come after the re-send): it is dropped
+        and counted in ``stale``, so that it is not taken for this frame's answer."""
+        waits = 0
+        while waits < attempts:
             try:
                 data = self._poll() if self.poll else self.sock.recv(65536)
             except TimeoutError:
+                waits += 1
                 self.resends += 1
                 self.sock.sendto(self._packet, self.target)
                 continue
             kinematics = parse_kinematics(data)
+            if kinematics.timestamp == self.last_timestamp:
+                self.stale += 1
+                continue
+            self.last_timestamp = kinematics.timestamp
             self.frame_count += 1
             return kinematics
         raise TimeoutError(f"no answer from {self.target} to frame {self.frame_count}")
@@ -180,6 +192,7 @@ class FakeArduPilot:
     def restart(self) -> None:
         """As ArduPilot restarted: the frame count starts from 0 again."""
         self.frame_count = 0
+        self.last_timestamp = None
 
     def close(self) -> None:
         self.sock.close()
