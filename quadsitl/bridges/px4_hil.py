@@ -43,6 +43,7 @@ from quadsitl.physics.sensors.suite import specific_force
 from quadsitl.vehicle.geo import Home
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.lockstep import ARMED_FLAG, LOCKSTEP_FLAG
+from quadsitl.wire.units import rotor_speed
 
 PORT = 4560  # TCP port of instance 0 (PX4's simulator_mavlink default); instance i: + i
 ROUND_US = 4_000  # µs of physics per lockstep round: PX4's 250 Hz IMU (IMU_INTEG_RATE)
@@ -86,7 +87,7 @@ def motor_commands(controls: Sequence[float], omega_max: float) -> tuple[list[fl
     for u in controls[: L.N_ROTORS]:
         if not math.isfinite(u):
             bad, u = True, 0.0
-        out.append(omega_max * min(1.0, max(0.0, u)))
+        out.append(rotor_speed(min(1.0, max(0.0, u)), omega_max))
     return out, bad
 
 

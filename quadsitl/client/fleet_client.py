@@ -41,8 +41,8 @@ from quadsitl.mavlink.links import MAX_DATAGRAM, is_loopback
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
 from quadsitl.wire import fast_codec as FC
-from quadsitl.wire import mavlink as mav
 from quadsitl.wire.answer import ANSWER_IDS, Answer, AnswerReader, decode_answer, field_slices
+from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.lockstep import (
     FORCE_MAGIC,
     RELEASE_LOCKSTEP,

@@ -31,8 +31,8 @@ from quadsitl.mavlink.links import MAX_DATAGRAM, is_loopback
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
 from quadsitl.wire import fast_codec as FC
-from quadsitl.wire import mavlink as mav
 from quadsitl.wire.answer import ANSWER_IDS, AnswerReader, decode_answer
+from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.lockstep import (
     ARMED_FLAG,
     BUSY_PREFIX,

@@ -6,6 +6,6 @@ clients) and ``gcs_tools`` import pymavlink. It speaks MAVLink 2 with pymavlink'
 AVAILABLE_MODES); frames are converted ENU/FLU <-> NED/FRD here, at the wire.
 """
 
-from quadsitl.wire import mavlink
+from quadsitl.wire.dialect import mavlink
 
 __all__ = ["mavlink"]

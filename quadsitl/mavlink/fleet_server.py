@@ -37,8 +37,9 @@ from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.results import Severity
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.answer import answer_parts, field_slices
-from quadsitl.wire.lockstep import RELEASE_LOCKSTEP, check_controls, to_time_usec
+from quadsitl.wire.lockstep import RELEASE_LOCKSTEP, check_controls
 from quadsitl.wire.state import ROW_BY_ROW, WireState
+from quadsitl.wire.units import to_time_usec
 
 FAST_IDS = frozenset({mav.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET})
 _ROUND = field_slices(mav.MAVLink_set_actuator_control_target_message)  # a round command's

@@ -37,8 +37,9 @@ from quadsitl.vehicle.results import ACCEPTED, Outcome, Result
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.answer import answer_parts
-from quadsitl.wire.lockstep import ARMED_FLAG, LOCKSTEP_FLAG, check_controls, to_time_usec
+from quadsitl.wire.lockstep import ARMED_FLAG, LOCKSTEP_FLAG, check_controls
 from quadsitl.wire.state import WireState
+from quadsitl.wire.units import rotor_speed, to_time_usec
 
 LOCKSTEP_IDLE = 5.0  # wall s without lockstep commands before real time resumes
 # (only when lockstep was asked for by the flag; ``--lockstep`` waits for ever)
@@ -67,7 +68,8 @@ def fly(
     vehicles = [path.vehicle for path in paths]
     flying = np.array([on and v.armed for on, v in zip(armed, vehicles, strict=True)])
     max_speed = np.array([v.airframe.max_rotor_speed for v in vehicles])  # rad/s
-    rotor_cmd[:] = np.asarray(controls, dtype=np.float64) * (max_speed * flying)[:, np.newaxis]
+    controls = np.asarray(controls, dtype=np.float64)
+    rotor_cmd[:] = rotor_speed(controls, (max_speed * flying)[:, np.newaxis])
     return warnings
 
 

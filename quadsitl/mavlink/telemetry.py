@@ -43,8 +43,8 @@ from quadsitl.vehicle.modes import MAIN_AUTO, MAIN_OFFBOARD, MAIN_POSCTL, Mode
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.answer import UNUSED_OUTPUTS, odometry_values
-from quadsitl.wire.lockstep import to_time_usec
 from quadsitl.wire.state import WireState
+from quadsitl.wire.units import to_time_usec
 
 _encoder = mav.MAVLink(None)
 

@@ -1,8 +1,9 @@
 """The wire vocabulary both ends of the motor path share: the simulator's server
 (:mod:`quadsitl.mavlink`) and the lockstep clients (:mod:`quadsitl.client`).
 
-- ``mavlink``: the dialect, pymavlink's ``development`` (``common`` plus the messages
-  being standardised, such as AVAILABLE_MODES);
+- :mod:`.dialect`: ``mavlink``, pymavlink's ``development`` dialect (``common`` plus
+  the messages being standardised, such as AVAILABLE_MODES);
+- :mod:`.units`: the wire's units (``time_usec``; Ω = u·Ω_max), free of pymavlink;
 - :mod:`.fast_codec`: MAVLink 2 frames packed and parsed with ``struct``;
 - :mod:`.state`: :class:`~.state.WireState`, the vehicle state in wire frames;
 - :mod:`.lockstep`: the motor path's commands, flags and limits;
@@ -12,7 +13,3 @@
 Nothing here opens a socket or knows the vehicle: both ends import it, it imports
 neither.
 """
-
-from pymavlink.dialects.v20 import development as mavlink
-
-__all__ = ["mavlink"]

@@ -18,7 +18,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from quadsitl.physics import layout as L
-from quadsitl.wire import mavlink as mav
+from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.lockstep import ACTUATOR_OUTPUTS
 from quadsitl.wire.state import WireState
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from quadsitl.wire import mavlink as mav
+from quadsitl.wire.dialect import mavlink as mav
 
 RESET_STATE = mav.MAV_CMD_USER_1  # 31010: position and attitude, with the staged motion
 STAGE_MOTION = mav.MAV_CMD_USER_2  # 31011: velocity, body rates, rotor speed of the next reset
@@ -25,12 +25,6 @@ OWNER_SILENCE = 10.0  # s without a datagram from the motor link's owner before 
 BUSY_PREFIX = "lockstep in use by "  # the refusal text's start (fits one STATUSTEXT chunk)
 STATUSTEXT_CHUNK = 50  # bytes of text per STATUSTEXT; a longer text goes in chunks
 ACTUATOR_OUTPUTS = 32  # ACTUATOR_OUTPUT_STATUS.actuator; the first N_ROTORS are the rotors
-
-
-def to_time_usec(seconds: float) -> int:
-    """Simulated seconds as a wire ``time_usec``: rounded to the nearest microsecond
-    (every message of a step carries the same stamp)."""
-    return round(seconds * 1e6)
 
 
 def check_controls(controls: Sequence[float]) -> tuple[str, str] | None:
