@@ -360,12 +360,17 @@ class MotorClient:
         """The second half of :meth:`step`: wait for the state answer (an answer of an
         earlier step, arriving late, is not taken for it)."""
         after = self._later_than
-        self._exchange(
-            "state answer",
-            lambda _, answered: answered and (after is None or self.state.time_usec > after),
-        )
+
+        def done(_: FC.Frame, answered: bool) -> bool:
+            return answered and (after is None or self._state_time() > after)
+
+        self._exchange("state answer", done)
         assert self.state is not None
         return self.state
+
+    def _state_time(self) -> int:
+        assert self.state is not None  # an answer has just been read
+        return int(self.state.time_usec)
 
     def _last_text(self) -> str:
         return self.statustexts[-1] if self.statustexts else "no reason given"
