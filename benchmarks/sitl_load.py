@@ -37,8 +37,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from pymavlink.dialects.v20 import common as mavlink
 
 from gcs_tools.demo import free_udp_port
-from quadsitl.mavlink import fast_codec as FC
 from quadsitl.vehicle.geo import Home
+from quadsitl.wire import fast_codec as FC
 
 WARM_UP = 5.0  # wall s: start, arm, take off
 MISSION_ITEMS = 10

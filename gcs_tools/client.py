@@ -16,10 +16,10 @@ from typing import Any
 os.environ.setdefault("MAVLINK20", "1")  # before pymavlink.mavutil is imported
 from pymavlink import mavutil
 
-from quadsitl.mavlink.commands import FORCE_MAGIC
 from quadsitl.mavlink.param_protocol import decode_value as decode_param
 from quadsitl.mavlink.param_protocol import encode_raw as encode_param
 from quadsitl.vehicle.geo import Home
+from quadsitl.wire.lockstep import FORCE_MAGIC
 
 mav = mavutil.mavlink
 

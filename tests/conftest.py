@@ -15,7 +15,7 @@ import pytest
 
 from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
-from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
+from quadsitl.client.motor_client import MotorClient, SimulatorError
 
 # The signing timestamps that simulators keep across restarts go to this session's own
 # folder (inherited by every simulator process), never to the user's state folder.

@@ -17,11 +17,11 @@ from gcs_tools.demo import free_udp_port
 from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink import telemetry as T
-from quadsitl.mavlink.hil_state import WireState
 from quadsitl.physics import layout as L
 from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.params import ParamError
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire.state import WireState
 from tests.conftest import cli
 
 

@@ -1,4 +1,4 @@
-"""The struct-based MAVLink 2 packing (quadsitl.mavlink.fast_codec) against pymavlink's
+"""The struct-based MAVLink 2 packing (quadsitl.wire.fast_codec) against pymavlink's
 own, for every message of the dialect with random field values."""
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ import string
 import numpy as np
 import pytest
 
-from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.hil_state import WireState
 from quadsitl.physics import layout as L
+from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.state import WireState
 
 INT_RANGES = {
     "int8_t": (-128, 127),

@@ -16,7 +16,7 @@ import pytest
 
 from gcs_tools.client import VehicleClient, Waypoint, mav
 from gcs_tools.scripted_flight import mission_items
-from quadsitl.mavlink import fast_codec as FC
+from quadsitl.wire import fast_codec as FC
 from tests.conftest import cli, free_udp_port
 
 VEHICLES = 4

@@ -11,13 +11,13 @@ import pytest
 
 import quadsitl  # noqa: F401  (registers the envs)
 from gcs_tools.relay import LossyRelay
+from quadsitl.client.fleet_client import FleetClient
+from quadsitl.client.motor_client import MotorClient, SimulatorError
 from quadsitl.envs.sim_process import SimProcess
 from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.fleet_client import FleetClient
-from quadsitl.mavlink.hil_state import WireState
-from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
-from quadsitl.mavlink.motor_path import RESET_STATE
 from quadsitl.physics import PAPER, Fleet
+from quadsitl.wire.lockstep import RESET_STATE
+from quadsitl.wire.state import WireState
 from tests.conftest import OBS_TOLERANCE, MotorSim, fly_both
 
 RATES = ["--physics-rate", "100", "--control-rate", "20", "--gcs", "none", "--api", "none"]

@@ -16,12 +16,12 @@ import pytest
 from pymavlink import mavutil
 
 import quadsitl  # noqa: F401  (registers the envs)
+from quadsitl.client.fleet_client import FleetClient
+from quadsitl.client.motor_client import SimulatorError
 from quadsitl.envs.sim_process import SimProcess
-from quadsitl.mavlink.fleet_client import FleetClient
-from quadsitl.mavlink.motor_client import SimulatorError
-from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_MOTION
-from quadsitl.mavlink.ownership import OWNER_SILENCE, Ownership
+from quadsitl.mavlink.ownership import Ownership
 from quadsitl.mavlink.runner import SimConfig
+from quadsitl.wire.lockstep import OWNER_SILENCE, RESET_STATE, STAGE_MOTION
 from tests.conftest import OBS_TOLERANCE, REWARD_TOLERANCE, fly_both, run_cli
 
 RATES = ["--physics-rate", "100", "--control-rate", "20", "--gcs", "none", "--api", "none"]

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from pymavlink import mavutil
 
-from quadsitl.mavlink.hil_state import WireState
-from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
+from quadsitl.client.motor_client import MotorClient, SimulatorError
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
+from quadsitl.wire.state import WireState
 from tests.conftest import MotorSim
 
 AIRFRAME = get_airframe("paper")

@@ -26,12 +26,12 @@ from quadsitl.bridges.px4_hil import (
     FrameReader,
     HilPhysics,
 )
-from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import AIRFRAMES, get_airframe
 from quadsitl.physics.fleet import Fleet
 from quadsitl.vehicle.geo import Home
+from quadsitl.wire import fast_codec as FC
 
 
 def actuators(controls: list[float], lockstep: bool = True, armed: bool = True) -> FC.Frame:

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import quadsitl  # noqa: F401  (registers the envs)
-from quadsitl.mavlink.motor_client import SimulatorError
+from quadsitl.client.motor_client import SimulatorError
 from tests.conftest import OBS_TOLERANCE, cli, fly_both
 
 ray = pytest.importorskip("ray")

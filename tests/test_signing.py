@@ -7,7 +7,7 @@ import time
 import pytest
 from pymavlink import mavutil
 
-from quadsitl.mavlink.motor_client import MotorClient, SimulatorError
+from quadsitl.client.motor_client import MotorClient, SimulatorError
 from quadsitl.mavlink.signing import (
     SignatureCheck,
     key_from_file,

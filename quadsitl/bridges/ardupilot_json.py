@@ -36,6 +36,7 @@ from quadsitl.bridges.lockstep import step_vehicles
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe
 from quadsitl.physics.fleet import Fleet, initial_state
+from quadsitl.wire.units import rotor_speed
 
 SERVO_MAGIC_16 = 18458  # 16 channels
 SERVO_MAGIC_32 = 29569  # 32 channels (SERVO_32_ENABLE 1)
@@ -246,7 +247,7 @@ class JsonPhysics:
             peer.frame_count, peer.frame_rate = frame.frame_count, frame.frame_rate
             pwm, omega_max = frame.pwm, self._omega_max[index]
             self._commands[index] = [
-                omega_max * throttle(pwm[channel]) for channel in self.channels[index]
+                rotor_speed(throttle(pwm[channel]), omega_max) for channel in self.channels[index]
             ]
             due.setdefault(frame.frame_rate, []).append(index)
         for rate, rows in due.items():

@@ -32,9 +32,9 @@ from quadsitl.bridges.px4_hil import (
     ROUND_US,
     FrameReader,
 )
-from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.vehicle.geo import Home
+from quadsitl.wire import fast_codec as FC
 
 STATE_INTERVAL_US = 5_000  # what PX4 asks for HIL_STATE_QUATERNION
 MODE_CUSTOM = 1  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, always set in PX4's mode

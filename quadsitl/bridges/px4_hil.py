@@ -35,19 +35,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from quadsitl.bridges.lockstep import step_vehicles
-from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import Fleet, initial_state
 from quadsitl.physics.sensors import GpsParams, SensorParams, SensorSuite
 from quadsitl.physics.sensors.suite import specific_force
 from quadsitl.vehicle.geo import Home
+from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.lockstep import ARMED_FLAG, LOCKSTEP_FLAG
+from quadsitl.wire.units import rotor_speed
 
 PORT = 4560  # TCP port of instance 0 (PX4's simulator_mavlink default); instance i: + i
 ROUND_US = 4_000  # µs of physics per lockstep round: PX4's 250 Hz IMU (IMU_INTEG_RATE)
 PHYSICS_SUBSTEPS = 4  # 1 ms physics steps per round
-LOCKSTEP_FLAG = 1  # HIL_ACTUATOR_CONTROLS.flags bit 0
-ARMED_FLAG = 128  # MAV_MODE_FLAG_SAFETY_ARMED in HIL_ACTUATOR_CONTROLS.mode
 # HIL_SENSOR.fields_updated, as SimulatorMavlink.hpp's SensorSource tests them.
 FIELDS_ACCEL = 0b111
 FIELDS_GYRO = 0b111000
@@ -87,7 +87,7 @@ def motor_commands(controls: Sequence[float], omega_max: float) -> tuple[list[fl
     for u in controls[: L.N_ROTORS]:
         if not math.isfinite(u):
             bad, u = True, 0.0
-        out.append(omega_max * min(1.0, max(0.0, u)))
+        out.append(rotor_speed(min(1.0, max(0.0, u)), omega_max))
     return out, bad
 
 

@@ -17,11 +17,11 @@ from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink import telemetry as T
 from quadsitl.mavlink.identity import AVAILABLE_MODES, available_modes_message
 from quadsitl.mavlink.links import Link
-from quadsitl.mavlink.motor_path import RESET_STATE, STAGE_AIRFRAME, STAGE_MOTION
 from quadsitl.physics.sensors.failures import FAILURE_NAMES, OFF, STUCK
 from quadsitl.physics.sensors.failures import OK as SENSOR_OK
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import ACCEPTED, Outcome, Result, Severity
+from quadsitl.wire.lockstep import FORCE_MAGIC, RESET_STATE, STAGE_AIRFRAME, STAGE_MOTION
 
 if TYPE_CHECKING:
     from quadsitl.mavlink.server import MavlinkServer
@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 # COMPONENT_ARM_DISARM param2 that forces the action: PX4's and ArduPilot's 21196 (what
 # this project's clients send), and 2989, which QGroundControl's "force arm" sends
 # (src/Vehicle/Vehicle.cc).
-FORCE_MAGIC = 21196
+
 # MAV_CMD_INJECT_FAILURE's sensor units and failure types the sensor models simulate.
 SENSOR_UNITS = {
     mav.FAILURE_UNIT_SENSOR_GYRO: "gyro",

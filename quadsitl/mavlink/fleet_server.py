@@ -21,30 +21,28 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
-import numpy as np
-
-from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink import telemetry as T
-from quadsitl.mavlink.hil_state import ROW_BY_ROW, WireState
 from quadsitl.mavlink.links import Link, Peer
-from quadsitl.mavlink.motor_path import (
-    LOCKSTEP_IDLE,
-    RELEASE_LOCKSTEP,
-    answer_parts,
-    check_controls,
-)
+from quadsitl.mavlink.motor_path import LOCKSTEP_IDLE, fly
 from quadsitl.mavlink.ownership import Ownership, may_take
 from quadsitl.mavlink.server import MOTOR_LINK, MavlinkServer
 from quadsitl.mavlink.signing import is_signed
 from quadsitl.mavlink.tlog import TlogWriter
-from quadsitl.physics.layout import P_GEAR_HEIGHT, P_OMEGA_MAX
+from quadsitl.physics.layout import P_GEAR_HEIGHT
 from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.results import Severity
+from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.answer import answer_parts, field_slices
+from quadsitl.wire.lockstep import RELEASE_LOCKSTEP, check_controls
+from quadsitl.wire.state import ROW_BY_ROW, WireState
+from quadsitl.wire.units import to_time_usec
 
 FAST_IDS = frozenset({mav.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET})
+_ROUND = field_slices(mav.MAVLink_set_actuator_control_target_message)  # a round command's
 WIRE_FIELDS = ("position_ned", "q_ned_frd", "velocity_frd", "rates_frd", "rotor_speeds")
 TICK_PERIOD = 0.005  # wall s between two ticks of one vehicle (events, telemetry)
 LOCKSTEP_TICK_PERIOD = 0.02  # the same in lockstep (telemetry capped on the wall clock)
@@ -70,6 +68,11 @@ class FleetServer:
                 schedule.offset = i / len(servers) * T.FASTEST_INTERVAL
         self._round_wall = -math.inf  # wall time of the last round command
         self.ownership = Ownership()  # of the motor link: one client at a time
+        # The messages routed here; the rest go to the vehicle they name (_dispatch).
+        self.handlers: dict[int, Callable[[Any, Link, Peer], None]] = {
+            mav.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET: self._on_set_actuator_control_target,
+            mav.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS: self._on_hil_actuator_controls,
+        }
 
     # --- the loop's hooks -------------------------------------------------------------
     def receive(self, link: Link, received_at: float | None = None) -> None:
@@ -90,26 +93,29 @@ class FleetServer:
                 continue
             if isinstance(message, FC.Frame):  # an unsigned round command, parsed fast
                 link.accept(peer)  # (only when signing is off)
-                # time_usec, controls[8], group_mlx, target_system, target_component
                 values = message.unpack()
-                self._round_command(values[10], values[0], values[1:5], link)
+                target = values[_ROUND["target_system"].start]
+                stamp = values[_ROUND["time_usec"].start]
+                self._round_command(target, stamp, values[_ROUND["controls"]][:4], link)
                 continue
             if self.tlog is not None and link.name != MOTOR_LINK:
                 self.tlog.record(bytes(message.get_msgbuf()), received_at)
-            kind = message.get_type()
-            if kind == "SET_ACTUATOR_CONTROL_TARGET":
-                self._round_command(
-                    message.target_system,
-                    message.time_usec,
-                    message.controls[:4],
-                    link,
-                    message,
-                    peer,
-                )
-            elif kind == "HIL_ACTUATOR_CONTROLS" and len(self.servers) > 1:
-                self._refuse_unaddressed()
-            else:
-                self._dispatch(message, link, peer)
+            handler = self.handlers.get(message.get_msgId(), self._dispatch)
+            handler(message, link, peer)
+
+    def _on_set_actuator_control_target(self, message: Any, link: Link, peer: Peer) -> None:
+        """A round command through pymavlink (signed, or not on the motor link)."""
+        controls = message.controls[:4]
+        self._round_command(message.target_system, message.time_usec, controls, link, message, peer)
+
+    def _on_hil_actuator_controls(self, message: Any, link: Link, peer: Peer) -> None:
+        """One vehicle's motor command: its server flies it as a round of one
+        (:func:`~quadsitl.mavlink.motor_path.fly`); refused where several vehicles share
+        the links (it names none of them)."""
+        if len(self.servers) > 1:
+            self._refuse_unaddressed()
+        else:
+            self._dispatch(message, link, peer)
 
     def tick(self, wall_now: float) -> None:
         """Every vehicle's events, heartbeat and telemetry, the vehicles in turn: each
@@ -272,24 +278,19 @@ class FleetServer:
     @property
     def round_start(self) -> int:
         """µs: the simulated time of the group's vehicles (they share a clock)."""
-        return round(self.group.vehicles[0].time * 1e6)
+        return to_time_usec(self.group.vehicles[0].time)
 
     def _run_round(self, link: Link) -> list[bytes]:
         started = self.round_start
         wall = time.monotonic()
         order = range(len(self.servers))
-        few = len(order) <= ROW_BY_ROW  # array operations pay off for more
-        for index in order:
-            motors = self.servers[index].motors
-            warning = motors.apply(self.pending[index], speeds=few)
-            motors.last_lockstep_wall = wall
+        paths = [self.servers[index].motors for index in order]
+        controls = [self.pending[index] for index in order]
+        warnings = fly(paths, controls, [True] * len(paths), self.group.rotor_cmd)
+        for index, warning in zip(order, warnings, strict=True):
+            paths[index].last_lockstep_wall = wall
             if warning is not None:
                 self.servers[index].statustext(Severity.WARNING, warning)
-        if not few:  # the rotor speeds of all vehicles at once (0 where disarmed)
-            controls = np.array([self.pending[index] for index in order])
-            armed = np.array([v.armed for v in self.group.vehicles])
-            max_speed = self.group.physics.params[:, P_OMEGA_MAX]
-            self.group.rotor_cmd[:] = controls * (max_speed * armed)[:, None]
         self.pending.clear()
         self.group.advance()
         self.previous_round = started
@@ -299,7 +300,7 @@ class FleetServer:
     def _answers(self, link: Link, rows: list[int]) -> list[bytes]:
         """The state answers of vehicles ``rows`` (cached as their last answer)."""
         physics = self.group.physics
-        time_usec = round(self.group.vehicles[0].time * 1e6)
+        time_usec = self.round_start
         gears = physics.params[rows, P_GEAR_HEIGHT]  # each vehicle's airframe's
         # The state each answer carries: the truth, or what the observation delay shows.
         states, contact_rows, touchdown_rows = self.group.episodes.observed(rows)

@@ -30,12 +30,13 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink
 from quadsitl.mavlink.signing import now_timestamp
+from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.lockstep import OWNER_SILENCE
 
 LOOPBACK = "127.0.0.1"
-PEER_TIMEOUT = 10.0  # s without an accepted frame before a learned UDP peer is dropped
+PEER_TIMEOUT = OWNER_SILENCE  # s without an accepted frame before a UDP peer is dropped
 MAX_DATAGRAM = 65535
 
 

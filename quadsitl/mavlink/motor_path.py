@@ -23,29 +23,26 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from quadsitl import frames
-from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.hil_state import WireState
 from quadsitl.physics import layout as L
 from quadsitl.vehicle import external_control as X
 from quadsitl.vehicle.episodes import MotorEpisodes, check_factors
 from quadsitl.vehicle.results import ACCEPTED, Outcome, Result
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.answer import answer_parts
+from quadsitl.wire.lockstep import ARMED_FLAG, LOCKSTEP_FLAG, check_controls
+from quadsitl.wire.state import WireState
+from quadsitl.wire.units import rotor_speed, to_time_usec
 
-RESET_STATE = mav.MAV_CMD_USER_1  # 31010
-STAGE_MOTION = mav.MAV_CMD_USER_2  # 31011
-RELEASE_LOCKSTEP = mav.MAV_CMD_USER_3  # 31012: the owner hands the motor link back
-STAGE_AIRFRAME = mav.MAV_CMD_USER_4  # 31013: the next reset's airframe factors
-ARMED_FLAG = mav.MAV_MODE_FLAG_SAFETY_ARMED  # 128
-LOCKSTEP_FLAG = 1
 LOCKSTEP_IDLE = 5.0  # wall s without lockstep commands before real time resumes
 # (only when lockstep was asked for by the flag; ``--lockstep`` waits for ever)
-NAN_COVARIANCE = [math.nan] + [0.0] * 20  # "covariance unknown"
 
 _encoder = mav.MAVLink(None)
 STANDARD_GRAVITY = 9.80665  # m/s² per g: the unit of HIL_STATE_QUATERNION's mG fields
@@ -55,64 +52,25 @@ def _int16(x: float) -> int:
     return int(max(-32767, min(32767, round(x))))
 
 
-UNUSED_OUTPUTS = (0.0,) * 28  # ACTUATOR_OUTPUT_STATUS has 32 outputs; 4 are rotors
-
-
-def answer_parts(
-    time_usec: int,
-    state: tuple[list[float], ...],
-    contact: int,
-    touchdown: float,
-    resets: int,
-    lean: bool = False,
-) -> list[tuple[Any, tuple[Any, ...]]]:
-    """A state answer as (message class, values in wire order): ACTUATOR_OUTPUT_STATUS,
-    NAMED_VALUE_INT ``CONTACT`` (``lean``: only when not airborne, its absence meaning
-    airborne), NAMED_VALUE_FLOAT ``TD_SPEED`` (only when not airborne), ODOMETRY last.
-    ``state``: position NED, quaternion FRD -> NED, body velocity and rates FRD, rotor
-    speeds, as lists."""
-    p, q, v, r, rotors = state
-    time_ms = (time_usec // 1000) & 0xFFFFFFFF
-    parts: list[tuple[Any, tuple[Any, ...]]] = [
-        (mav.MAVLink_actuator_output_status_message, (time_usec, 0b1111, *rotors, *UNUSED_OUTPUTS))
-    ]
-    if contact != L.AIRBORNE or not lean:
-        parts.append((mav.MAVLink_named_value_int_message, (time_ms, contact, b"CONTACT")))
-    if contact != L.AIRBORNE:
-        parts.append((mav.MAVLink_named_value_float_message, (time_ms, touchdown, b"TD_SPEED")))
-    parts.append((mav.MAVLink_odometry_message, odometry_values(time_usec, p, q, v, r, resets)))
-    return parts
-
-
-def odometry_values(time_usec: int, p: Any, q: Any, v: Any, r: Any, resets: int) -> tuple[Any, ...]:
-    """ODOMETRY's fields in wire order, as PX4 sends it: pose in local NED (``p`` m,
-    ``q`` FRD -> NED), velocity ``v`` and rates ``r`` in body FRD (the child frame);
-    the truth, so quality 100 and covariances unknown (no estimator); ``resets`` counts
-    jumps of the pose (state resets)."""
-    return (
-        time_usec,
-        *p,
-        *q,
-        *v,
-        *r,
-        *NAN_COVARIANCE,
-        *NAN_COVARIANCE,
-        mav.MAV_FRAME_LOCAL_NED,
-        mav.MAV_FRAME_BODY_FRD,
-        resets & 0xFF,
-        mav.MAV_ESTIMATOR_TYPE_UNKNOWN,
-        100,
-    )
-
-
-def check_controls(controls: Any) -> tuple[str, str] | None:
-    """(kind, reason) why four normalised rotor commands cannot be flown, or None."""
-    for i, u in enumerate(controls):
-        if not math.isfinite(u):
-            return "not_finite", f"motor command rejected: control {i} is {u}"
-        if not 0.0 <= u <= 1.0:
-            return "out_of_range", f"motor command rejected: control {i} = {u:g} not in [0, 1]"
-    return None
+def fly(
+    paths: Sequence[MotorPath],
+    controls: Any,
+    armed: Sequence[bool],
+    rotor_cmd: np.ndarray,
+) -> list[str | None]:
+    """Fly one round of checked motor commands, one per vehicle of ``paths``: the
+    vehicle's HIL_ACTUATOR_CONTROLS (a round of one) or a fleet's round. ``controls``
+    (k, 4) normalised rotor speeds u in [0, 1]; ``armed`` (k,) what each command says;
+    ``rotor_cmd`` (k, 4) rad/s, the vehicles' rotor commands, written here: Ω = u·Ω_max
+    of the airframe, 0 where the command or the vehicle is disarmed. Returns each
+    vehicle's warning worth a STATUSTEXT, or None."""
+    warnings = [path.take(on) for path, on in zip(paths, armed, strict=True)]
+    vehicles = [path.vehicle for path in paths]
+    flying = np.array([on and v.armed for on, v in zip(armed, vehicles, strict=True)])
+    max_speed = np.array([v.airframe.max_rotor_speed for v in vehicles])  # rad/s
+    controls = np.asarray(controls, dtype=np.float64)
+    rotor_cmd[:] = rotor_speed(controls, (max_speed * flying)[:, np.newaxis])
+    return warnings
 
 
 class MotorPath:
@@ -186,7 +144,9 @@ class MotorPath:
         problem = self.check(msg)
         if problem is not None:
             return self.reject(*problem)
-        warning = self.apply(msg.controls[: L.N_ROTORS], bool(msg.mode & ARMED_FLAG))
+        controls = [msg.controls[: L.N_ROTORS]]  # a round of one
+        armed = [bool(msg.mode & ARMED_FLAG)]
+        (warning,) = fly([self], controls, armed, self.vehicle.rotor_cmd[np.newaxis])
         if msg.time_usec:
             self.last_command_usec = msg.time_usec
         self.last_frame = frame if lockstep else None
@@ -195,11 +155,10 @@ class MotorPath:
             X.advance(self.vehicle, self.episodes.step if self.episodes else None)
         return warning
 
-    def apply(self, controls: Any, armed: bool = True, speeds: bool = True) -> str | None:
-        """Take checked normalised rotor commands (four, in [0, 1]); ``armed`` False stops
-        the motors. ``speeds`` False: the caller sets the rotor speeds itself (a group
-        round does it for all vehicles at once). Returns a warning worth a STATUSTEXT,
-        or None."""
+    def take(self, armed: bool = True) -> str | None:
+        """Count one checked motor command and hand the rotors to it (the caller sets
+        their speeds: :func:`fly`); ``armed`` False: the command stops the motors.
+        Returns a warning worth a STATUSTEXT, or None."""
         v = self.vehicle
         warning = None
         self.flown_since_reset = True
@@ -207,11 +166,7 @@ class MotorPath:
             self.counters["while_disarmed"] += 1
             if self.counters["while_disarmed"] % 1000 == 1:
                 warning = "motor commands ignored: vehicle disarmed (arm it first)"
-        if speeds:
-            rotor_speeds = np.asarray(controls, dtype=np.float64) * v.airframe.max_rotor_speed
-            X.motor_command(v, rotor_speeds if armed else np.zeros(L.N_ROTORS))
-        else:
-            X.motor_command(v, None)
+        X.motor_command(v, None)
         self.counters["accepted"] += 1
         return warning
 
@@ -289,7 +244,7 @@ class MotorPath:
         2 crashed), NAMED_VALUE_FLOAT ``TD_SPEED`` (touchdown speed, m/s; only when not
         airborne) and last ODOMETRY (float32 pose and body-frame velocity)."""
         v = self.vehicle
-        time_usec = round(v.time * 1e6)
+        time_usec = to_time_usec(v.time)
         if self.episodes is None:
             state, contact, touchdown = v.state, int(v.fleet.contact[0]), v.fleet.touchdown_speed[0]
         else:  # what the delay line lets the controller see

@@ -17,12 +17,10 @@ import hmac
 import math
 from typing import Any
 
-from quadsitl.mavlink.links import PEER_TIMEOUT
 from quadsitl.mavlink.signing import NEW_STREAM_SLACK, SIGNED_FLAG, now_timestamp
+from quadsitl.wire.lockstep import BUSY_PREFIX, OWNER_SILENCE
 
-OWNER_SILENCE = PEER_TIMEOUT  # s without a datagram from the owner before it lapses
 REFUSAL_PERIOD = 0.5  # s: at most one refusal text a peer in this time
-BUSY_PREFIX = "lockstep in use by "  # the refusal text (fits one STATUSTEXT chunk)
 
 
 def where(address: Any) -> str:

@@ -1,4 +1,5 @@
-"""The MAVLink server: one ``handle_<message>`` per incoming message, telemetry out.
+"""The MAVLink server: a handler per incoming message id (:attr:`MavlinkServer.handlers`),
+telemetry out.
 
 It owns no sockets and no clock: the loop in :mod:`.runner` passes messages in with the
 link they came from, and calls :meth:`MavlinkServer.tick` after stepping the physics.
@@ -34,10 +35,11 @@ from quadsitl.vehicle.episodes import MotorEpisodes
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import Outcome, Severity
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire.statustext import split_text
 
-STATUSTEXT_LENGTH = 50
 SIGNING_REPORT_PERIOD = 10.0  # wall s between STATUSTEXT summaries of rejected messages
 MOTOR_LINK = "hil"  # the link name whose traffic is not logged and has no streams
+Handler = Callable[[Any, Link], None]  # a message, the link it came on
 RESULTS = {
     Outcome.ACCEPTED: mav.MAV_RESULT_ACCEPTED,
     Outcome.TEMPORARILY_REJECTED: mav.MAV_RESULT_TEMPORARILY_REJECTED,
@@ -90,10 +92,32 @@ class MavlinkServer:
         self.after_ack: list[Any] = []
         self.commands = Commands(self)
         self.counters = {"ignored": 0, "bad_values": 0}
-        self.handlers: dict[str, Callable[[Any, Link], None]] = {
-            name[len("handle_") :].upper(): getattr(self, name)
-            for name in dir(self)
-            if name.startswith("handle_")
+        self.handlers: dict[int, Handler] = {  # message id: its handler
+            mav.MAVLINK_MSG_ID_HEARTBEAT: self._on_heartbeat,
+            mav.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS: self._on_hil_actuator_controls,
+            mav.MAVLINK_MSG_ID_SETUP_SIGNING: self._on_setup_signing,
+            mav.MAVLINK_MSG_ID_PING: self._on_ping,
+            mav.MAVLINK_MSG_ID_TIMESYNC: self._on_timesync,
+            mav.MAVLINK_MSG_ID_COMMAND_LONG: self._command,
+            mav.MAVLINK_MSG_ID_COMMAND_INT: self._command,
+            mav.MAVLINK_MSG_ID_SET_MODE: self._on_set_mode,
+            mav.MAVLINK_MSG_ID_MANUAL_CONTROL: self._on_manual_control,
+            mav.MAVLINK_MSG_ID_REQUEST_DATA_STREAM: self._on_request_data_stream,
+            mav.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED: self._on_set_position_target,
+            mav.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET: self._on_set_attitude_target,
+            # parameters (param_protocol.py)
+            mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST: self._replying(self.params.on_request_list),
+            mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ: self._replying(self.params.on_request_read),
+            mav.MAVLINK_MSG_ID_PARAM_SET: self._on_param_set,
+            # missions (mission_protocol.py)
+            mav.MAVLINK_MSG_ID_MISSION_COUNT: self._replying(self.missions.on_count, timed=True),
+            mav.MAVLINK_MSG_ID_MISSION_ITEM_INT: self._replying(self.missions.on_item, timed=True),
+            mav.MAVLINK_MSG_ID_MISSION_ITEM: self._replying(self.missions.on_item, timed=True),
+            mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST: self._replying(self.missions.on_request_list),
+            mav.MAVLINK_MSG_ID_MISSION_REQUEST_INT: self._replying(self.missions.on_request),
+            mav.MAVLINK_MSG_ID_MISSION_REQUEST: self._replying(self.missions.on_request),
+            mav.MAVLINK_MSG_ID_MISSION_CLEAR_ALL: self._replying(self.missions.on_clear_all),
+            mav.MAVLINK_MSG_ID_MISSION_SET_CURRENT: self._on_mission_set_current,
         }
 
     def set_signing_key(self, key: bytes | None) -> None:
@@ -123,21 +147,17 @@ class MavlinkServer:
                 self.tlog.record(frame)
 
     def statustext(self, severity: int, text: str, echo: bool = True) -> None:
-        """STATUSTEXT on every link; long texts are split into chunks (MAVLink 2). A
-        chunked text ends with a chunk shorter than 50 bytes, an empty one if need be
-        (QGroundControl waits for it, src/MAVLink/StatusTextHandler.cc). ``echo``: also
-        print it on the console (a fleet prints a text that concerns all its vehicles once)."""
+        """STATUSTEXT on every link; long texts are split into chunks
+        (:mod:`quadsitl.wire.statustext`). ``echo``: also print it on the console (a fleet
+        prints a text that concerns all its vehicles once)."""
         if echo and self.echo is not None:
             self.echo(f"[{self.vehicle.time:8.2f} s] {text}")
-        data = text.encode("utf-8", "replace")
-        chunks = [data[i : i + STATUSTEXT_LENGTH] for i in range(0, len(data), STATUSTEXT_LENGTH)]
-        if len(chunks) > 1 and len(chunks[-1]) == STATUSTEXT_LENGTH:
-            chunks.append(b"")
+        chunks = split_text(text)
         chunk_id = 0
         if len(chunks) > 1:  # a counter: two texts' chunks never share an id (1..65535)
             self._statustext_id = self._statustext_id % 65535 + 1
             chunk_id = self._statustext_id
-        for seq, chunk in enumerate(chunks or [b""]):
+        for seq, chunk in enumerate(chunks):
             self.send(self.encoder.statustext_encode(severity, chunk, chunk_id, seq))
 
     @property
@@ -157,12 +177,6 @@ class MavlinkServer:
         )
 
     # --- the loop's hooks -------------------------------------------------------------
-    def receive(self, link: Link, received_at: float | None = None) -> None:
-        for message, peer in link.receive():
-            if self.tlog is not None and link.name != MOTOR_LINK:
-                self.tlog.record(bytes(message.get_msgbuf()), received_at)
-            self.dispatch(message, link, peer)
-
     def dispatch(self, message: Any, link: Link, peer: Peer | None = None) -> None:
         """Check and handle one message from ``peer`` of ``link``; a message that passes
         (signed with the key, when signing is on) makes the peer live (telemetry)."""
@@ -177,7 +191,7 @@ class MavlinkServer:
             return
         if peer is not None and (self.signing is None or is_signed(message)):
             link.accept(peer)
-        handler = self.handlers.get(message.get_type())
+        handler = self.handlers.get(message.get_msgId())
         if handler is None:
             return
         try:
@@ -228,7 +242,7 @@ class MavlinkServer:
         )
 
     # --- the ground station's heartbeat: link-loss failsafe (PX4's NAV_DLL_ACT) --------
-    def handle_heartbeat(self, msg: Any, link: Link) -> None:
+    def _on_heartbeat(self, msg: Any, link: Link) -> None:
         if msg.type != mav.MAV_TYPE_GCS or link.name == MOTOR_LINK:
             return
         self.gcs_heard = time.monotonic()
@@ -278,13 +292,13 @@ class MavlinkServer:
             self.statustext(Severity.WARNING, self.signing.summary())
 
     # --- motor path ---------------------------------------------------------------------
-    def handle_hil_actuator_controls(self, msg: Any, link: Link) -> None:
+    def _on_hil_actuator_controls(self, msg: Any, link: Link) -> None:
         problem = self.motors.command(msg)
         if problem is not None:
             self.statustext(Severity.WARNING, problem)
         self.send_together(self.motors.state_messages(self.hil_state(link)), link)
 
-    def handle_setup_signing(self, msg: Any, link: Link) -> None:
+    def _on_setup_signing(self, msg: Any, link: Link) -> None:
         """A new key from a ground station (MAVProxy's ``signing setup``). Once signing is
         on, only a message signed with the current key gets here; all zeros: off."""
         key = bytes(msg.secret_key)
@@ -297,7 +311,7 @@ class MavlinkServer:
         return id(link) not in self.without_hil_state
 
     # --- heartbeat, ping, time --------------------------------------------------------
-    def handle_ping(self, msg: Any, link: Link) -> None:
+    def _on_ping(self, msg: Any, link: Link) -> None:
         if msg.target_system == 0:  # a request, not an answer to one of ours
             self.send(
                 self.encoder.ping_encode(
@@ -306,29 +320,17 @@ class MavlinkServer:
                 link,
             )
 
-    def handle_timesync(self, msg: Any, link: Link) -> None:
+    def _on_timesync(self, msg: Any, link: Link) -> None:
         if msg.tc1 == 0:
             self.send(self.encoder.timesync_encode(time.monotonic_ns(), msg.ts1), link)
 
     # --- parameters (param_protocol.py) ------------------------------------------------
-    def handle_param_request_list(self, msg: Any, link: Link) -> None:
-        self.params.on_request_list(msg, self._reply(link))
-
-    def handle_param_request_read(self, msg: Any, link: Link) -> None:
-        self.params.on_request_read(msg, self._reply(link))
-
-    def handle_param_set(self, msg: Any, link: Link) -> None:
+    def _on_param_set(self, msg: Any, link: Link) -> None:
         if getattr(msg, "target_component", 0) not in (0, self.component_id):
             return
         self.params.on_set(msg, self._reply(link), self.send)
 
     # --- commands ---------------------------------------------------------------------
-    def handle_command_long(self, msg: Any, link: Link) -> None:
-        self._command(msg, link)
-
-    def handle_command_int(self, msg: Any, link: Link) -> None:
-        self._command(msg, link)
-
     def _command(self, msg: Any, link: Link) -> None:
         if getattr(msg, "target_component", 0) not in (0, self.component_id):
             self.counters["ignored"] += 1
@@ -347,7 +349,7 @@ class MavlinkServer:
             self.send_together(self.after_ack, link)
             self.after_ack = []
 
-    def handle_set_mode(self, msg: Any, link: Link) -> None:
+    def _on_set_mode(self, msg: Any, link: Link) -> None:
         """SET_MODE (QGroundControl's PX4 plugin and MAVProxy send it); no ACK exists for
         it: the heartbeat shows the new mode, a STATUSTEXT the refusal."""
         try:
@@ -359,7 +361,7 @@ class MavlinkServer:
         if result.reason:
             self.statustext(Severity.WARNING, result.reason)
 
-    def handle_manual_control(self, msg: Any, link: Link) -> None:
+    def _on_manual_control(self, msg: Any, link: Link) -> None:
         """Joystick (QGroundControl's): x forward, y right, r yaw in ±1000, z thrust
         0..1000 with 500 = hold altitude. Flown in POSCTL/ALTCTL; COM_RC_IN_MODE = 4
         turns stick input off."""
@@ -372,7 +374,7 @@ class MavlinkServer:
         )
         self.vehicle.stick_input(x / 1000, y / 1000, (z - 500) / 500, r / 1000)
 
-    def handle_request_data_stream(self, msg: Any, link: Link) -> None:
+    def _on_request_data_stream(self, msg: Any, link: Link) -> None:
         ids = T.DATA_STREAMS.get(msg.req_stream_id, ())
         rate = float(msg.req_message_rate) if msg.start_stop else 0.0
         for message_id in ids:
@@ -382,35 +384,21 @@ class MavlinkServer:
     def _reply(self, link: Link) -> Callable[[Any], None]:
         return lambda message: self.send(message, link)
 
-    def handle_mission_count(self, msg: Any, link: Link) -> None:
-        self.missions.on_count(msg, self._reply(link), time.monotonic())
+    def _replying(self, on: Callable[..., None], timed: bool = False) -> Handler:
+        """A handler calling a protocol's ``on(msg, reply)`` (``timed``: with the wall
+        time, ``on(msg, reply, now)``), replies going back on the message's link."""
+        if timed:
+            return lambda msg, link: on(msg, self._reply(link), time.monotonic())
+        return lambda msg, link: on(msg, self._reply(link))
 
-    def handle_mission_item_int(self, msg: Any, link: Link) -> None:
-        self.missions.on_item(msg, self._reply(link), time.monotonic())
-
-    def handle_mission_item(self, msg: Any, link: Link) -> None:
-        self.missions.on_item(msg, self._reply(link), time.monotonic())
-
-    def handle_mission_request_list(self, msg: Any, link: Link) -> None:
-        self.missions.on_request_list(msg, self._reply(link))
-
-    def handle_mission_request_int(self, msg: Any, link: Link) -> None:
-        self.missions.on_request(msg, self._reply(link))
-
-    def handle_mission_request(self, msg: Any, link: Link) -> None:
-        self.missions.on_request(msg, self._reply(link))
-
-    def handle_mission_clear_all(self, msg: Any, link: Link) -> None:
-        self.missions.on_clear_all(msg, self._reply(link))
-
-    def handle_mission_set_current(self, msg: Any, link: Link) -> None:
+    def _on_mission_set_current(self, msg: Any, link: Link) -> None:
         result = self.vehicle.set_mission_current(msg.seq)
         if result.reason:
             self.statustext(Severity.WARNING, result.reason)
         self.send(T.build_mission_current(self.snapshot()), link)
 
     # --- offboard (offboard.py) ---------------------------------------------------------
-    def handle_set_position_target_local_ned(self, msg: Any, link: Link) -> None:
+    def _on_set_position_target(self, msg: Any, link: Link) -> None:
         v = self.vehicle
         yaw_now = float(frames.euler_from_quat(v.fleet.quaternion[0])[2])
         setpoint = offboard.position_target(msg, v.position, yaw_now, v.airframe.gear_height)
@@ -419,7 +407,7 @@ class MavlinkServer:
         else:
             v.offboard_setpoint(setpoint)
 
-    def handle_set_attitude_target(self, msg: Any, link: Link) -> None:
+    def _on_set_attitude_target(self, msg: Any, link: Link) -> None:
         setpoint = offboard.attitude_target(msg)
         if isinstance(setpoint, str):
             self._bad_value(setpoint)

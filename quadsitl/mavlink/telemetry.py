@@ -24,11 +24,9 @@ from typing import Any
 import numpy as np
 
 from quadsitl import frames
-from quadsitl.mavlink import fast_codec as FC
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.degrade import SLOWEST_RATE
 from quadsitl.mavlink.estimate import build_estimate_odometry
-from quadsitl.mavlink.hil_state import WireState
 from quadsitl.mavlink.identity import (
     AVAILABLE_MODES,
     CUSTOM_VERSION,
@@ -36,13 +34,17 @@ from quadsitl.mavlink.identity import (
     MIDDLEWARE_VERSION,
     Identity,
 )
-from quadsitl.mavlink.motor_path import STANDARD_GRAVITY, odometry_values
+from quadsitl.mavlink.motor_path import STANDARD_GRAVITY
 from quadsitl.physics import dryden as D
 from quadsitl.physics import layout as L
 from quadsitl.physics.sensors import environment as E
 from quadsitl.physics.sensors.gps import FIX_3D
 from quadsitl.vehicle.modes import MAIN_AUTO, MAIN_OFFBOARD, MAIN_POSCTL, Mode
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.answer import UNUSED_OUTPUTS, odometry_values
+from quadsitl.wire.state import WireState
+from quadsitl.wire.units import to_time_usec
 
 _encoder = mav.MAVLink(None)
 
@@ -105,7 +107,7 @@ class Snapshot:
         self.error_counts = [min(n, 65535) for n in error_counts]  # signing, motor commands
         s = vehicle.nav_state  # the truth itself unless EKF2_EN selects the estimate
         self.time_boot_ms = int(vehicle.time * 1000) & 0xFFFFFFFF
-        self.time_usec = int(vehicle.time * 1e6)
+        self.time_usec = to_time_usec(vehicle.time)
         # Local origin: the start position on the ground (the resting centre of mass is
         # gear height up); the conversion is WireState's, shared with the motor path.
         wire = WireState.from_physics(s, vehicle.airframe.gear_height, self.time_usec, 0, 0.0)
@@ -352,7 +354,7 @@ def build_servo_output_raw(s: Snapshot) -> Any:
 
 
 def build_actuator_output_status(s: Snapshot) -> Any:
-    speeds = [float(w) for w in s.rotor_speeds] + [0.0] * 28  # rad/s, measured
+    speeds = [float(w) for w in s.rotor_speeds] + list(UNUSED_OUTPUTS)  # rad/s, measured
     return _encoder.actuator_output_status_encode(s.time_usec, 0b1111, speeds)
 
 

@@ -15,6 +15,7 @@ are in degrees, unwrapped (continuous through ±180°). Frames: see
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -26,6 +27,7 @@ from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.modes import Mode
 from quadsitl.viz.scene import WIND_ARROW_SCALE, pose_from_ned, quat_xyzw
 
+M = mavutil.mavlink
 GCS_TYPE = 6  # MAV_TYPE_GCS
 SEVERITY = ["CRITICAL"] * 3 + ["ERROR", "WARN", "INFO", "INFO", "DEBUG"]  # MAV_SEVERITY 0..7
 
@@ -54,6 +56,30 @@ class FlightView:
     last_angle: dict[str, float] = field(default_factory=dict)  # entity -> last degrees
     position: np.ndarray = field(default_factory=lambda: np.zeros(3))  # m, ENU: the latest
     windy: bool = False  # a WIND_COV with moving air has been seen
+    handlers: dict[int, Callable[[Any], list[Sample]]] = field(
+        init=False, repr=False, compare=False
+    )
+
+    def __post_init__(self) -> None:
+        self.handlers = {  # message id: the samples of a message from the vehicle
+            M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: self._local_position_ned,
+            M.MAVLINK_MSG_ID_ODOMETRY: self._odometry,
+            M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self._global_position_int,
+            M.MAVLINK_MSG_ID_HOME_POSITION: self._home_position,
+            M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: self._attitude_quaternion,
+            M.MAVLINK_MSG_ID_HIL_STATE_QUATERNION: self._hil_state_quaternion,
+            M.MAVLINK_MSG_ID_ATTITUDE: self._attitude,
+            M.MAVLINK_MSG_ID_ATTITUDE_TARGET: self._attitude_target,
+            M.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: self._position_target_local_ned,
+            M.MAVLINK_MSG_ID_MISSION_CURRENT: self._mission_current,
+            M.MAVLINK_MSG_ID_GPS_RAW_INT: self._gps_raw_int,
+            M.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: self._actuator_output_status,
+            M.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: self._servo_output_raw,
+            M.MAVLINK_MSG_ID_BATTERY_STATUS: self._battery_status,
+            M.MAVLINK_MSG_ID_SYS_STATUS: self._sys_status,
+            M.MAVLINK_MSG_ID_WIND_COV: self._wind_cov,
+            M.MAVLINK_MSG_ID_STATUSTEXT: self._statustext,
+        }
 
     def samples(self, msg: Any, own: bool = False) -> list[Sample]:
         """Samples of one message; ``own``: built by the simulator itself (no header)."""
@@ -64,7 +90,7 @@ class FlightView:
             return self._from_anyone(kind, msg)  # either direction: GCS or vehicle
         if not own and not self._from_vehicle(msg):
             return []
-        handler = getattr(self, f"_{kind.lower()}", None)
+        handler = self.handlers.get(msg.get_msgId())
         if handler is None:
             return []
         self.seen.add(kind)

@@ -19,7 +19,7 @@ from typing import Any
 
 from fastcrc import crc16
 
-from quadsitl.mavlink import mavlink as mav
+from quadsitl.wire.dialect import mavlink as mav
 
 MAGIC = 0xFD  # MAVLink 2
 HEADER = struct.Struct("<BBBBBBBHB")  # magic, len, incompat, compat, seq, sys, comp, id

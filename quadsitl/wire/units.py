@@ -1,0 +1,20 @@
+"""The wire's units, one rule each: simulated time as ``time_usec``, and a normalised
+rotor command as a rotor speed. No pymavlink here: the flight-stack bridges that speak
+other protocols use these too."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def to_time_usec(seconds: float) -> int:
+    """Simulated seconds as a wire ``time_usec``: rounded to the nearest microsecond
+    (every message of a step carries the same stamp)."""
+    return round(seconds * 1e6)
+
+
+def rotor_speed(u: Any, omega_max: Any) -> Any:
+    """Ω = u·Ω_max: a normalised rotor command u in [0, 1] as a rotor speed, rad/s (the one
+    place this is written; numbers, or arrays that broadcast: (k, 4) commands and (k, 1)
+    top speeds)."""
+    return u * omega_max
