@@ -20,13 +20,13 @@ from policies.export.runtimes import load_policy
 from policies.networks import DeterministicPolicy
 from quadsitl.physics import Airframe
 from quadsitl.physics import layout as L
-from quadsitl.tasks import TaskOptions
+from quadsitl.tasks import TASKS, TaskOptions
 from quadsitl.tasks import features as F
 from quadsitl.vehicle.controller import CascadedController, Setpoint
 
-# m: the farthest goal shown to the policy, by the task it learned (hover: its start
-# offsets, ±0.3 m; waypoints: goals 1–2.5 m away).
-CARROT = {"hover": 0.25, "static_waypoint": 1.5, "random_waypoint": 2.0}
+# m: the farthest goal shown to the policy, by the task it learned (TaskSpec.carrot);
+# the tasks without one cannot fly goto and mission legs.
+CARROT = {name: t.carrot for name, t in TASKS.items() if t.carrot is not None}
 REANCHOR = 0.5  # fraction of the carrot distance that counts as reached
 
 
@@ -61,7 +61,7 @@ class PolicyAutopilot:
     def from_checkpoint(cls, path: str, airframe: Airframe) -> PolicyAutopilot:
         """From a checkpoint (.pt) or its export (.onnx, or a C .h with its contract)."""
         net, config = load_policy(path)
-        if config.task not in ("hover", "static_waypoint", "random_waypoint"):
+        if config.task not in CARROT:
             raise ValueError(f"a {config.task} policy cannot fly goto and mission legs")
         options = {k: v for k, v in config.task_options.items() if not k.startswith("init_")}
         return cls(
@@ -69,7 +69,7 @@ class PolicyAutopilot:
             airframe,
             TaskOptions.from_kwargs(**options),
             CARROT[config.task],
-            goal_at_origin=config.task == "hover",
+            goal_at_origin=TASKS[config.task].goal_at_origin,
         )
 
     def reset(self) -> None:

@@ -325,19 +325,21 @@ class TaskEngine:
         if self.task.advance_goal is not None:
             self.task.advance_goal(self, active)
         self.task.evaluate(
-            fleet.state,
-            fleet.params,
-            fleet.contact,
-            self.goal,
-            self.action,
-            self.steps,
-            self.max_steps,
-            self.obs,
-            self.dist,
-            self.prev_dist,
-            self.tilt,
-            self.reward,
-            self.outcome,
+            S.StepBatch(
+                state=fleet.state,
+                params=fleet.params,
+                contact=fleet.contact,
+                goal=self.goal,
+                action=self.action,
+                steps=self.steps,
+                max_steps=self.max_steps,
+                obs=self.obs,
+                dist=self.dist,
+                prev_dist=self.prev_dist,
+                tilt=self.tilt,
+                reward=self.reward,
+                outcome=self.outcome,
+            )
         )
         if self.observation_noise is not None:
             self._observe_noisy(np.arange(self.n), self.control_period)
