@@ -18,6 +18,7 @@ TASK_NAMES = (
     "random_waypoint",
     "land",
     "target_follow",
+    "figure_eight",
 )
 NAMESPACE = "QuadSITL"
 VERSION = 0
