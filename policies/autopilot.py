@@ -22,6 +22,7 @@ from quadsitl.physics import Airframe
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS, TaskOptions
 from quadsitl.tasks import features as F
+from quadsitl.tasks.engine import commanded_rotor_speed
 from quadsitl.vehicle.controller import CascadedController, Setpoint
 
 # m: the farthest goal shown to the policy, by the task it learned (TaskSpec.carrot);
@@ -105,9 +106,9 @@ class PolicyAutopilot:
         local[0, L.POS] -= origin
         self.goal[0, F.GOAL_POS] = goal - origin
         F.observe(local, self.params, self.goal, self.obs, self.dist, self.tilt)
-        action = self.net.mean_action(self.obs)[0]
-        hover = self.airframe.hover_rotor_speed
-        self.command = np.clip(hover + self.beta * action, 0.0, self.airframe.max_rotor_speed)
+        action = self.net.mean_action(self.obs)[0].astype(np.float64)  # as the envs step it
+        omega = commanded_rotor_speed(self.airframe.hover_rotor_speed, self.beta, action)
+        self.command = np.clip(omega, 0.0, self.airframe.max_rotor_speed)
         return self.command
 
     def _carrot(self, position: np.ndarray) -> np.ndarray:

@@ -25,6 +25,7 @@ TARGET_SUCCESS = 0.9  # "reached": the first periodic validation at or above thi
 # shortened for the long tasks so that 45 runs fit in about an hour on two cores
 # (TaskSpec.comparison_steps).
 FAST_BUDGET = {name: t.comparison_steps for name, t in TASKS.items()}
+PAPER_TASKS = tuple(name for name, t in TASKS.items() if t.paper)  # the comparison's tasks
 
 
 def score_run(

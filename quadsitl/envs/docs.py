@@ -56,6 +56,9 @@ landed_off_pad, crashed), ``success``, ``final_distance`` (m), ``time_within_thr
 
 VERSION_HISTORY = """## Version History
 * v0: {history}"""
+PAPER_HISTORY = """the paper's task, without the original code's bugs (stale distances at reset,
+  inconsistent rotor observation, inverse Euler angles, wrong crash geometry)."""
+OWN_HISTORY = "a task of quadsitl's own (not in the paper)."
 
 
 def env_doc(task: TaskSpec) -> str:
@@ -77,7 +80,7 @@ def env_doc(task: TaskSpec) -> str:
             f"## Episode End\n{doc.end}; truncated after {seconds:g} s ({steps} steps). "
             f"Success: {task.success_text()}.",
             ARGUMENTS.format(seconds=seconds),
-            VERSION_HISTORY.format(history=doc.history),
+            VERSION_HISTORY.format(history=PAPER_HISTORY if task.paper else OWN_HISTORY),
         ]
     )
 

@@ -31,6 +31,13 @@ from quadsitl.tasks.reward import jit
 
 
 @jit
+def commanded_rotor_speed(hover, beta, action):  # pragma: no cover - compiled
+    """Eq. 19: Ω_c = Ω_h + β·a, rad/s, of actions ``a`` (a number or an array; float64),
+    for the hover speed Ω_h (rad/s) and the action scale β (rad/s)."""
+    return hover + beta * action
+
+
+@jit
 def take_action(raw, active, hover, beta, low, high, action, rotor_cmd, steps):  # pragma: no cover
     """Start a step: ``action`` = the raw actions clipped to [low, high] (0 where not
     ``active``), rotor commands Ω_c = Ω_h + β·a (Eq. 19: the bounds are the rotor speeds
@@ -45,7 +52,7 @@ def take_action(raw, active, hover, beta, low, high, action, rotor_cmd, steps): 
         for i in range(raw.shape[1]):
             a = min(max(raw[n, i], low), high) if active[n] else 0.0
             action[n, i] = a
-            rotor_cmd[n, i] = hover + beta * a
+            rotor_cmd[n, i] = commanded_rotor_speed(hover, beta, a)
         steps[n] += 1
     return -1
 

@@ -110,7 +110,6 @@ TASK = S.TaskSpec(
         start="Vehicle and point at the origin, level, at rest, rotors at hover speed.",
         end=f"Terminated when any |x|, |y|, |z| > {BOUND_BOX:g} m or beyond "
         f"{math.degrees(MAX_TILT):g}° roll/pitch",
-        history="a tracking task of quadsitl's own (not in the paper).",
     ),
     episode_seconds=EPISODE_SECONDS,
     evaluate=evaluate,

@@ -33,6 +33,7 @@ def evaluate(b):  # pragma: no cover - compiled
 
 TASK = S.TaskSpec(
     name="hover",
+    paper=True,
     doc=S.TaskDoc(
         description="Hold position at the origin, level, heading yaw 0 (east).",
         rewards=R.eq18_text(WEIGHTS, f" + {TIME_REWARD:g}"),

@@ -74,6 +74,7 @@ def landed(engine, rows: np.ndarray) -> np.ndarray:
 _PAPER = get_airframe("paper")  # the limits the docs quote
 TASK = S.TaskSpec(
     name="land",
+    paper=True,
     doc=S.TaskDoc(
         description=f"Descend onto the pad at the origin (ground z = 0) at about "
         f"{DESCENT_RATE:g} m/s without crashing.",

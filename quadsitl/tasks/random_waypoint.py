@@ -29,6 +29,7 @@ def evaluate(b):  # pragma: no cover - compiled
 
 TASK = S.TaskSpec(
     name="random_waypoint",
+    paper=True,
     doc=S.TaskDoc(
         description="Fly to a goal drawn each episode at radius U({:g}, {:g}) m in a uniformly "
         "random direction.".format(*GOAL_DISTANCE),

@@ -84,10 +84,6 @@ class TaskDoc:
     rewards: str  # the per-step reward (reward.eq18_text and the task's terms)
     start: str  # the starting state
     end: str  # what terminates an episode (its time limit and success are added)
-    history: str = (  # the v0 line of its version history
-        "the paper's task, without the original code's bugs (stale distances at reset,\n"
-        "  inconsistent rotor observation, inverse Euler angles, wrong crash geometry)."
-    )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -102,6 +98,7 @@ class TaskSpec:
 
     name: str
     doc: TaskDoc
+    paper: bool = False  # one of the paper's five tasks (the algorithm comparison's)
     episode_seconds: float
     evaluate: Callable[[StepBatch], None]
     goal_radius: float  # m: the time-within and reach-time metrics count inside it

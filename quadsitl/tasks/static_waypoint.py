@@ -43,6 +43,7 @@ def evaluate(b):  # pragma: no cover - compiled
 
 TASK = S.TaskSpec(
     name="static_waypoint",
+    paper=True,
     doc=S.TaskDoc(
         description=f"Fly from the origin to the waypoint ({GOAL[0]:g}, {GOAL[1]:g}, "
         f"{GOAL[2]:g}) m and stay there.",

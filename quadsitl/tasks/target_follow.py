@@ -129,6 +129,7 @@ def followed(engine, rows: np.ndarray) -> np.ndarray:
 
 TASK = S.TaskSpec(
     name="target_follow",
+    paper=True,
     doc=S.TaskDoc(
         description=f"Follow a target moving at {SPEED:g} m/s along chained quadratic Bézier "
         f"curves through random points in [−{BOX:g}, {BOX:g}]³ m, staying within {RANGE:g} m "
