@@ -8,7 +8,7 @@ over seeds) written as PNGs. Runs go ``--jobs`` at a time (default 2, one per co
 the reference machine), so their wall clocks are those of runs sharing the CPU. An
 interrupted comparison continues with ``--resume`` (same ``--runs``).
 
-    python benchmarks/algorithms.py                        # fast preset, all tasks
+    python benchmarks/algorithms.py                        # fast preset, the paper's tasks
     python benchmarks/algorithms.py --tasks hover --preset paper --seeds 0 1 2
 
 Prints the table, then ``<task>_<algo>_<preset>_success:`` lines (mean test success over
@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from policies.comparison import FAST_BUDGET, comparison_table
+from policies.comparison import FAST_BUDGET, PAPER_TASKS, comparison_table
 from policies.config import ALGORITHMS, TASK_NAMES
 from policies.plots import learning_curves
 from policies.sweep import run_sweep
@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--tasks", nargs="*", default=list(TASK_NAMES), choices=TASK_NAMES)
+    parser.add_argument("--tasks", nargs="*", default=list(PAPER_TASKS), choices=TASK_NAMES)
     parser.add_argument("--algos", nargs="*", default=list(ALGORITHMS), choices=ALGORITHMS)
     parser.add_argument("--preset", default="fast", choices=("fast", "paper"))
     parser.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2])

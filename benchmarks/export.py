@@ -27,9 +27,7 @@ from policies import checkpoint
 from policies.export.parity import max_differences, record_observations
 from policies.export.runtimes import FLOATS, CPolicy, OnnxPolicy
 from policies.export.writer import export
-from quadsitl.tasks import TASKS
 
-CHECKPOINTS = Path(__file__).resolve().parents[1] / "policies" / "checkpoints"
 C_CALL_TARGET_US = 20.0
 CALLS = 2_000  # per timing run (Python-side forms)
 C_CALLS = 100_000  # per timing run (the C loop)
@@ -48,7 +46,7 @@ def best_us(run: Callable[[], None], calls: int, repeats: int = 5) -> float:
 
 def time_forms(task: str, folder: Path) -> tuple[dict[str, float], dict[str, float]]:
     """(µs per call of each form, max abs difference of each form from PyTorch)."""
-    source = CHECKPOINTS / f"{task}.pt"
+    source = checkpoint.SHIPPED / f"{task}.pt"
     net, config, _ = checkpoint.load(source)
     onnx_file = export(source, "onnx", folder)[0]
     header = export(source, "c", folder)[0]
@@ -97,7 +95,7 @@ def main() -> None:
     )
     worst = {"torch": 0.0, "onnxruntime": 0.0, "c": 0.0}
     with tempfile.TemporaryDirectory(prefix="quadsitl-bench-export-") as folder:
-        for task in TASKS:
+        for task in checkpoint.shipped_checkpoints():
             times, diff = time_forms(task, Path(folder))
             for form in worst:
                 worst[form] = max(worst[form], times[form])

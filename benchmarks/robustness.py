@@ -19,9 +19,7 @@ from benchmarks._common import pin_to_one_core
 from policies import checkpoint
 from policies.ladder import LADDER
 from policies.robustness import climb
-from quadsitl.tasks import TASKS
 
-CHECKPOINTS = Path(__file__).resolve().parents[1] / "policies" / "checkpoints"
 TARGET_SECONDS = 180.0
 EPISODES = 100
 
@@ -31,8 +29,8 @@ def main() -> None:
     torch.set_num_threads(1)
     rungs = sum(len(rungs) for _, rungs in LADDER.values())
     seconds = {}
-    for task in TASKS:
-        net, config, _ = checkpoint.load(CHECKPOINTS / f"{task}.pt")
+    for task, path in checkpoint.shipped_checkpoints().items():
+        net, config, _ = checkpoint.load(path)
         ladder = climb(task, net, config, episodes=EPISODES)
         worst = min(ladder.rows, key=lambda row: row.success_rate)
         seconds[task] = ladder.seconds

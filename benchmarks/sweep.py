@@ -26,8 +26,8 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from policies.comparison import FAST_BUDGET, score_run
-from policies.config import ALGORITHMS, TASK_NAMES, make_config
+from policies.comparison import FAST_BUDGET, PAPER_TASKS, score_run
+from policies.config import ALGORITHMS, make_config
 from policies.sweep import run_sweep
 from policies.train import train
 
@@ -74,7 +74,7 @@ def main() -> None:
         grid = {"task": ["hover"], "algo": ["ppo", "trpo"], "seed": [0, 1]}
         steps, episodes = {"hover": 98_304}, 25
     else:
-        grid = {"task": list(TASK_NAMES), "algo": list(ALGORITHMS), "seed": [0]}
+        grid = {"task": list(PAPER_TASKS), "algo": list(ALGORITHMS), "seed": [0]}
         steps, episodes = FAST_BUDGET, 100
     runs = len(grid["task"]) * len(grid["algo"]) * len(grid["seed"])
     pool = pool_seconds(grid, steps, episodes)

@@ -20,13 +20,14 @@ from policies.export.runtimes import load_policy
 from policies.networks import DeterministicPolicy
 from quadsitl.physics import Airframe
 from quadsitl.physics import layout as L
-from quadsitl.tasks import TaskOptions
+from quadsitl.tasks import TASKS, TaskOptions
 from quadsitl.tasks import features as F
+from quadsitl.tasks.engine import commanded_rotor_speed
 from quadsitl.vehicle.controller import CascadedController, Setpoint
 
-# m: the farthest goal shown to the policy, by the task it learned (hover: its start
-# offsets, ±0.3 m; waypoints: goals 1–2.5 m away).
-CARROT = {"hover": 0.25, "static_waypoint": 1.5, "random_waypoint": 2.0}
+# m: the farthest goal shown to the policy, by the task it learned (TaskSpec.carrot);
+# the tasks without one cannot fly goto and mission legs.
+CARROT = {name: t.carrot for name, t in TASKS.items() if t.carrot is not None}
 REANCHOR = 0.5  # fraction of the carrot distance that counts as reached
 
 
@@ -61,7 +62,7 @@ class PolicyAutopilot:
     def from_checkpoint(cls, path: str, airframe: Airframe) -> PolicyAutopilot:
         """From a checkpoint (.pt) or its export (.onnx, or a C .h with its contract)."""
         net, config = load_policy(path)
-        if config.task not in ("hover", "static_waypoint", "random_waypoint"):
+        if config.task not in CARROT:
             raise ValueError(f"a {config.task} policy cannot fly goto and mission legs")
         options = {k: v for k, v in config.task_options.items() if not k.startswith("init_")}
         return cls(
@@ -69,7 +70,7 @@ class PolicyAutopilot:
             airframe,
             TaskOptions.from_kwargs(**options),
             CARROT[config.task],
-            goal_at_origin=config.task == "hover",
+            goal_at_origin=TASKS[config.task].goal_at_origin,
         )
 
     def reset(self) -> None:
@@ -105,9 +106,9 @@ class PolicyAutopilot:
         local[0, L.POS] -= origin
         self.goal[0, F.GOAL_POS] = goal - origin
         F.observe(local, self.params, self.goal, self.obs, self.dist, self.tilt)
-        action = self.net.mean_action(self.obs)[0]
-        hover = self.airframe.hover_rotor_speed
-        self.command = np.clip(hover + self.beta * action, 0.0, self.airframe.max_rotor_speed)
+        action = self.net.mean_action(self.obs)[0].astype(np.float64)  # as the envs step it
+        omega = commanded_rotor_speed(self.airframe.hover_rotor_speed, self.beta, action)
+        self.command = np.clip(omega, 0.0, self.airframe.max_rotor_speed)
         return self.command
 
     def _carrot(self, position: np.ndarray) -> np.ndarray:

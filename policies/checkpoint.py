@@ -23,6 +23,15 @@ from policies.networks import ActorCritic, DeterministicPolicy
 
 FORMAT = "quadsitl-policy-1"
 MAX_SIZE = 1_000_000  # observations, actions: anything larger is not one of ours
+SHIPPED = Path(__file__).resolve().parent / "checkpoints"  # the trained policies, TASK.pt
+
+
+def shipped_checkpoints() -> dict[str, Path]:
+    """Task name -> its shipped policy, for the tasks of the task list that have one (a
+    task may have none: the benchmarks and tests that fly shipped policies skip it)."""
+    from quadsitl.tasks import TASKS
+
+    return {task: SHIPPED / f"{task}.pt" for task in TASKS if (SHIPPED / f"{task}.pt").is_file()}
 
 
 def save(path: str | Path, net: ActorCritic, config: TrainConfig, **extra: Any) -> None:

@@ -18,17 +18,14 @@ import numpy as np
 
 from policies import checkpoint
 from policies.evaluate import TASK_METRICS, evaluate
+from quadsitl.tasks import TASKS
 
 TARGET_SUCCESS = 0.9  # "reached": the first periodic validation at or above this
 # Steps per run of the fast-preset comparison: the PPO budget that learns each task,
-# shortened for the two long tasks so that 45 runs fit in about an hour on two cores.
-FAST_BUDGET = {
-    "hover": 800_000,
-    "static_waypoint": 2_000_000,
-    "random_waypoint": 4_000_000,
-    "land": 4_000_000,
-    "target_follow": 2_000_000,
-}
+# shortened for the long tasks so that 45 runs fit in about an hour on two cores
+# (TaskSpec.comparison_steps).
+FAST_BUDGET = {name: t.comparison_steps for name, t in TASKS.items()}
+PAPER_TASKS = tuple(name for name, t in TASKS.items() if t.paper)  # the comparison's tasks
 
 
 def score_run(

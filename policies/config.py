@@ -185,14 +185,9 @@ PAPER: dict[str, dict[str, Any]] = {
     "ppo": {"gae_lambda": 0.92, "epochs": 4, "clip_coef": 0.1},
     "trpo": {"gae_lambda": 0.97},
 }
-# Evaluation standard (and training distribution) of every task: a randomised start.
-STARTS: dict[str, dict[str, Any]] = {
-    "hover": {"init_position_noise": 0.3, "init_attitude_noise": 0.2},
-    "static_waypoint": {"init_attitude_noise": 0.1},
-    "random_waypoint": {"init_attitude_noise": 0.1},
-    "land": {"init_attitude_noise": 0.1},
-    "target_follow": {"init_attitude_noise": 0.1},
-}
+# Evaluation standard (and training distribution) of every task: a randomised start,
+# as each task's spec states it (TaskSpec.train_start).
+STARTS: dict[str, dict[str, Any]] = {name: dict(t.train_start) for name, t in TASKS.items()}
 FAST_COMMON: dict[str, Any] = {
     "num_envs": 128,
     "steps_per_env": 32,
@@ -231,13 +226,8 @@ FAST_TASK_ALGO: dict[tuple[str, str], dict[str, Any]] = {
     ("random_waypoint", "ppo"): {"entropy_coef": 0.0},
     ("land", "ppo"): {"entropy_coef": 0.0},
 }
-FAST_STEPS = {
-    "hover": 800_000,
-    "static_waypoint": 2_000_000,
-    "random_waypoint": 12_000_000,
-    "land": 6_000_000,
-    "target_follow": 6_000_000,
-}
+# The fast preset's budget that learns each task, by measurement (TaskSpec.train_steps).
+FAST_STEPS = {name: t.train_steps for name, t in TASKS.items()}
 
 
 FOREIGN_STEPS = 1_000_000  # default budget of the fast preset for another Gymnasium env

@@ -18,18 +18,14 @@ from policies.config import TrainConfig
 from policies.networks import DeterministicPolicy
 from policies.rollout import SEED_SPACING, make_vector_env
 from quadsitl.physics import layout as L
+from quadsitl.tasks import TASKS, get_task
 from quadsitl.tasks import features as F
 
 EVAL_SEED = 10_000  # test starts (quadsitl eval, the reported figures)
 VALIDATION_SEED = 20_000  # other starts, for choosing the best checkpoint while training
-# The figure that says how a task went, beyond success (episode-end info key, unit).
-TASK_METRICS: dict[str, tuple[str, str, str]] = {
-    "hover": ("final_distance", "final position error", "m"),
-    "static_waypoint": ("reach_time", "waypoint reach time", "s"),
-    "random_waypoint": ("reach_time", "waypoint reach time", "s"),
-    "land": ("touchdown_speed", "touchdown speed", "m/s"),
-    "target_follow": ("final_distance", "final range error", "m"),
-}
+# The figure that says how a task went, beyond success (episode-end info key, name,
+# unit): each task's spec states it.
+TASK_METRICS: dict[str, tuple[str, str, str]] = {name: t.metric for name, t in TASKS.items()}
 # How an episode ended (the task engine's outcome names), in words.
 OUTCOME_MEANINGS = {
     "timed_out": "flew until the episode's time limit",
@@ -39,19 +35,11 @@ OUTCOME_MEANINGS = {
     "landed_off_pad": "touched down off the pad",
     "crashed": "hit the ground too hard",
 }
-# What counts as a success, per task (the others: timed_out within the success radius).
-SUCCESS_RULES = {
-    "land": "landed",
-    "target_follow": "timed_out, having kept the target within range 80 % of the time",
-}
 
 
 def success_rule(task: str) -> str:
     """A task's success in terms of its outcome names (for the evaluation's output)."""
-    from quadsitl.tasks import get_task
-
-    radius = get_task(task).success_radius
-    return SUCCESS_RULES.get(task, f"timed_out within {radius:g} m of the goal at the end")
+    return get_task(task).success_text()
 
 
 @dataclass

@@ -1,23 +1,42 @@
-"""Register the five tasks with Gymnasium (done on ``import quadsitl``)."""
+"""The task list, and the Gymnasium ids derived from it (registered on ``import quadsitl``).
+
+``TASK_NAMES`` is the one list of quadsitl's tasks: each name is a module of
+``quadsitl.tasks`` that defines ``TASK`` (a ``TaskSpec``). Everything per task is derived
+from it: the Gymnasium ids (here), the task registry (``quadsitl.tasks.TASKS``), the env
+classes (``quadsitl.envs``) and the trainers' and evaluators' tables (``policies``).
+Adding a task is its module plus its name here (docs/tasks.md). This module imports no
+task, so that ``import quadsitl`` stays light: the envs are built when first made.
+"""
 
 from __future__ import annotations
 
 import gymnasium
 
-ENV_IDS = {
-    "Hover": "QuadSITL/Hover-v0",
-    "StaticWaypoint": "QuadSITL/StaticWaypoint-v0",
-    "RandomWaypoint": "QuadSITL/RandomWaypoint-v0",
-    "Land": "QuadSITL/Land-v0",
-    "TargetFollow": "QuadSITL/TargetFollow-v0",
-}
+TASK_NAMES = (
+    "hover",
+    "static_waypoint",
+    "random_waypoint",
+    "land",
+    "target_follow",
+    "figure_eight",
+)
+NAMESPACE = "QuadSITL"
+VERSION = 0
+
+
+def task_env_name(task: str) -> str:
+    """``static_waypoint`` -> ``StaticWaypoint``: the name in the env's id and classes."""
+    return "".join(part.capitalize() for part in task.split("_"))
+
+
+ENV_IDS = {task_env_name(t): f"{NAMESPACE}/{task_env_name(t)}-v{VERSION}" for t in TASK_NAMES}
+"""Env name -> Gymnasium id, e.g. ``"Hover": "QuadSITL/Hover-v0"``."""
 
 
 def task_env_id(task: str) -> str:
     """The Gymnasium id of a task name: ``static_waypoint`` -> ``QuadSITL/StaticWaypoint-v0``."""
-    name = "".join(part.capitalize() for part in task.split("_"))
     try:
-        return ENV_IDS[name]
+        return ENV_IDS[task_env_name(task)]
     except KeyError:
         raise ValueError(f"unknown task {task!r}") from None
 

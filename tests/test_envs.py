@@ -1,4 +1,5 @@
-"""The five task envs: checkers, seeding, vector equivalence, rewards and outcomes."""
+"""The task envs, every id of the task list: checkers, seeding, vector equivalence, rewards
+and outcomes."""
 
 from __future__ import annotations
 

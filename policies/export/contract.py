@@ -42,11 +42,7 @@ def sha256(path: Path) -> str:
 
 def observation_layout(task: TaskSpec) -> tuple[tuple[slice, str, str], ...]:
     """(columns, meaning, frame and unit) of each block of ``task``'s observation."""
-    if task.extra_obs == 0:
-        return F.OBS_LAYOUT
-    if task.extra_obs == F.TARGET_EXTRA_OBS:
-        return F.OBS_LAYOUT + F.TARGET_OBS_LAYOUT
-    raise ValueError(f"the {task.name} task's extra observations have no documented layout")
+    return F.OBS_LAYOUT + task.extra_obs_layout
 
 
 def layout_text(task_name: str) -> str:

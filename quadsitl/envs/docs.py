@@ -1,6 +1,10 @@
-"""The Gymnasium docstring template, filled in per task from shared pieces."""
+"""The Gymnasium docstring template, filled in from a task's spec (its words, which the
+task builds from its constants) and shared pieces."""
 
 from __future__ import annotations
+
+from quadsitl.tasks import TaskOptions, TaskSpec
+from quadsitl.tasks import features as F
 
 ACTION_SPACE = """## Action Space
 ``Box(-Ω_h/β, (Ω_max − Ω_h)/β, (4,), float32)`` ≈ [−6.45, 2.67] for the paper airframe:
@@ -24,6 +28,8 @@ OBSERVATION_SPACE = """## Observation Space
 | 28–30 | goal velocity − velocity, body frame | m/s |
 | 31–33 | goal rates (0) − body rates | rad/s |
 {extra}"""
+
+EXTRA_OBS_ROW = "| {columns} | {meaning} | {unit} |"
 
 ARGUMENTS = """## Arguments
 Keyword arguments of ``gymnasium.make(id, **kwargs)`` (all optional; unknown names raise
@@ -49,31 +55,37 @@ landed_off_pad, crashed), ``success``, ``final_distance`` (m), ``time_within_thr
 ``episode_length``, ``touchdown_speed`` (m/s, NaN if airborne)."""
 
 VERSION_HISTORY = """## Version History
-* v0: the paper's task, without the original code's bugs (stale distances at reset,
+* v0: {history}"""
+PAPER_HISTORY = """the paper's task, without the original code's bugs (stale distances at reset,
   inconsistent rotor observation, inverse Euler angles, wrong crash geometry)."""
+OWN_HISTORY = "a task of quadsitl's own (not in the paper)."
 
 
-def env_doc(
-    title: str,
-    description: str,
-    rewards: str,
-    start: str,
-    end: str,
-    seconds: float,
-    extra: str = "",
-) -> str:
-    """Assemble one env's docstring in the Gymnasium template."""
-    size = 34 + (7 if extra else 0)
+def env_doc(task: TaskSpec) -> str:
+    """Assemble the docstring of ``task``'s env in the Gymnasium template."""
+    doc, seconds = task.doc, task.episode_seconds
+    steps = max(1, round(seconds / TaskOptions().control_period))
+    extra = "\n".join(
+        EXTRA_OBS_ROW.format(columns=_columns(block), meaning=meaning, unit=unit)
+        for block, meaning, unit in task.extra_obs_layout
+    )
     return "\n\n".join(
         [
-            title,
-            f"## Description\n{description}",
+            f"# {task.env_id}",
+            f"## Description\n{doc.description}",
             ACTION_SPACE,
-            OBSERVATION_SPACE.format(size=size, extra=extra),
-            f"## Rewards\n{rewards}",
-            f"## Starting State\n{start}",
-            f"## Episode End\n{end}",
+            OBSERVATION_SPACE.format(size=F.OBS_SIZE + task.extra_obs, extra=extra),
+            f"## Rewards\n{doc.rewards}",
+            f"## Starting State\n{doc.start}",
+            f"## Episode End\n{doc.end}; truncated after {seconds:g} s ({steps} steps). "
+            f"Success: {task.success_text()}.",
             ARGUMENTS.format(seconds=seconds),
-            VERSION_HISTORY,
+            VERSION_HISTORY.format(history=PAPER_HISTORY if task.paper else OWN_HISTORY),
         ]
     )
+
+
+def _columns(block: slice) -> str:
+    """``34–36`` (or ``37`` for one column)."""
+    last = block.stop - 1
+    return f"{block.start}" if last == block.start else f"{block.start}–{last}"

@@ -1,4 +1,5 @@
-"""One Gymnasium env per task: a TaskEngine with one vehicle."""
+"""One Gymnasium env per task: a TaskEngine with one vehicle; the classes are derived
+from the task list (ENV_CLASSES)."""
 
 from __future__ import annotations
 
@@ -15,13 +16,8 @@ from quadsitl.envs.mavlink_backend import (
 )
 from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.physics import layout as L
-from quadsitl.tasks import TaskEngine
+from quadsitl.tasks import TASKS, TaskEngine, TaskSpec
 from quadsitl.viz.episode_view import EpisodeView
-
-EQ18 = (
-    "Per step (Eq. 18, Δd = previous − current distance to the goal): "
-    "{weights} − 0.01·‖a‖²{time}{bonus}."
-)
 
 
 def make_spaces(engine: TaskEngine) -> tuple[gym.spaces.Box, gym.spaces.Box]:
@@ -48,7 +44,7 @@ RENDER_MODES = ("rerun",)
 
 
 class QuadEnv(gym.Env):
-    """Base of the five task envs; subclasses set ``task_name`` and the docstring.
+    """Base of the task envs; each task's subclass (ENV_CLASSES) sets ``task_name``.
 
     ``backend="inprocess"`` (default) steps the physics here; ``backend="mavlink"`` flies
     a ``quadsitl sim --lockstep`` process over MAVLink with the same task code (see
@@ -124,102 +120,21 @@ class QuadEnv(gym.Env):
         super().close()
 
 
-class HoverEnv(QuadEnv):
-    task_name = "hover"
-    __doc__ = docs.env_doc(
-        "# QuadSITL/Hover-v0",
-        "Hold position at the origin, level, heading yaw 0 (east).",
-        EQ18.format(
-            weights="100·Δd_pos + 10·Δd_att + 0.1·Δd_vel + 0.1·Δd_rate", time=" + 10", bonus=""
-        ),
-        "At the goal (origin), level, at rest, rotors at hover speed; add noise with init_*.",
-        "Terminated when any |x|, |y|, |z| > 3 m (out_of_bounds) or |roll| or |pitch| > 90° "
-        "(flipped); truncated after 5 s (100 steps). Success: flown to the end and within "
-        "0.1 m of the goal.",
-        5.0,
-    )
+def _env_class(task: TaskSpec) -> type[QuadEnv]:
+    """The env class of a task: ``HoverEnv`` for ``hover``, its docstring from its spec."""
+    name = f"{task.env_name}Env"
+    attributes = {"task_name": task.name, "__doc__": docs.env_doc(task), "__module__": __name__}
+    return type(name, (QuadEnv,), {**attributes, "__qualname__": name})
 
 
-class StaticWaypointEnv(QuadEnv):
-    task_name = "static_waypoint"
-    __doc__ = docs.env_doc(
-        "# QuadSITL/StaticWaypoint-v0",
-        "Fly from the origin to the waypoint (1.5, 0, 0) m and stay there.",
-        EQ18.format(
-            weights="100·Δd_pos + 10·Δd_att + 0.1·Δd_vel + 0.1·Δd_rate",
-            time=" + 0.1",
-            bonus=" + 100 while within 0.05 m of the goal",
-        ),
-        "At the origin, level, at rest, rotors at hover speed.",
-        "Terminated more than 2 m from the goal (a flip does not end it, as in the paper); "
-        "truncated after 3 s "
-        "(60 steps). Success: within 0.1 m at the end.",
-        3.0,
-    )
+ENV_CLASSES: dict[str, type[QuadEnv]] = {t.env_name: _env_class(t) for t in TASKS.values()}
+"""Env name (``Hover``) -> env class (``HoverEnv``), one per task of the task list."""
 
 
-class RandomWaypointEnv(QuadEnv):
-    task_name = "random_waypoint"
-    __doc__ = docs.env_doc(
-        "# QuadSITL/RandomWaypoint-v0",
-        "Fly to a goal drawn each episode at radius U(1, 2.5) m in a uniformly random direction.",
-        EQ18.format(
-            weights="100·Δd_pos + 10·Δd_att + 0.1·Δd_vel + 0.1·Δd_rate",
-            time=" + 0.1",
-            bonus=" + 100 while within 0.05 m of the goal",
-        ),
-        "At the origin, level, at rest, rotors at hover speed.",
-        "Terminated more than 5 m from the goal (a flip does not end it); truncated after "
-        "3.5 s (70 steps). Success: within 0.1 m at the end.",
-        3.5,
-    )
-
-
-class LandEnv(QuadEnv):
-    task_name = "land"
-    __doc__ = docs.env_doc(
-        "# QuadSITL/Land-v0",
-        "Descend onto the pad at the origin (ground z = 0) at about 0.5 m/s without crashing.",
-        EQ18.format(
-            weights="100·Δd_pos + 10·Δd_att + 1·Δ‖v − (0, 0, −0.5)‖ + 5·Δd_rate",
-            time="",
-            bonus="; +500 on landing on the pad (within 0.5 m), −500 on a crash (rotor "
-            "strike, touchdown faster than 1 m/s or tilted more than 15°) or a descent faster "
-            "than 2 m/s",
-        ),
-        "x, y ~ U(−1.5, 1.5) m, z = 3 m, level, at rest, rotors at hover speed.",
-        "Terminated on landing (landed / landed_off_pad), crash or more than 6 m from the pad "
-        "(a flip in the air does not end it); truncated after 6 s (120 steps). Success: "
-        "landed on the pad.",
-        6.0,
-    )
-
-
-class TargetFollowEnv(QuadEnv):
-    task_name = "target_follow"
-    __doc__ = docs.env_doc(
-        "# QuadSITL/TargetFollow-v0",
-        "Follow a target moving at 1 m/s along chained quadratic Bézier curves through random "
-        "points in [−2, 2]³ m, staying within 2 m of it.",
-        EQ18.format(
-            weights="100·Δd_pos + 10·Δd_att + 0.1·Δd_vel + 0.1·Δd_rate (goal = the target)",
-            time="",
-            bonus=" + 5·(1 + t/T) while within 2 m (scaled up over the episode); −500 on "
-            "leaving the region",
-        ),
-        "Vehicle and target at the origin, level, at rest, rotors at hover speed.",
-        "Terminated when any |x|, |y|, |z| > 4 m or beyond 90° roll/pitch; truncated after "
-        "25 s (500 steps). Success: flown to the end, within 2 m for ≥ 80 % of it.",
-        25.0,
-        extra="| 34–36 | target − position | m |\n| 37 | distance to the target | m |\n"
-        "| 38–40 | target velocity, world | m/s |",
-    )
-
-
-ENV_CLASSES: dict[str, type[QuadEnv]] = {
-    "Hover": HoverEnv,
-    "StaticWaypoint": StaticWaypointEnv,
-    "RandomWaypoint": RandomWaypointEnv,
-    "Land": LandEnv,
-    "TargetFollow": TargetFollowEnv,
-}
+def __getattr__(name: str) -> type[QuadEnv]:
+    """Each task's env class by its name (``HoverEnv``): the Gymnasium entry points and
+    pickle find them here."""
+    env_name = name.removesuffix("Env")
+    if name.endswith("Env") and env_name in ENV_CLASSES:
+        return ENV_CLASSES[env_name]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

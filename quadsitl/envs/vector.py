@@ -27,6 +27,7 @@ from quadsitl.envs.mavlink_backend import (
 )
 from quadsitl.envs.single import ENV_CLASSES, check_no_render, check_open, make_spaces
 from quadsitl.mavlink.motor_client import SimulatorError
+from quadsitl.tasks import get_task
 
 
 class QuadVectorEnv(VectorEnv):
@@ -150,18 +151,23 @@ def _copies(arrays: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
 
 
 def _vector_class(name: str, task_name: str) -> type[QuadVectorEnv]:
-    return type(
-        f"{name}VectorEnv",
-        (QuadVectorEnv,),
-        {"task_name": task_name, "__doc__": f"Native vector env of QuadSITL/{name}-v0."},
-    )
+    class_name = f"{name}VectorEnv"
+    attributes = {"task_name": task_name, "__module__": __name__, "__qualname__": class_name}
+    doc = f"Native vector env of {get_task(task_name).env_id}."
+    return type(class_name, (QuadVectorEnv,), {**attributes, "__doc__": doc})
 
 
 VECTOR_CLASSES = {name: _vector_class(name, cls.task_name) for name, cls in ENV_CLASSES.items()}
-HoverVectorEnv = VECTOR_CLASSES["Hover"]
-StaticWaypointVectorEnv = VECTOR_CLASSES["StaticWaypoint"]
-RandomWaypointVectorEnv = VECTOR_CLASSES["RandomWaypoint"]
-LandVectorEnv = VECTOR_CLASSES["Land"]
-TargetFollowVectorEnv = VECTOR_CLASSES["TargetFollow"]
+"""Env name (``Hover``) -> native vector env class (``HoverVectorEnv``), one per task."""
+
+
+def __getattr__(name: str) -> type[QuadVectorEnv]:
+    """Each task's vector env class by its name (``HoverVectorEnv``): the Gymnasium
+    vector entry points and pickle find them here."""
+    env_name = name.removesuffix("VectorEnv")
+    if name.endswith("VectorEnv") and env_name in VECTOR_CLASSES:
+        return VECTOR_CLASSES[env_name]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = ["VECTOR_CLASSES", "QuadVectorEnv"]

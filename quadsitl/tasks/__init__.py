@@ -1,14 +1,25 @@
-"""The paper's five flight tasks over the batched physics."""
+"""The flight tasks over the batched physics: the paper's five, and more.
 
-from quadsitl.tasks import hover, land, random_waypoint, static_waypoint, target_follow
+Each task is one module here, named in ``quadsitl.registration.TASK_NAMES``; its
+``TASK`` (a TaskSpec) is the single source of its facts.
+"""
+
+import importlib
+
+from quadsitl.registration import TASK_NAMES
 from quadsitl.tasks.engine import TaskEngine
 from quadsitl.tasks.options import TaskOptions
 from quadsitl.tasks.spec import OUTCOME_NAMES, TaskSpec
 
-TASKS: dict[str, TaskSpec] = {
-    t.name: t
-    for t in (hover.TASK, static_waypoint.TASK, random_waypoint.TASK, land.TASK, target_follow.TASK)
-}
+
+def _load(name: str) -> TaskSpec:
+    task = importlib.import_module(f"quadsitl.tasks.{name}").TASK
+    if not isinstance(task, TaskSpec) or task.name != name:
+        raise TypeError(f"quadsitl.tasks.{name}.TASK must be a TaskSpec named {name!r}")
+    return task
+
+
+TASKS: dict[str, TaskSpec] = {name: _load(name) for name in TASK_NAMES}
 
 
 def get_task(name: str | TaskSpec) -> TaskSpec:

@@ -31,6 +31,13 @@ from quadsitl.tasks.reward import jit
 
 
 @jit
+def commanded_rotor_speed(hover, beta, action):  # pragma: no cover - compiled
+    """Eq. 19: Ω_c = Ω_h + β·a, rad/s, of actions ``a`` (a number or an array; float64),
+    for the hover speed Ω_h (rad/s) and the action scale β (rad/s)."""
+    return hover + beta * action
+
+
+@jit
 def take_action(raw, active, hover, beta, low, high, action, rotor_cmd, steps):  # pragma: no cover
     """Start a step: ``action`` = the raw actions clipped to [low, high] (0 where not
     ``active``), rotor commands Ω_c = Ω_h + β·a (Eq. 19: the bounds are the rotor speeds
@@ -45,7 +52,7 @@ def take_action(raw, active, hover, beta, low, high, action, rotor_cmd, steps): 
         for i in range(raw.shape[1]):
             a = min(max(raw[n, i], low), high) if active[n] else 0.0
             action[n, i] = a
-            rotor_cmd[n, i] = hover + beta * a
+            rotor_cmd[n, i] = commanded_rotor_speed(hover, beta, a)
         steps[n] += 1
     return -1
 
@@ -325,19 +332,21 @@ class TaskEngine:
         if self.task.advance_goal is not None:
             self.task.advance_goal(self, active)
         self.task.evaluate(
-            fleet.state,
-            fleet.params,
-            fleet.contact,
-            self.goal,
-            self.action,
-            self.steps,
-            self.max_steps,
-            self.obs,
-            self.dist,
-            self.prev_dist,
-            self.tilt,
-            self.reward,
-            self.outcome,
+            S.StepBatch(
+                state=fleet.state,
+                params=fleet.params,
+                contact=fleet.contact,
+                goal=self.goal,
+                action=self.action,
+                steps=self.steps,
+                max_steps=self.max_steps,
+                obs=self.obs,
+                dist=self.dist,
+                prev_dist=self.prev_dist,
+                tilt=self.tilt,
+                reward=self.reward,
+                outcome=self.outcome,
+            )
         )
         if self.observation_noise is not None:
             self._observe_noisy(np.arange(self.n), self.control_period)

@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from quadsitl.physics import get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.tasks import features as F
 from quadsitl.tasks import reward as R
@@ -49,50 +50,59 @@ def on_reset(engine, rows: np.ndarray) -> None:
 
 
 @R.jit
-def evaluate(
-    state,
-    params,
-    contact,
-    goal,
-    action,
-    steps,
-    max_steps,
-    obs,
-    dist,
-    prev_dist,
-    tilt,
-    reward,
-    outcome,
-):  # pragma: no cover - compiled
-    F.observe(state, params, goal, obs, dist, tilt)
-    weights = WEIGHTS
-    for n in range(state.shape[0]):
-        reward[n] = R.progress(n, prev_dist, dist, weights, action)
-        outcome[n] = S.RUNNING
-        if dist[n, F.D_POS] > MAX_GOAL_DISTANCE:
-            outcome[n] = S.OUT_OF_BOUNDS
-        if contact[n] == L.ON_GROUND:
-            on_pad = math.hypot(state[n, L.I_PX], state[n, L.I_PY]) <= PAD_RADIUS
-            outcome[n] = S.LANDED if on_pad else S.LANDED_OFF_PAD
-        if contact[n] == L.CRASHED or state[n, L.I_VZ] < -VORTEX_RING_SPEED:
-            outcome[n] = S.CRASHED
-            reward[n] -= CRASH_PENALTY
-        elif outcome[n] == S.LANDED:
-            reward[n] += LANDING_REWARD
+def evaluate(b):  # pragma: no cover - compiled
+    F.observe(b.state, b.params, b.goal, b.obs, b.dist, b.tilt)
+    for n in range(b.state.shape[0]):
+        b.reward[n] = R.progress(n, b.prev_dist, b.dist, WEIGHTS, b.action)
+        b.outcome[n] = S.RUNNING
+        if b.dist[n, F.D_POS] > MAX_GOAL_DISTANCE:
+            b.outcome[n] = S.OUT_OF_BOUNDS
+        if b.contact[n] == L.ON_GROUND:
+            on_pad = math.hypot(b.state[n, L.I_PX], b.state[n, L.I_PY]) <= PAD_RADIUS
+            b.outcome[n] = S.LANDED if on_pad else S.LANDED_OFF_PAD
+        if b.contact[n] == L.CRASHED or b.state[n, L.I_VZ] < -VORTEX_RING_SPEED:
+            b.outcome[n] = S.CRASHED
+            b.reward[n] -= CRASH_PENALTY
+        elif b.outcome[n] == S.LANDED:
+            b.reward[n] += LANDING_REWARD
 
 
 def landed(engine, rows: np.ndarray) -> np.ndarray:
     return engine.outcome[rows] == S.LANDED
 
 
+_PAPER = get_airframe("paper")  # the limits the docs quote
 TASK = S.TaskSpec(
     name="land",
+    paper=True,
+    doc=S.TaskDoc(
+        description=f"Descend onto the pad at the origin (ground z = 0) at about "
+        f"{DESCENT_RATE:g} m/s without crashing.",
+        rewards=R.eq18_text(
+            WEIGHTS,
+            f"; +{LANDING_REWARD:g} on landing on the pad (within {PAD_RADIUS:g} m), "
+            f"−{CRASH_PENALTY:g} on a crash (rotor strike, touchdown faster than "
+            f"{_PAPER.max_touchdown_speed:g} m/s or tilted more than "
+            f"{_PAPER.max_touchdown_tilt_deg:g}°) or a descent faster than "
+            f"{VORTEX_RING_SPEED:g} m/s",
+            velocity=f"‖v − (0, 0, −{DESCENT_RATE:g})‖",
+        ),
+        start=f"x, y ~ U(−{START_SPREAD:g}, {START_SPREAD:g}) m, z = {START_HEIGHT:g} m, "
+        "level, at rest, rotors at hover speed.",
+        end="Terminated on landing (landed / landed_off_pad), crash or more than "
+        f"{MAX_GOAL_DISTANCE:g} m from the pad (a flip in the air does not end it)",
+    ),
     episode_seconds=EPISODE_SECONDS,
     evaluate=evaluate,
     goal_radius=GOAL_RADIUS,
+    success_rule="landed",
+    metric=S.Metric("touchdown_speed", "touchdown speed", "m/s"),
     ground=True,
     start=start_above_pad,
     goal=pad_goal,
     on_reset=on_reset,
     success=landed,
+    train_start={"init_attitude_noise": 0.1},
+    train_steps=6_000_000,
+    comparison_steps=4_000_000,
 )

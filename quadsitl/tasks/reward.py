@@ -51,3 +51,14 @@ def distance_to_goal(state, goal, n):  # pragma: no cover - compiled
         delta = goal[n, k] - state[n, L.I_PX + k]
         total += delta * delta
     return math.sqrt(total)
+
+
+def eq18_text(weights, terms: str = "", velocity: str = "d_vel") -> str:
+    """``progress`` in words, for a task's docs: ``weights`` α, ``velocity`` the name of
+    the velocity distance, then the task's own ``terms`` (" + 10", " + 100 while ...")."""
+    names = ("d_pos", "d_att", velocity, "d_rate")
+    progress_terms = " + ".join(f"{w:g}·Δ{name}" for w, name in zip(weights, names, strict=True))
+    return (
+        "Per step (Eq. 18, Δd = previous − current distance to the goal): "
+        f"{progress_terms} − {ACTION_WEIGHT:g}·‖a‖²{terms}."
+    )

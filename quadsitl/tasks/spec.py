@@ -1,19 +1,25 @@
-"""What a task is: its constants, how an episode starts, and one compiled ``evaluate``.
+"""What a task is: its constants, how an episode starts, one compiled ``evaluate``, and
+the facts the rest of the project derives from it (env id, docstring, metric, training
+start and budget).
 
 A task module (``hover.py``, ``land.py``, ...) reads top to bottom: the start and the
 goal, then ``evaluate``, which writes the observation, the reward and the outcome of
-every env after a physics step. The engine (``engine.py``) knows no task: it steps the
-physics, calls these functions, and keeps the episode counters and metrics.
+every env after a physics step, then its ``TASK``. The engine (``engine.py``) knows no
+task: it steps the physics, calls these functions, and keeps the episode counters and
+metrics. The Gymnasium envs (their ids, classes and docstrings) and the trainers' and
+evaluators' per-task tables are derived from the ``TaskSpec`` of each task in
+``quadsitl.registration.TASK_NAMES``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
+from quadsitl.registration import task_env_id, task_env_name
 from quadsitl.tasks import features as F
 
 if TYPE_CHECKING:
@@ -38,26 +44,71 @@ OUTCOME_NAMES = {
 }
 
 
-@dataclass(frozen=True)
-class TaskSpec:
-    """A flight task, as the engine sees it.
+class StepBatch(NamedTuple):
+    """What a task's compiled ``evaluate`` reads and writes after a physics step, for
+    N envs (a named tuple: the struct numba passes into compiled code). It fills, for
+    every env n, ``obs[n]``, ``dist[n]``, ``tilt[n]``, ``reward[n]`` and ``outcome[n]``."""
 
-    ``evaluate(state, params, contact, goal, action, steps, max_steps, obs, dist,
-    prev_dist, tilt, reward, outcome)`` is compiled; after each physics step it fills,
-    for every env n, ``obs[n]``, ``dist[n]`` (the goal distances of Eq. 18), ``tilt[n]``,
-    ``reward[n]`` and ``outcome[n]`` (RUNNING or why the episode ends). ``steps[n]``
-    counts the env's steps including this one; ``prev_dist`` holds the distances of the
-    step before. ``observe(state, params, goal, obs, dist, tilt)`` does the observation
-    part alone (at reset).
+    state: np.ndarray  # (N, layout.STATE_SIZE) physics state (quadsitl.physics.layout)
+    params: np.ndarray  # (N, layout.N_PARAMS) airframe parameters
+    contact: np.ndarray  # (N,) int8 ground contact (layout.AIRBORNE, ON_GROUND, CRASHED)
+    goal: np.ndarray  # (N, 6) goal position (m) and velocity (m/s), world ENU
+    action: np.ndarray  # (N, 4) this step's actions, clipped
+    steps: np.ndarray  # (N,) int64 steps of the episode, this one included
+    max_steps: int  # the episode's time limit in steps
+    obs: np.ndarray  # (N, obs_size) float32, written
+    dist: np.ndarray  # (N, 4) goal distances of Eq. 18 (features.D_*), written
+    prev_dist: np.ndarray  # (N, 4) the distances of the step before
+    tilt: np.ndarray  # (N,) rad, angle between body up and world up, written
+    reward: np.ndarray  # (N,) written
+    outcome: np.ndarray  # (N,) int8 RUNNING or why the episode ends, written
+
+
+class Metric(NamedTuple):
+    """The figure that says how an episode of a task went, beyond success."""
+
+    key: str  # the episode-end info key (TaskEngine.episode_metrics)
+    name: str  # in words
+    unit: str
+
+
+FINAL_POSITION_ERROR = Metric("final_distance", "final position error", "m")
+
+
+@dataclass(frozen=True)
+class TaskDoc:
+    """A task in words, for its env's docstring (envs/docs.py assembles it in
+    Gymnasium's template). Task modules build these texts from their constants."""
+
+    description: str  # what the vehicle should do, one sentence
+    rewards: str  # the per-step reward (reward.eq18_text and the task's terms)
+    start: str  # the starting state
+    end: str  # what terminates an episode (its time limit and success are added)
+
+
+@dataclass(frozen=True, kw_only=True)
+class TaskSpec:
+    """A flight task, as the engine sees it, and the facts derived from it.
+
+    ``evaluate(batch: StepBatch)`` is compiled; after each physics step it fills the
+    batch's observation, distances, tilt, reward and outcome (see StepBatch).
+    ``observe(state, params, goal, obs, dist, tilt)`` does the observation part alone
+    (at reset).
     """
 
     name: str
+    doc: TaskDoc
+    paper: bool = False  # one of the paper's five tasks (the algorithm comparison's)
     episode_seconds: float
-    evaluate: Callable[..., None]
+    evaluate: Callable[[StepBatch], None]
     goal_radius: float  # m: the time-within and reach-time metrics count inside it
     success_radius: float = 0.1  # m: success = flown to the end and this close at the end
+    success_rule: str = ""  # success in outcome names ("" : timed_out within success_radius)
+    metric: Metric = FINAL_POSITION_ERROR
     ground: bool = False  # a ground plane at z = 0
-    extra_obs: int = 0  # observation values after the common F.OBS_SIZE
+    # The observation values after the common F.OBS_SIZE: (columns, meaning, frame and
+    # unit) blocks, as features.OBS_LAYOUT (what an exported policy's contract states).
+    extra_obs_layout: tuple[tuple[slice, str, str], ...] = ()
     observe: Callable[..., None] = F.observe
     # Start position (3, m ENU) and goal (6: position m, velocity m/s, ENU): fixed
     # values, or a function of the env's generator that draws them each episode.
@@ -68,3 +119,39 @@ class TaskSpec:
     on_reset: Callable[[TaskEngine, np.ndarray], None] | None = None
     advance_goal: Callable[[TaskEngine, np.ndarray], None] | None = None
     success: Callable[[TaskEngine, np.ndarray], np.ndarray] | None = None
+    # Training: the randomised start policies are trained and evaluated from (TaskOptions
+    # init_* names), the fast preset's step budget that learns the task, and the shorter
+    # one of the algorithm comparison (policies.comparison).
+    train_start: Mapping[str, float] = field(default_factory=dict)
+    train_steps: int = 2_000_000
+    comparison_steps: int = 2_000_000
+    # m: as the simulator's autopilot, the farthest goal shown to this task's policy (a
+    # farther target is approached through carrots this far ahead); None: its policy
+    # cannot fly goto and mission legs.
+    carrot: float | None = None
+
+    @property
+    def env_name(self) -> str:
+        """``static_waypoint`` -> ``StaticWaypoint`` (env class ``StaticWaypointEnv``)."""
+        return task_env_name(self.name)
+
+    @property
+    def env_id(self) -> str:
+        """The Gymnasium id, ``QuadSITL/StaticWaypoint-v0``."""
+        return task_env_id(self.name)
+
+    @property
+    def extra_obs(self) -> int:
+        """Observation values after the common F.OBS_SIZE."""
+        return sum(block.stop - block.start for block, _, _ in self.extra_obs_layout)
+
+    @property
+    def goal_at_origin(self) -> bool:
+        """Whether the goal is fixed at the origin (the task frame is the goal's)."""
+        return not callable(self.goal) and not any(self.goal[:3])
+
+    def success_text(self) -> str:
+        """What counts as a success, in terms of the outcome names."""
+        return self.success_rule or (
+            f"timed_out within {self.success_radius:g} m of the goal at the end"
+        )

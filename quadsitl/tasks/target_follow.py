@@ -32,6 +32,7 @@ BOX = 2.0  # m, control points in [−BOX, BOX]³
 RANGE = 2.0  # m, the distance to stay within
 RANGE_BONUS = 5.0  # per step within range, scaled by (1 + t/T): later matters more
 EXIT_PENALTY = 500.0
+FOLLOW_FRACTION = 0.8  # success: within RANGE for at least this fraction of the episode
 
 
 @dataclass
@@ -103,51 +104,58 @@ def observe(state, params, goal, obs, dist, tilt):  # pragma: no cover - compile
 
 
 @R.jit
-def evaluate(
-    state,
-    params,
-    contact,
-    goal,
-    action,
-    steps,
-    max_steps,
-    obs,
-    dist,
-    prev_dist,
-    tilt,
-    reward,
-    outcome,
-):  # pragma: no cover - compiled
-    observe(state, params, goal, obs, dist, tilt)
-    weights = WEIGHTS
-    for n in range(state.shape[0]):
-        reward[n] = R.progress(n, prev_dist, dist, weights, action)
+def evaluate(b):  # pragma: no cover - compiled
+    observe(b.state, b.params, b.goal, b.obs, b.dist, b.tilt)
+    for n in range(b.state.shape[0]):
+        b.reward[n] = R.progress(n, b.prev_dist, b.dist, WEIGHTS, b.action)
         # The distance computed here, not read back from the float32 observation.
-        if R.distance_to_goal(state, goal, n) <= RANGE:
-            reward[n] += RANGE_BONUS * (1.0 + steps[n] / max_steps)
-        outcome[n] = S.RUNNING
-        if R.outside_box(state, n, BOUND_BOX):
-            outcome[n] = S.OUT_OF_BOUNDS
-        if tilt[n] > MAX_TILT:
-            outcome[n] = S.FLIPPED
-        if outcome[n] != S.RUNNING:
-            reward[n] -= EXIT_PENALTY
+        if R.distance_to_goal(b.state, b.goal, n) <= RANGE:
+            b.reward[n] += RANGE_BONUS * (1.0 + b.steps[n] / b.max_steps)
+        b.outcome[n] = S.RUNNING
+        if R.outside_box(b.state, n, BOUND_BOX):
+            b.outcome[n] = S.OUT_OF_BOUNDS
+        if b.tilt[n] > MAX_TILT:
+            b.outcome[n] = S.FLIPPED
+        if b.outcome[n] != S.RUNNING:
+            b.reward[n] -= EXIT_PENALTY
 
 
 def followed(engine, rows: np.ndarray) -> np.ndarray:
+    """Flown to the end, within RANGE of the target for FOLLOW_FRACTION of it."""
     episode = engine.max_steps * engine.control_period
-    return (engine.outcome[rows] == S.TIMED_OUT) & (engine.time_within[rows] >= 0.8 * episode)
+    within = engine.time_within[rows] >= FOLLOW_FRACTION * episode
+    return (engine.outcome[rows] == S.TIMED_OUT) & within
 
 
 TASK = S.TaskSpec(
     name="target_follow",
+    paper=True,
+    doc=S.TaskDoc(
+        description=f"Follow a target moving at {SPEED:g} m/s along chained quadratic Bézier "
+        f"curves through random points in [−{BOX:g}, {BOX:g}]³ m, staying within {RANGE:g} m "
+        "of it.",
+        rewards=R.eq18_text(
+            WEIGHTS,
+            f" (goal = the target) + {RANGE_BONUS:g}·(1 + t/T) while within {RANGE:g} m "
+            f"(scaled up over the episode); −{EXIT_PENALTY:g} on leaving the region",
+        ),
+        start="Vehicle and target at the origin, level, at rest, rotors at hover speed.",
+        end=f"Terminated when any |x|, |y|, |z| > {BOUND_BOX:g} m or beyond "
+        f"{math.degrees(MAX_TILT):g}° roll/pitch",
+    ),
     episode_seconds=EPISODE_SECONDS,
     evaluate=evaluate,
     goal_radius=RANGE,
-    extra_obs=F.TARGET_EXTRA_OBS,
+    success_rule="timed_out, having kept the target within range "
+    f"{FOLLOW_FRACTION * 100:g} % of the time",
+    metric=S.Metric("final_distance", "final range error", "m"),
+    extra_obs_layout=F.TARGET_OBS_LAYOUT,
     observe=observe,
     new_state=new_state,
     on_reset=on_reset,
     advance_goal=advance_goal,
     success=followed,
+    train_start={"init_attitude_noise": 0.1},
+    train_steps=6_000_000,
+    comparison_steps=2_000_000,
 )

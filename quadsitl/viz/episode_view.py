@@ -184,7 +184,7 @@ class EpisodeView:
             pad = rr.LineStrips3D.from_fields(colors=[[0, 170, 0]], labels=["pad"])
             self.rec.log("world/goal", pad, static=True)
         else:
-            target = self.task == "target_follow"
+            target = engine.task.advance_goal is not None  # a moving target
             self.rec.log(
                 "world/goal",
                 rr.Ellipsoids3D.from_fields(
