@@ -15,13 +15,13 @@ import time
 import warnings
 from typing import Any
 
+from quadsitl.client.fleet_client import FleetClient
+from quadsitl.client.motor_client import SimulatorError
 from quadsitl.envs.memory import available_bytes
 from quadsitl.envs.ray_simulators import LOCAL, RaySimulator, join_ray, place_simulators
 from quadsitl.envs.remote_fleet import RemoteFleet
 from quadsitl.envs.sim_process import SimProcess
-from quadsitl.mavlink.fleet_client import FleetClient
 from quadsitl.mavlink.links import parse_url
-from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.mavlink.signing import checked_key
 from quadsitl.physics import AIRFRAMES, get_airframe
 from quadsitl.tasks import TaskEngine, TaskOptions, TaskSpec

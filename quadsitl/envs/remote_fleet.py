@@ -6,7 +6,7 @@ task code is the same for both backends: ``step`` sends one lockstep round to ev
 simulator process (the commands of all its vehicles together), then collects their
 answers (the simulators work in parallel); ``reset`` sends the reset commands of the
 vehicles to reset (docs/mavlink.md) and arms them. Lost datagrams are resent by the
-:class:`~quadsitl.mavlink.fleet_client.FleetClient` of each process.
+:class:`~quadsitl.client.fleet_client.FleetClient` of each process.
 
 Never out of step: after a :class:`SimulatorError` (a simulator stalled past the
 timeout, died, or answered for the wrong time) the simulators may have applied a
@@ -29,13 +29,13 @@ from gymnasium.error import ClosedEnvironmentError
 from numpy.typing import ArrayLike
 
 from quadsitl import frames
-from quadsitl.mavlink.fleet_client import FleetClient
-from quadsitl.mavlink.hil_state import ROW_BY_ROW, WireState
-from quadsitl.mavlink.motor_client import SimulatorError
+from quadsitl.client.fleet_client import FleetClient
+from quadsitl.client.motor_client import SimulatorError
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe
 from quadsitl.physics.fleet import VehicleStates
 from quadsitl.tasks.randomization import AIRFRAME_COLUMNS
+from quadsitl.wire.state import ROW_BY_ROW, WireState
 
 FLYING_ALTITUDE = 20.0  # m: where the task origin of tasks without a ground is flown
 

@@ -9,12 +9,12 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.error import ClosedEnvironmentError
 
+from quadsitl.client.motor_client import SimulatorError
 from quadsitl.envs import docs
 from quadsitl.envs.factory import build_engine
 from quadsitl.envs.mavlink_backend import (
     reset_envs,
 )
-from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS, TaskEngine, TaskSpec
 from quadsitl.viz.episode_view import EpisodeView

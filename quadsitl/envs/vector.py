@@ -21,12 +21,12 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from quadsitl.client.motor_client import SimulatorError
 from quadsitl.envs.factory import build_engine
 from quadsitl.envs.mavlink_backend import (
     reset_envs,
 )
 from quadsitl.envs.single import ENV_CLASSES, check_no_render, check_open, make_spaces
-from quadsitl.mavlink.motor_client import SimulatorError
 from quadsitl.tasks import get_task
 
 
