@@ -400,7 +400,7 @@ def _eval(args: argparse.Namespace) -> int:
         view = EpisodeView(f"eval {Path(args.checkpoint).name}", args.rerun or None)
 
         def on_step(engine, reward, outcome=None):  # type: ignore[no-untyped-def]
-            view.reset(engine, outcome) if reward is None else view.step(engine, reward)
+            view.reset(engine, outcome) if reward is None else view.step(engine)
 
     try:
         result = evaluate(net, config, args.task, args.episodes, args.backend, on_step=on_step)

@@ -136,7 +136,7 @@ class Px4TcpServer:
             except (BlockingIOError, InterruptedError):
                 continue
             except OSError as error:
-                self._drop(index, f"the connection failed ({error})")
+                self._drop(index, _failure(error))
                 continue
             if not data:
                 self._drop(index, "PX4 disconnected")
@@ -177,7 +177,7 @@ class Px4TcpServer:
         try:
             action(conn)
         except OSError as error:
-            self._drop(index, f"the connection failed ({error})")
+            self._drop(index, _failure(error))
 
     def _drop(self, index: int, why: str) -> None:
         conn = self.connections[index]
@@ -263,3 +263,11 @@ def _banner(config: Px4Config, server: Px4TcpServer, out: Callable[[str], None])
         )
     if folder is None:
         out(f"  (no PX4 parameter file ships for {config.airframe}; see docs/autopilots.md)")
+
+
+def _failure(error: OSError) -> str:
+    """Why a connection ended, in words: a peer that closed or reset it (found while
+    sending or receiving, whichever came first) disconnected; anything else failed."""
+    if isinstance(error, (BrokenPipeError, ConnectionResetError, ConnectionAbortedError)):
+        return f"PX4 disconnected ({error})"
+    return f"the connection failed ({error})"

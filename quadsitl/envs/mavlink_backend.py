@@ -28,7 +28,8 @@ from quadsitl.tasks import TaskEngine, TaskOptions, TaskSpec
 from quadsitl.tasks.delay import DELAY_KINDS, Delay
 from quadsitl.tasks.randomization import Randomization
 
-START_TIMEOUT = 30.0  # s for a new simulator process to answer (imports, kernel load)
+START_TIMEOUT = 60.0  # s for a new simulator process to answer (imports, kernel load; a
+# Ray worker starting on a busy machine took over 30 s)
 MAX_TIMEOUT = 3600.0  # s: longer than this, a stuck simulator looks like a hang
 SIM_PROCESS_BYTES = 200 * 2**20  # memory of one `quadsitl sim` process, measured
 MAX_SIMULATORS = 254  # one MAVLink system id each

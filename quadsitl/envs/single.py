@@ -96,7 +96,7 @@ class QuadEnv(gym.Env):
         except SimulatorError as error:
             raise self._explain(error) from None
         if self.view is not None:
-            self.view.step(engine, float(reward[0]))
+            self.view.step(engine)
         ended_early, timed_out = bool(terminated[0]), bool(truncated[0])
         info: dict[str, Any] = {}
         if ended_early or timed_out:

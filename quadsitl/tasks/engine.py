@@ -23,7 +23,9 @@ from quadsitl.physics.sensors.observation import ObservationNoise
 from quadsitl.physics.wind import Wind
 from quadsitl.tasks import faults as FT
 from quadsitl.tasks import features as F
+from quadsitl.tasks import recording as R
 from quadsitl.tasks import spec as S
+from quadsitl.tasks.batch import StepBatch
 from quadsitl.tasks.delay import Delay, DelayLine
 from quadsitl.tasks.options import TaskOptions
 from quadsitl.tasks.randomization import Randomization, airframe_scale_row
@@ -73,7 +75,9 @@ def close_step(
     terminated,
     truncated,
 ):  # pragma: no cover - compiled
-    """End a step: the episode counters, and truncation at the time limit."""
+    """End a step: the episode counters, and truncation at the time limit. (Arrays, not
+    the StepBatch: numba's call takes arrays' types in C, a struct's in Python, which
+    costs more than the seven arrays it would save.)"""
     for n in range(dist.shape[0]):
         if dist[n, F.D_POS] < goal_radius:
             time_within[n] += control_period
@@ -86,6 +90,51 @@ def close_step(
         for c in range(F.N_DIST):
             prev_dist[n, c] = dist[n, c]
         episode_return[n] += reward[n]
+
+
+@jit
+def close_step_recording(
+    dist,
+    prev_dist,
+    reward,
+    outcome,
+    steps,
+    max_steps,
+    goal_radius,
+    control_period,
+    time_within,
+    reach_time,
+    episode_return,
+    terminated,
+    truncated,
+    state,
+    goal,
+    wind_state,
+    rows,
+    counters,
+):  # pragma: no cover - compiled
+    """:func:`close_step`, then the recorded env's row (:mod:`.recording`). Returns the
+    rows recorded, negated once that env's episode has ended."""
+    close_step(
+        dist,
+        prev_dist,
+        reward,
+        outcome,
+        steps,
+        max_steps,
+        goal_radius,
+        control_period,
+        time_within,
+        reach_time,
+        episode_return,
+        terminated,
+        truncated,
+    )
+    i = counters[R.ENV]
+    R.record_row(
+        rows, counters, state, goal, dist, wind_state, reward[i], steps[i], episode_return[i]
+    )
+    return counters[R.COUNT] if outcome[i] == S.RUNNING else -counters[R.COUNT]
 
 
 OUTCOME_NAME_ARRAY = np.array([S.OUTCOME_NAMES[code] for code in range(len(S.OUTCOME_NAMES))])
@@ -154,8 +203,28 @@ class TaskEngine:
         self.time_within = np.zeros(num_envs)
         self.reach_time = np.full(num_envs, math.nan)
         self.episode_return = np.zeros(num_envs)
+        # A recorder's (rows, counters) (recording.py): see record(); rows written by the
+        # last step, negated once the recorded env's episode ended.
+        self.recording: tuple[NDArray[np.float64], NDArray[np.int64]] | None = None
+        self.recorded = 0
         self.rngs = [np.random.default_rng() for _ in range(num_envs)]
         self._all = np.ones(num_envs, bool)
+        fleet = self.fleet  # the arrays evaluate() reads and writes, held once (batch.py)
+        self._batch = StepBatch(
+            fleet.state,
+            fleet.params,
+            fleet.contact,
+            self.goal,
+            self.action,
+            self.steps,
+            self.max_steps,
+            self.obs,
+            self.dist,
+            self.prev_dist,
+            self.tilt,
+            self.reward,
+            self.outcome,
+        )
         self._action_shape = (num_envs, L.N_ROTORS)
         # Whatever state the task keeps per env beyond the goal (its own typed object).
         self.task_state = task.new_state(num_envs) if task.new_state is not None else None
@@ -331,28 +400,12 @@ class TaskEngine:
             self.delay.step(fleet, self.rotor_cmd, self.steps, self._observation_of)
         if self.task.advance_goal is not None:
             self.task.advance_goal(self, active)
-        self.task.evaluate(
-            S.StepBatch(
-                state=fleet.state,
-                params=fleet.params,
-                contact=fleet.contact,
-                goal=self.goal,
-                action=self.action,
-                steps=self.steps,
-                max_steps=self.max_steps,
-                obs=self.obs,
-                dist=self.dist,
-                prev_dist=self.prev_dist,
-                tilt=self.tilt,
-                reward=self.reward,
-                outcome=self.outcome,
-            )
-        )
+        self.task.evaluate(self._batch)
         if self.observation_noise is not None:
             self._observe_noisy(np.arange(self.n), self.control_period)
         if self.delay is not None:
             self.delay.delay_observations(self.obs, self.steps)
-        close_step(
+        closing = (
             self.dist,
             self.prev_dist,
             self.reward,
@@ -367,7 +420,40 @@ class TaskEngine:
             self.terminated,
             self.truncated,
         )
+        if self.recording is None:
+            close_step(*closing)
+        else:
+            rows, counters = self.recording
+            self.recorded = close_step_recording(
+                *closing, fleet.state, self.goal, fleet.wind_state, rows, counters
+            )
         return self.reward, self.terminated, self.truncated
+
+    def record(self, rows: NDArray[np.float64], counters: NDArray[np.int64]) -> None:
+        """From the next step on, each step writes env ``counters[recording.ENV]``'s row
+        into ``rows`` (:func:`recording.new_buffer`) in its compiled end; ``step`` then
+        leaves the rows written in ``recorded`` (negated once that episode ended). The
+        recorder empties the buffer (``counters[recording.COUNT] = 0``) before it fills."""
+        self.recording = (rows, counters)
+
+    def record_now(self, reward: float = math.nan) -> None:
+        """The recorded env's row as it is now (a reset's: reward NaN)."""
+        if self.recording is None:
+            raise RuntimeError("record_now() before record()")
+        rows, counters = self.recording
+        i = int(counters[R.ENV])
+        fleet = self.fleet
+        R.record_row(
+            rows,
+            counters,
+            fleet.state,
+            self.goal,
+            self.dist,
+            fleet.wind_state,
+            reward,
+            int(self.steps[i]),
+            float(self.episode_return[i]),
+        )
 
     # --- episode metrics -----------------------------------------------------------
     def episode_metrics(self, rows: NDArray[np.int64]) -> dict[str, NDArray]:

@@ -21,6 +21,7 @@ import numpy as np
 
 from quadsitl.registration import task_env_id, task_env_name
 from quadsitl.tasks import features as F
+from quadsitl.tasks.batch import StepBatch
 
 if TYPE_CHECKING:
     from quadsitl.tasks.engine import TaskEngine
@@ -42,26 +43,6 @@ OUTCOME_NAMES = {
     CRASHED: "crashed",
     LANDED_OFF_PAD: "landed_off_pad",
 }
-
-
-class StepBatch(NamedTuple):
-    """What a task's compiled ``evaluate`` reads and writes after a physics step, for
-    N envs (a named tuple: the struct numba passes into compiled code). It fills, for
-    every env n, ``obs[n]``, ``dist[n]``, ``tilt[n]``, ``reward[n]`` and ``outcome[n]``."""
-
-    state: np.ndarray  # (N, layout.STATE_SIZE) physics state (quadsitl.physics.layout)
-    params: np.ndarray  # (N, layout.N_PARAMS) airframe parameters
-    contact: np.ndarray  # (N,) int8 ground contact (layout.AIRBORNE, ON_GROUND, CRASHED)
-    goal: np.ndarray  # (N, 6) goal position (m) and velocity (m/s), world ENU
-    action: np.ndarray  # (N, 4) this step's actions, clipped
-    steps: np.ndarray  # (N,) int64 steps of the episode, this one included
-    max_steps: int  # the episode's time limit in steps
-    obs: np.ndarray  # (N, obs_size) float32, written
-    dist: np.ndarray  # (N, 4) goal distances of Eq. 18 (features.D_*), written
-    prev_dist: np.ndarray  # (N, 4) the distances of the step before
-    tilt: np.ndarray  # (N,) rad, angle between body up and world up, written
-    reward: np.ndarray  # (N,) written
-    outcome: np.ndarray  # (N,) int8 RUNNING or why the episode ends, written
 
 
 class Metric(NamedTuple):

@@ -23,7 +23,6 @@ import math
 import time
 import warnings
 
-import numba
 import numpy as np
 import pyarrow as pa
 import rerun as rr
@@ -31,8 +30,20 @@ import rerun as rr
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TaskEngine
 from quadsitl.tasks import features as F
+from quadsitl.tasks import recording as R
 from quadsitl.tasks import spec as S
 from quadsitl.tasks.land import PAD_RADIUS
+from quadsitl.tasks.recording import (
+    C_AIR,
+    C_DIST,
+    C_DISTANCE,
+    C_EPISODE,
+    C_GOAL,
+    C_RETURN,
+    C_REWARD,
+    C_SPEED,
+    C_STEP,
+)
 from quadsitl.viz.scene import (
     EPISODE_PANELS,
     WIND_ARROW_SCALE,
@@ -49,38 +60,10 @@ MAX_PATH = 200  # points a path is thinned to (a long episode's path stays light
 CAPACITY = 32768  # steps buffered before they are sent
 FLUSH_AFTER = 0.5  # wall s: a buffer older than this is sent at the next step
 
-# One buffer row: the vehicle's state, the goal position, the goal errors, the speed,
-# the distance to the goal, the reward (NaN at a reset), the episode, the step and the
-# air's velocity at the vehicle (m/s, ENU; 0 in still air).
-C_GOAL = slice(L.STATE_SIZE, L.STATE_SIZE + 3)
-C_DIST = slice(C_GOAL.stop, C_GOAL.stop + len(TERMS))
-C_SPEED, C_DISTANCE, C_REWARD, C_EPISODE, C_STEP = range(C_DIST.stop, C_DIST.stop + 5)
-C_AIR = slice(C_STEP + 1, C_STEP + 4)
-ROW_SIZE = C_AIR.stop
-C_COUNT, C_EPISODE_NUMBER, C_STEP_NUMBER = range(3)  # the counters: rows, episode, step
 CLOCK_EVERY = 16  # rows between two looks at the clock (FLUSH_AFTER)
-
-
-@numba.njit(cache=True)
-def _record(rows, counters, state, goal, dist, wind_state, outcome, i, reward):  # pragma: no cover
-    """The next row of ``rows`` from env ``i`` of the engine's arrays (one call: a step's
-    whole cost of recording is this copy). ``counters``: rows buffered, episode, step
-    (each row's own), moved on here. Returns the rows buffered, negated once env ``i``'s
-    episode has ended."""
-    k = counters[C_COUNT]
-    row = rows[k]
-    row[: L.STATE_SIZE] = state[i]
-    row[C_GOAL] = goal[i, :3]
-    row[C_DIST] = dist[i]
-    row[C_SPEED] = np.sqrt(state[i, L.I_VX] ** 2 + state[i, L.I_VY] ** 2 + state[i, L.I_VZ] ** 2)
-    row[C_DISTANCE] = np.sqrt(np.sum((state[i, :3] - goal[i, :3]) ** 2))
-    row[C_REWARD] = reward
-    row[C_EPISODE] = counters[C_EPISODE_NUMBER]
-    row[C_STEP] = counters[C_STEP_NUMBER]
-    row[C_AIR] = wind_state[i, L.WS_AIR_VELOCITY]
-    counters[C_COUNT] = k + 1
-    counters[C_STEP_NUMBER] += 1
-    return k + 1 if outcome[i] == S.RUNNING else -(k + 1)
+# Rows a step's end may write before the view looks: the step's and, when the caller
+# resets the env at once (a vector env, eval), the reset's.
+HEADROOM = 2
 
 
 class _Arrow:
@@ -112,15 +95,13 @@ class EpisodeView:
         self.rec.send_recording_name(name)
         self.index = index
         self.episode = -1
-        self.counters = np.zeros(3, np.int64)  # rows buffered, episode, next row's step
-        self.episode_return = 0.0
         self.ended = False
         self.framed = False
         self.task = ""
         self.windy = False  # the env flies in wind: its panel and arrow are sent
         self.goal_radius = 0.05
-        self.rows = np.empty((CAPACITY, ROW_SIZE))
-        self.oldest = 0.0  # wall time of the oldest buffered row
+        self.rows, self.counters = R.new_buffer(CAPACITY, index)  # the engine writes them
+        self.oldest = time.monotonic()  # wall time of (about) the oldest buffered row
         self.track: list[np.ndarray] = []  # positions of this episode already sent
         self.last_goal = np.full((1, 4), np.nan)  # episode and goal last sent
         self.events: list[tuple[int, int, str, str]] = []  # episode, step, text, level
@@ -131,43 +112,32 @@ class EpisodeView:
         if previous_outcome is not None and not self.ended and self.episode >= 0:
             self._outcome(previous_outcome)
         self.episode += 1
-        self.counters[C_EPISODE_NUMBER] = self.episode
-        self.counters[C_STEP_NUMBER] = 0
-        self.episode_return = 0.0
+        self.counters[R.EPISODE] = self.episode
         self.ended = False
         if not self.framed:
             self.framed = True
             self._frame(engine)
-        self._row(engine, math.nan)
+            engine.record(self.rows, self.counters)
+        engine.record_now()
+        self._rows_written(int(self.counters[R.COUNT]))
 
-    def step(self, engine: TaskEngine, reward: float) -> None:
-        self.episode_return += reward
-        if self._row(engine, reward) < 0 and not self.ended:
-            self._outcome(S.OUTCOME_NAMES[int(engine.outcome[self.index])])
+    def step(self, engine: TaskEngine) -> None:
+        """After a step of ``engine`` (which wrote its row): all a step costs, unless
+        the buffer is due to be sent."""
+        rows = engine.recorded
+        if rows < 0:
+            rows = -rows
+            if not self.ended:
+                self._outcome(S.OUTCOME_NAMES[int(engine.outcome[self.index])])
+        if rows % CLOCK_EVERY == 0 or rows >= CAPACITY - HEADROOM:
+            self._rows_written(rows)
 
-    def _row(self, engine: TaskEngine, reward: float) -> int:
-        """One buffered row: all a step costs, unless the buffer is due to be sent. The
-        rows buffered, negated once the episode has ended."""
-        fleet = engine.fleet
-        count = _record(
-            self.rows,
-            self.counters,
-            fleet.state,
-            engine.goal,
-            engine.dist,
-            fleet.wind_state,
-            engine.outcome,
-            self.index,
-            reward,
-        )
-        rows = abs(count)
-        if rows == 1:
-            self.oldest = time.monotonic()
-        elif rows == CAPACITY or (
+    def _rows_written(self, rows: int) -> None:
+        """Send the buffer when it is (nearly) full, or its oldest row has waited long."""
+        if rows >= CAPACITY - HEADROOM or (
             rows % CLOCK_EVERY == 0 and time.monotonic() - self.oldest > FLUSH_AFTER
         ):
             self.flush()
-        return count
 
     def _frame(self, engine: TaskEngine) -> None:
         """Camera on the start, the goal and the ground under them (first reset); the
@@ -199,18 +169,20 @@ class EpisodeView:
 
     def _outcome(self, outcome: str) -> None:
         self.ended = True
-        steps = int(self.counters[C_STEP_NUMBER]) - 1  # of the row just recorded
+        last = self.rows[max(int(self.counters[R.COUNT]) - 1, 0)]  # the episode's last row
+        steps, episode_return = int(last[C_STEP]), float(last[C_RETURN])
         level = "INFO" if outcome in ("landed", "timed_out") else "WARN"
         text = (
             f"episode {self.episode}: {outcome.replace('_', ' ')} after {steps} steps, "
-            f"return {self.episode_return:.1f}"
+            f"return {episode_return:.1f}"
         )
         self.events.append((self.episode, steps, text, level))
 
     def flush(self) -> None:
         """Send the buffered rows to Rerun, a column per series."""
-        rows = self.rows[: self.counters[C_COUNT]]
-        self.counters[C_COUNT] = 0
+        rows = self.rows[: self.counters[R.COUNT]]
+        self.counters[R.COUNT] = 0
+        self.oldest = time.monotonic()  # (nearly) when the next row comes
         if len(rows):
             self._send(rows.copy())
         if self.events:

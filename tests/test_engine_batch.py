@@ -1,0 +1,56 @@
+"""The engine's StepBatch holds the engine's own arrays: compiled ``evaluate`` writes
+where the engine and the envs read, through resets, randomised airframes and steps."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numba
+import numpy as np
+
+import quadsitl  # noqa: F401  (registers the envs)
+from quadsitl.tasks.batch import FIELDS
+
+
+@numba.njit
+def held(b):
+    """The batch's fields, read as compiled code reads them."""
+    return (
+        b.state,
+        b.params,
+        b.contact,
+        b.goal,
+        b.action,
+        b.steps,
+        b.max_steps,
+        b.obs,
+        b.dist,
+        b.prev_dist,
+        b.tilt,
+        b.reward,
+        b.outcome,
+    )
+
+
+def engine_arrays(engine):
+    fleet = engine.fleet
+    own = {"state": fleet.state, "params": fleet.params, "contact": fleet.contact}
+    return {name: own.get(name, getattr(engine, name, None)) for name in FIELDS}
+
+
+def test_the_batch_holds_the_arrays_the_engine_reads_after_resets_and_steps():
+    env = gym.make("QuadSITL/RandomWaypoint-v0", randomize=True)
+    engine = env.unwrapped.engine
+    for seed in (0, 1):
+        env.reset(seed=seed)
+        for _ in range(5):
+            obs, reward, *_ = env.step(env.action_space.sample())
+    fields = dict(zip(FIELDS, held(engine._batch), strict=True))
+    for name, array in engine_arrays(engine).items():
+        if name == "max_steps":
+            assert fields[name] == engine.max_steps
+            continue
+        assert fields[name].shape == array.shape, name
+        assert np.shares_memory(fields[name], array), name
+    # what evaluate wrote is what the env returned
+    assert np.array_equal(engine.obs[0], obs) and engine.reward[0] == reward
+    env.close()
