@@ -20,8 +20,10 @@ $(VENV)/.installed: pyproject.toml
 demo: venv
 	$(BIN)/quadsitl demo
 
+# Test processes in parallel (pytest-xdist); TEST_WORKERS=0 runs the suite in one.
+TEST_WORKERS ?= 4
 test: venv
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS)
 
 # MAVProxy's core for its slow test, without the GUI and vision packages it lists
 # (OpenCV, VTK, wxPython): the simulator's tests only drive its command line.
