@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 # CPU build of PyTorch from the local wheel cache; a looser pin pulls CUDA.
 TORCH_PIN := torch==2.13.0
 
-.PHONY: venv demo test test-slow bench bench-training bench-algorithms images lint format clean
+.PHONY: venv demo test test-slow house bench bench-training bench-algorithms images lint format clean
 
 venv: $(VENV)/.installed
 
@@ -31,6 +31,11 @@ test-slow: venv
 	$(BIN)/python -m pip install --quiet --no-deps 'MAVProxy>=1.8.75'
 	$(BIN)/python -m pip install --quiet defusedxml pynmeagps pyserial
 	$(BIN)/python -m pytest -q -m slow
+
+# The house's measures (files to add a task, largest file, import cycles, ...);
+# `make house SUITE=--suite` also times `make test` on a loaded machine.
+house: venv
+	$(BIN)/python benchmarks/house.py $(SUITE)
 
 bench: venv
 	$(BIN)/python benchmarks/physics.py
