@@ -25,6 +25,7 @@ from quadsitl.mavlink.links import parse_url
 from quadsitl.mavlink.signing import checked_key
 from quadsitl.physics import AIRFRAMES, get_airframe
 from quadsitl.tasks import TaskEngine, TaskOptions, TaskSpec
+from quadsitl.tasks import faults as FT
 from quadsitl.tasks.delay import DELAY_KINDS, Delay
 from quadsitl.tasks.randomization import Randomization
 
@@ -242,9 +243,9 @@ class MavlinkBackend:
                 "wind is not available with backend='mavlink' yet (the simulator process "
                 "flies in still air); use the in-process backend"
             )
-        if options.ground_effect or options.faults:
+        if options.ground_effect or FT.motor_faults(options.faults):
             raise ValueError(
-                "ground_effect and faults are not available with backend='mavlink' yet; use "
+                "ground_effect and motor faults are not available with backend='mavlink' yet; use "
                 "the in-process backend (or quadsitl sim --fail-motor, MAV_CMD_INJECT_FAILURE)"
             )
         airframe = get_airframe(options.airframe)  # type: ignore[arg-type]

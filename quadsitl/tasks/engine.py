@@ -30,6 +30,7 @@ from quadsitl.tasks.delay import Delay, DelayLine
 from quadsitl.tasks.options import TaskOptions
 from quadsitl.tasks.randomization import Randomization, airframe_scale_row
 from quadsitl.tasks.reward import jit
+from quadsitl.tasks.sensor_faults import SensorFaults
 
 
 @jit
@@ -230,6 +231,10 @@ class TaskEngine:
         self.task_state = task.new_state(num_envs) if task.new_state is not None else None
         noise = options.sensor_noise
         self.observation_noise = ObservationNoise(num_envs, noise) if noise > 0 else None
+        failing = FT.sensor_faults(options.faults)
+        self.sensor_faults = (
+            SensorFaults(failing, num_envs, options.control_period) if failing else None
+        )
         delay = Delay.parse(options.delay)  # fixed, or drawn by randomize (not both)
         if delay is None and self.randomization is not None:
             delay = self.randomization.delay
@@ -308,6 +313,8 @@ class TaskEngine:
         self.episode_return[rows] = 0.0
         if self.observation_noise is not None:
             self.observation_noise.reset(rows, [self.rngs[i] for i in rows])
+        if self.sensor_faults is not None:
+            self.sensor_faults.reset(rows)
         if self.task.on_reset is not None:
             self.task.on_reset(self, rows)
         self.observe(rows if rows.size < self.n else None)
@@ -345,6 +352,8 @@ class TaskEngine:
         state = fleet.state[rows]
         if self.observation_noise is not None:
             state = self.observation_noise.perturb(state, rows, elapsed)
+        if self.sensor_faults is not None:
+            state = self.sensor_faults.apply(state, rows, self.steps[rows])
         self.task.observe(state, fleet.params[rows], self.goal[rows], obs, dist, tilt)
         return obs
 
@@ -401,7 +410,7 @@ class TaskEngine:
         if self.task.advance_goal is not None:
             self.task.advance_goal(self, active)
         self.task.evaluate(self._batch)
-        if self.observation_noise is not None:
+        if self.observation_noise is not None or self.sensor_faults is not None:
             self._observe_noisy(np.arange(self.n), self.control_period)
         if self.delay is not None:
             self.delay.delay_observations(self.obs, self.steps)

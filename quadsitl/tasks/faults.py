@@ -1,9 +1,11 @@
-"""Motor faults as a task option: a motor that loses thrust during every episode.
+"""Faults as a task option: a motor that loses thrust, or a sensor that sticks, during
+every episode.
 
-``faults={"motor": 2, "efficiency": 0.6, "at": 1.0}`` (or a list of such dicts): from the
-first control period that starts ``at`` seconds or more into each episode, motor 2
-(1-based, as PX4 numbers them) gives 60 % of its thrust and torque (0: off). Each episode
-starts healthy. docs/tasks.md, "Motor faults".
+``faults={"motor": 2, "efficiency": 0.6, "at": 1.0}`` (or a list of such dicts, motor and
+sensor faults mixed): from the first control period that starts ``at`` seconds or more
+into each episode, motor 2 (1-based, as PX4 numbers them) gives 60 % of its thrust and
+torque (0: off). A dict with ``"sensor"`` is a sensor fault (:mod:`.sensor_faults`). Each
+episode starts healthy. docs/tasks.md, "Motor faults" and "Sensor faults".
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from numpy.typing import NDArray
 
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import FleetLike
+from quadsitl.tasks import sensor_faults as SF
+from quadsitl.tasks.sensor_faults import SensorFault
 from quadsitl.vehicle.motor_faults import check_efficiency, check_motor
 
 FIELDS = ("motor", "efficiency", "at")
@@ -44,18 +48,18 @@ class MotorFault:
     def first_step(self, control_period: float) -> int:
         """The env step (1-based) whose control period is the first to start at ``at``
         or later."""
-        return math.ceil(self.at / control_period - 1e-9) + 1
+        return SF.first_step(self.at, control_period)
 
 
-def parse_faults(option: Any) -> tuple[MotorFault, ...]:
-    """The ``faults`` option (None, a dict, a MotorFault, or a list of them) checked; a
-    one-line ValueError naming what is wrong."""
+def parse_faults(option: Any) -> tuple[MotorFault | SensorFault, ...]:
+    """The ``faults`` option (None, a dict, a MotorFault or SensorFault, or a list of
+    them) checked; a one-line ValueError naming what is wrong."""
     if option is None:
         return ()
     items = option if isinstance(option, (list, tuple)) else [option]
-    faults = []
+    faults: list[MotorFault | SensorFault] = []
     for item in items:
-        if isinstance(item, MotorFault):
+        if isinstance(item, (MotorFault, SensorFault)):
             faults.append(item)
             continue
         if not isinstance(item, dict):
@@ -63,10 +67,17 @@ def parse_faults(option: Any) -> tuple[MotorFault, ...]:
                 "faults must be a dict like {'motor': 2, 'efficiency': 0.6, 'at': 1.0} or a "
                 f"list of them, got {item!r}"
             )
+        if "sensor" in item:
+            unknown = sorted(set(item) - set(SF.FIELDS))
+            if unknown:
+                raise ValueError(f"a sensor fault may have {list(SF.FIELDS)}; got {sorted(item)}")
+            faults.append(SensorFault(**item))
+            continue
         unknown = sorted(set(item) - set(FIELDS))
         if unknown or "motor" not in item:
             raise ValueError(
-                f"a fault needs 'motor' and may have {list(FIELDS[1:])}; got {sorted(item)}"
+                f"a fault needs 'motor' (or 'sensor') and may have {list(FIELDS[1:])}; got "
+                f"{sorted(item)}"
             )
         faults.append(MotorFault(**item))
     return tuple(faults)
@@ -80,16 +91,24 @@ def heal(fleet: FleetLike, rows: NDArray[np.int64]) -> None:
         fleet.set_motor_efficiency(np.ones(L.N_ROTORS), mask=mask)
 
 
+def motor_faults(faults: tuple[MotorFault | SensorFault, ...]) -> tuple[MotorFault, ...]:
+    return tuple(f for f in faults if isinstance(f, MotorFault))
+
+
+def sensor_faults(faults: tuple[MotorFault | SensorFault, ...]) -> tuple[SensorFault, ...]:
+    return tuple(f for f in faults if isinstance(f, SensorFault))
+
+
 def strike(
     fleet: FleetLike,
-    faults: tuple[MotorFault, ...],
+    faults: tuple[MotorFault | SensorFault, ...],
     steps: NDArray[np.int64],
     active: NDArray[np.bool_],
     control_period: float,
 ) -> None:
     """Fail the motors whose time has come in the envs stepping now (``steps``: each
     env's step count, this step included)."""
-    for fault in faults:
+    for fault in motor_faults(faults):
         due = active & (steps == fault.first_step(control_period))
         if due.any():
             efficiency = fleet.params[due][:, L.P_ROTOR_EFFICIENCY].copy()

@@ -73,8 +73,10 @@ class TaskOptions:
         ground_effect: True: each rotor gains thrust near the ground (Cheeseman–Bennett;
             docs/physics.md). Off by default, in every task.
         faults: a motor that fails during every episode: ``{"motor": 2, "efficiency":
-            0.6, "at": 1.0}`` (motor 1-4, thrust fraction 0..1, s into the episode) or a
-            list of them (:mod:`quadsitl.tasks.faults`); None: healthy motors.
+            0.6, "at": 1.0}`` (motor 1-4, thrust fraction 0..1, s into the episode), a
+            sensor that sticks: ``{"sensor": "gps", "at": 2.0}``
+            (:mod:`quadsitl.tasks.sensor_faults`), or a list of them
+            (:mod:`quadsitl.tasks.faults`); None: healthy motors and sensors.
         sensor_noise: noise scale of the observation as the sensors would measure it
             (position and velocity as the GPS, rates as the gyroscope, attitude as an
             estimator: :mod:`quadsitl.physics.sensors.observation`); 0: the exact state.
