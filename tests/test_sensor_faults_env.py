@@ -31,9 +31,7 @@ def fly(env, steps: int, rng: np.random.Generator) -> list[np.ndarray]:
         ("gyro", list(range(F.OBS_RATES.start, F.OBS_RATES.stop)), [0, 1, 2]),
     ],
 )
-def test_a_failed_sensor_holds_what_the_policy_sees_while_the_vehicle_flies_on(
-    sensor, held, free
-):
+def test_a_failed_sensor_holds_what_the_policy_sees_while_the_vehicle_flies_on(sensor, held, free):
     at = 0.2
     env = gym.make("QuadSITL/Hover-v0", faults={"sensor": sensor, "at": at})
     engine = env.unwrapped.engine
