@@ -260,7 +260,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _sweep(args: argparse.Namespace) -> int:
     from policies.plots import learning_curves
-    from policies.sweep import parse_grid, parse_search, results_text, run_sweep
+    from policies.sweep import results_text, run_sweep
+    from policies.sweep_spec import parse_grid, parse_search
 
     grid, search = parse_grid(args.grid), parse_search(args.search)
     fixed = {"total_steps": args.steps} if args.steps else {}

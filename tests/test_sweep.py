@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from policies import sweep as S
+from policies import sweep_spec as SS
 from tests.conftest import cli
 
 pytest.importorskip("ray")  # the sweep extra, which `make test` installs
@@ -171,23 +172,23 @@ def test_bad_sweeps_are_refused_before_ray_starts(tmp_path, options, message):
 
 def test_grids_are_checked_before_they_are_built():
     started = time.monotonic()
-    with pytest.raises(S.SweepError, match="100,000,001 values"):
-        S.parse_grid(["seed=0..100000000"])
-    with pytest.raises(S.SweepError, match=r"the sweep has 10,100 trials"):
-        S.check_trials(S.parse_grid(["task=hover", "algo=ppo", "seed=0..100"]), {}, samples=100)
+    with pytest.raises(SS.SweepError, match="100,000,001 values"):
+        SS.parse_grid(["seed=0..100000000"])
+    with pytest.raises(SS.SweepError, match=r"the sweep has 10,100 trials"):
+        SS.check_trials(SS.parse_grid(["task=hover", "algo=ppo", "seed=0..100"]), {}, samples=100)
     assert time.monotonic() - started < 5  # nothing of that size was built
-    with pytest.raises(S.SweepError, match=r"0\.0001 given twice"):
-        S.parse_grid(["learning_rate=1e-4,0.0001"])  # equal values, spelt differently
-    with pytest.raises(S.SweepError, match="seed is already an axis"):
-        S.parse_grid(["seed=0", "seed=1"])
-    with pytest.raises(S.SweepError, match="would share the run folder"):  # 6 digits alike
-        S.check_trials(
-            S.parse_grid(["task=hover", "algo=ppo", "learning_rate=1e-4,1.0000001e-4"]), {}
+    with pytest.raises(SS.SweepError, match=r"0\.0001 given twice"):
+        SS.parse_grid(["learning_rate=1e-4,0.0001"])  # equal values, spelt differently
+    with pytest.raises(SS.SweepError, match="seed is already an axis"):
+        SS.parse_grid(["seed=0", "seed=1"])
+    with pytest.raises(SS.SweepError, match="would share the run folder"):  # 6 digits alike
+        SS.check_trials(
+            SS.parse_grid(["task=hover", "algo=ppo", "learning_rate=1e-4,1.0000001e-4"]), {}
         )
     for bad in ("../../etc", "a/b", "..", ".hidden", "", "x" * 101):
-        with pytest.raises(S.SweepError, match="one folder name"):
-            S.check_name(bad)
-    S.check_name("lr-search_2.v1")
+        with pytest.raises(SS.SweepError, match="one folder name"):
+            SS.check_name(bad)
+    SS.check_name("lr-search_2.v1")
 
 
 def test_a_new_sweep_refuses_run_folders_it_did_not_make(tmp_path):
@@ -204,13 +205,13 @@ def test_a_new_sweep_refuses_run_folders_it_did_not_make(tmp_path):
     assert done.returncode == 2 and "already hold a run that it did not make" in done.stderr
     assert str(taken) in done.stderr and not (tmp_path / "sweeps").exists()
     # in a trial (a searched run's folder is known only then): refused, never adopted
-    with pytest.raises(S.SweepError, match="holds a run that this sweep did not make"):
+    with pytest.raises(SS.SweepError, match="holds a run that this sweep did not make"):
         S.claim(taken, "/runs/sweeps/a")
     fresh = tmp_path / "fresh"
     S.claim(fresh, "/runs/sweeps/a")  # a new folder: marked as the sweep's
     (fresh / "config.json").write_text("{}")
     S.claim(fresh, "/runs/sweeps/a")  # its own run, restarted: continued
-    with pytest.raises(S.SweepError, match=r"\(sweep /runs/sweeps/a\)"):
+    with pytest.raises(SS.SweepError, match=r"\(sweep /runs/sweeps/a\)"):
         S.claim(fresh, "/runs/sweeps/b")
 
 
