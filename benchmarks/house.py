@@ -35,7 +35,16 @@ CONVERSION = re.compile(
     r"(max_rotor_speed|OMEGA_MAX\]|omega_max|max_speed)\b[^=\n]*\*"
     r"|\*[^=\n]*(max_rotor_speed|OMEGA_MAX\]|omega_max\b|max_speed)"
 )
-NOT_CONVERSIONS = ("physics/", "controller.py", "cascade.py", "vehicle.py", "telemetry.py")
+# Files whose products with Ω_max are not u -> Ω (the telemetry's throttle and PWM turn
+# rad/s back into a fraction).
+NOT_CONVERSIONS = (
+    "physics/",
+    "controller.py",
+    "cascade.py",
+    "vehicle.py",
+    "telemetry_pose.py",
+    "telemetry_status.py",
+)
 REFLECTION = re.compile(r'getattr\([^,]+, *f"_|getattr\(self, *f"|dir\(self\)|for \w+ in dir\(')
 
 

@@ -16,7 +16,8 @@ from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
 from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink import telemetry as T
+from quadsitl.mavlink.snapshot import Snapshot
+from quadsitl.mavlink.telemetry_pose import build_odometry
 from quadsitl.physics import layout as L
 from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.params import ParamError
@@ -44,13 +45,13 @@ def test_with_the_parameter_off_the_telemetry_is_the_truth_exactly():
     v.arm()
     v.takeoff(3.0)
     _fly(v, 3.0)
-    s = T.Snapshot(v)
+    s = Snapshot(v)
     wire = WireState.from_physics(v.state, v.airframe.gear_height, s.time_usec, 0, 0.0)
     np.testing.assert_array_equal(s.position_ned, wire.position_ned)
     np.testing.assert_array_equal(s.q_ned_frd, wire.q_ned_frd)
     np.testing.assert_array_equal(s.rates_frd, wire.rates_frd)
     np.testing.assert_array_equal(s.velocity_ned, frames.enu_to_ned(v.state[L.VEL]))
-    odometry = T.build_odometry(s)
+    odometry = build_odometry(s)
     assert math.isnan(odometry.pose_covariance[0])  # the truth: covariance unknown
     assert odometry.estimator_type == mav.MAV_ESTIMATOR_TYPE_UNKNOWN
 
@@ -63,7 +64,7 @@ def test_the_flight_software_flies_and_reports_the_estimate_when_selected():
     _fly(v, 8.0)
     position_error, attitude_error = _errors(v)
     assert 0.0 < position_error < 2.0 and 0.0 < attitude_error < 3.0  # near, not the truth
-    s = T.Snapshot(v)
+    s = Snapshot(v)
     known = v.nav_state
     np.testing.assert_allclose(s.position_ned[2], v.airframe.gear_height - known[L.I_PZ])
     assert s.position_ned[2] != pytest.approx(v.airframe.gear_height - v.state[L.I_PZ], abs=1e-6)

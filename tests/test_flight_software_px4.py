@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.telemetry import mission_state
+from quadsitl.mavlink.telemetry_status import mission_state
 from quadsitl.vehicle import mission as M
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.params import ParamError

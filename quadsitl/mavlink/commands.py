@@ -2,29 +2,32 @@
 
 The server (:mod:`.server`) decodes the message into a :class:`Command`, runs it here and
 answers with COMMAND_ACK (and, after it, any message the command asked for: see
-``server.after_ack``). Frames and units are converted here, at the wire: AMSL and
-relative altitudes to local metres, NED yaw in degrees to ENU radians.
+``server.after_ack``). What the commands need of the server is :class:`CommandHost`, so
+this module does not import the server. Frames and units are converted here, at the
+wire: AMSL and relative altitudes to local metres, NED yaw in degrees to ENU radians.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink import telemetry as T
-from quadsitl.mavlink.identity import AVAILABLE_MODES, available_modes_message
+from quadsitl.mavlink import telemetry_pose as pose
+from quadsitl.mavlink import telemetry_status as status
+from quadsitl.mavlink.identity import AVAILABLE_MODES, Identity, available_modes_message
 from quadsitl.mavlink.links import Link
+from quadsitl.mavlink.motor_path import MotorPath
+from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.physics.sensors.failures import FAILURE_NAMES, OFF, STUCK
 from quadsitl.physics.sensors.failures import OK as SENSOR_OK
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import ACCEPTED, Outcome, Result, Severity
+from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire.lockstep import FORCE_MAGIC, RESET_STATE, STAGE_AIRFRAME, STAGE_MOTION
-
-if TYPE_CHECKING:
-    from quadsitl.mavlink.server import MavlinkServer
 
 # COMPONENT_ARM_DISARM param2 that forces the action: PX4's and ArduPilot's 21196 (what
 # this project's clients send), and 2989, which QGroundControl's "force arm" sends
@@ -61,10 +64,29 @@ class Command:
             self.params = [getattr(msg, f"param{i}") for i in range(1, 8)]
 
 
+class CommandHost(Protocol):
+    """What the commands act on and answer through: the server of one vehicle
+    (:class:`~.server.MavlinkServer`, which runs them)."""
+
+    vehicle: Vehicle
+    identity: Identity
+    encoder: Any  # pymavlink's MAVLink, for the messages sent after the ACK
+    motors: MotorPath
+    schedules: dict[int, T.Schedule]  # link id -> its telemetry schedule
+    without_hil_state: set[int]  # link ids whose motor answers leave HIL_STATE out
+    after_ack: list[Any]  # messages to send after the COMMAND_ACK
+
+    def statustext(self, severity: int, text: str, echo: bool = True) -> None: ...
+
+    def snapshot(self) -> Snapshot: ...
+
+    def hil_state(self, link: Link) -> bool: ...
+
+
 class Commands:
     """The MAV_CMDs the vehicle runs; anything else is UNSUPPORTED."""
 
-    def __init__(self, server: MavlinkServer) -> None:
+    def __init__(self, server: CommandHost) -> None:
         self.server = server
         self.table = self._table()
 
@@ -155,7 +177,7 @@ class Commands:
             east, north, up = v.origin.to_local(lat, lon, alt)
         result = v.set_home(float(east), float(north), float(up))
         if result.ok:  # ground stations learn the new home at once
-            self.server.after_ack.append(T.build_home_position(self.server.snapshot()))
+            self.server.after_ack.append(pose.build_home_position(self.server.snapshot()))
         return result
 
     def _cmd_set_mode(self, c: Command, link: Link) -> Result:
@@ -216,7 +238,7 @@ class Commands:
         message_id = _int(c.params[0], "message id")
         if message_id == mav.MAVLINK_MSG_ID_HEARTBEAT:
             self.server.after_ack.append(
-                T.build_heartbeat(self.server.vehicle, self.server.identity.autopilot)
+                status.build_heartbeat(self.server.vehicle, self.server.identity.autopilot)
             )
             return ACCEPTED
         if message_id == mav.MAVLINK_MSG_ID_AVAILABLE_MODES:

@@ -11,17 +11,15 @@ frame, body FRD, as the velocity itself.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
+from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.physics import layout as L
 from quadsitl.vehicle import estimator_params as E
-
-if TYPE_CHECKING:
-    from quadsitl.mavlink.telemetry import Snapshot
 
 _UPPER = np.triu_indices(6)  # row-major upper-right triangle: MAVLink's order
 _FLU_TO_FRD = np.diag([1.0, -1.0, -1.0])

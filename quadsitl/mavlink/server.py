@@ -23,13 +23,20 @@ from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink import offboard
 from quadsitl.mavlink import telemetry as T
+from quadsitl.mavlink import telemetry_status as status
 from quadsitl.mavlink.commands import Command, Commands
 from quadsitl.mavlink.identity import IDENTITIES, Identity
 from quadsitl.mavlink.links import Link, Peer
 from quadsitl.mavlink.mission_protocol import MissionProtocol
 from quadsitl.mavlink.motor_path import MotorPath
 from quadsitl.mavlink.param_protocol import ParamProtocol
-from quadsitl.mavlink.signing import SignatureCheck, StreamTimestamps, is_signed
+from quadsitl.mavlink.signing import (
+    SignatureCheck,
+    SigningNotices,
+    StreamTimestamps,
+    is_signed,
+)
+from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.vehicle.episodes import MotorEpisodes
 from quadsitl.vehicle.modes import Mode
@@ -37,7 +44,6 @@ from quadsitl.vehicle.results import Outcome, Severity
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire.statustext import split_text
 
-SIGNING_REPORT_PERIOD = 10.0  # wall s between STATUSTEXT summaries of rejected messages
 MOTOR_LINK = "hil"  # the link name whose traffic is not logged and has no streams
 Handler = Callable[[Any, Link], None]  # a message, the link it came on
 RESULTS = {
@@ -77,9 +83,8 @@ class MavlinkServer:
         self.motors = MotorPath(vehicle, lockstep, episodes, row)
         self.without_hil_state: set[int] = set()  # links whose answers leave it out
         self.signing: SignatureCheck | None = None
-        self._signing_reported: tuple[float, int] = (-math.inf, 0)
+        self.signing_notices = SigningNotices(lambda text: self.statustext(Severity.WARNING, text))
         self._statustext_id = 0  # the id of this vehicle's last chunked STATUSTEXT
-        self._timestamps_reported = False  # said that signing timestamps cannot be kept
         if signing_key is not None:
             self.set_signing_key(signing_key)
         self.missions = MissionProtocol(vehicle, self.encoder, self.statustext)
@@ -187,7 +192,7 @@ class MavlinkServer:
                 link.accept(peer)
             return
         if self.signing is not None and self.signing.verdict(message) is not None:
-            self._report_signing()
+            self.signing_notices.rejected(self.signing, time.monotonic())
             return
         if peer is not None and (self.signing is None or is_signed(message)):
             link.accept(peer)
@@ -213,20 +218,18 @@ class MavlinkServer:
         state = (v.armed, v.mode, v.crashed, v.motor_control)
         if wall_now - self.last_heartbeat >= T.HEARTBEAT_PERIOD or state != self.last_state:
             self.last_heartbeat, self.last_state = wall_now, state  # at once on a change
-            self.send(T.build_heartbeat(v, self.identity.autopilot))
+            self.send(status.build_heartbeat(v, self.identity.autopilot))
         self._watch_ground_station(wall_now)
-        progress = (v.mission_current, len(v.mission), T.mission_state(v))
+        progress = (v.mission_current, len(v.mission), status.mission_state(v))
         if progress != self.last_mission_progress:  # at once, as PX4 does: MAVSDK's
             self.last_mission_progress = progress  # is_mission_finished reads it
-            self.send(T.build_mission_current(self.snapshot()))
+            self.send(status.build_mission_current(self.snapshot()))
         self.missions.tick(wall_now)
         self.params.tick()
         if self.signing is not None:
-            self._keep_signing_timestamps(wall_now)
-            if wall_now - self._signing_reported[0] > 1.0:
-                self._report_signing(wall_now)
+            self.signing_notices.tick(self.signing, wall_now)
         wall_cap = wall_now if self.motors.lockstep else None
-        snapshot: T.Snapshot | None = None
+        snapshot: Snapshot | None = None
         for link in self.links:
             due = self.schedules[id(link)].due(v.time, wall_cap)
             if not due:
@@ -236,8 +239,8 @@ class MavlinkServer:
             for message_id in due:
                 self.send(T.BUILDERS[message_id](snapshot), link)
 
-    def snapshot(self) -> T.Snapshot:
-        return T.Snapshot(
+    def snapshot(self) -> Snapshot:
+        return Snapshot(
             self.vehicle, self.comm_errors, self.error_counts, self.identity, self.motors.resets
         )
 
@@ -260,36 +263,10 @@ class MavlinkServer:
             self.gcs_lost = True
             self.vehicle.datalink_lost(silence)
 
-    def _keep_signing_timestamps(self, wall_now: float) -> None:
-        """Save the streams' timestamps now and then; say once if they cannot be kept."""
-        assert self.signing is not None
-        kept = self.signing.timestamps
-        if kept is None:
-            return
-        kept.save_if_due(wall_now)
-        if kept.problem is not None and not self._timestamps_reported:
-            self._timestamps_reported = True
-            self.statustext(
-                Severity.WARNING,
-                f"signing timestamps not kept ({kept.problem}): a signed message sent "
-                "before a restart could be replayed after it",
-            )
-
     def close(self) -> None:
         """Keep the signing timestamps (the simulator is stopping)."""
         if self.signing is not None and self.signing.timestamps is not None:
             self.signing.timestamps.save()
-
-    def _report_signing(self, wall_now: float | None = None) -> None:
-        """STATUSTEXT at the first rejection, then a summary at most every 10 s."""
-        assert self.signing is not None
-        total = sum(self.signing.rejected.values())
-        last_time, last_total = self._signing_reported
-        now = time.monotonic() if wall_now is None else wall_now
-        first = last_total == 0 and total > 0
-        if total != last_total and (first or now - last_time >= SIGNING_REPORT_PERIOD):
-            self._signing_reported = (now, total)
-            self.statustext(Severity.WARNING, self.signing.summary())
 
     # --- motor path ---------------------------------------------------------------------
     def _on_hil_actuator_controls(self, msg: Any, link: Link) -> None:
@@ -395,7 +372,7 @@ class MavlinkServer:
         result = self.vehicle.set_mission_current(msg.seq)
         if result.reason:
             self.statustext(Severity.WARNING, result.reason)
-        self.send(T.build_mission_current(self.snapshot()), link)
+        self.send(status.build_mission_current(self.snapshot()), link)
 
     # --- offboard (offboard.py) ---------------------------------------------------------
     def _on_set_position_target(self, msg: Any, link: Link) -> None:

@@ -15,7 +15,8 @@ a file per key in the state folder, as PX4 and ArduPilot keep theirs with the ke
 a frame captured before a restart cannot be replayed into the new process.
 
 With a key set, only HEARTBEAT and RADIO_STATUS are accepted unsigned (as ArduPilot
-does); everything else must be signed with the key.
+does); everything else must be signed with the key. What the server says about the
+messages it rejected, and about timestamps it cannot keep, is :class:`SigningNotices`.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import json
 import math
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -37,6 +39,7 @@ FUTURE_SLACK = 10 * 100_000  # how far ahead of the wall clock a timestamp may b
 REASONS = ("unsigned", "bad_signature", "replayed", "ahead")
 STATE_DIR_VARIABLE = "QUADSITL_STATE_DIR"  # where signing timestamps are kept
 SAVE_PERIOD = 1.0  # s between two writes of the timestamps (when they changed)
+REPORT_PERIOD = 10.0  # wall s between two summaries of rejected messages
 
 
 def key_from_passphrase(passphrase: str, source: str = "signing passphrase") -> bytes:
@@ -235,3 +238,38 @@ class SignatureCheck:
             f"signing: rejected {r['unsigned']} unsigned, {r['bad_signature']} badly signed, "
             f"{r['replayed']} replayed messages{ahead}"
         )
+
+
+class SigningNotices:
+    """What a server says about signing, through ``warn(text)``: the first rejected
+    message at once, then a summary at most every REPORT_PERIOD while more are
+    rejected; once, that the streams' timestamps cannot be kept."""
+
+    def __init__(self, warn: Callable[[str], None]) -> None:
+        self.warn = warn
+        self._reported: tuple[float, int] = (-math.inf, 0)  # wall s, rejections then
+        self._timestamps_reported = False
+
+    def rejected(self, check: SignatureCheck, wall_now: float) -> None:
+        """A message was rejected (or time passed): report if due."""
+        total = sum(check.rejected.values())
+        last_time, last_total = self._reported
+        first = last_total == 0 and total > 0
+        if total != last_total and (first or wall_now - last_time >= REPORT_PERIOD):
+            self._reported = (wall_now, total)
+            self.warn(check.summary())
+
+    def tick(self, check: SignatureCheck, wall_now: float) -> None:
+        """Save the streams' timestamps now and then (say once if they cannot be kept);
+        the summary of rejections when due."""
+        kept = check.timestamps
+        if kept is not None:
+            kept.save_if_due(wall_now)
+            if kept.problem is not None and not self._timestamps_reported:
+                self._timestamps_reported = True
+                self.warn(
+                    f"signing timestamps not kept ({kept.problem}): a signed message sent "
+                    "before a restart could be replayed after it"
+                )
+        if wall_now - self._reported[0] > 1.0:
+            self.rejected(check, wall_now)

@@ -24,7 +24,10 @@ from typing import Any
 
 import numpy as np
 
-from quadsitl.mavlink import telemetry as T
+from quadsitl.mavlink import telemetry_pose as pose
+from quadsitl.mavlink import telemetry_sensors as sensors
+from quadsitl.mavlink import telemetry_status as status
+from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
 from quadsitl.viz.live import LiveLogger
@@ -35,12 +38,12 @@ FLEET_SNAPSHOTS = 60.0  # Hz of wall time: vehicles logged a second, the fleet t
 MESSAGE_TIME = 0.5e-3  # wall s a message's logging may take (a few rr.log calls)
 FRAMED_HEIGHT = 5.0  # m above the start grid that the fleet's camera frames
 BUILDERS = (
-    T.build_attitude,
-    T.build_attitude_quaternion,
-    T.build_local_position_ned,
-    T.build_actuator_output_status,
-    T.build_battery_status,
-    T.build_mission_current,
+    pose.build_attitude,
+    pose.build_attitude_quaternion,
+    pose.build_local_position_ned,
+    status.build_actuator_output_status,
+    status.build_battery_status,
+    status.build_mission_current,
 )
 PANELS = (*LIVE_PANELS, "battery_remaining", "mission_item")
 
@@ -116,13 +119,13 @@ class SimView:
         index, self.turn = self.turn, (self.turn + 1) % len(self.turns)
         vehicle, logger = self.turns[index]
         stamp = time.time()
-        snapshot = T.Snapshot(vehicle)
+        snapshot = Snapshot(vehicle)
         messages = [build(snapshot) for build in BUILDERS]
         if vehicle.fleet.windy:
-            messages.append(T.build_wind_cov(snapshot))
+            messages.append(sensors.build_wind_cov(snapshot))
         if wall_now >= self.next_heartbeat[index]:
             self.next_heartbeat[index] = wall_now + 1.0
-            messages.insert(0, T.build_heartbeat(vehicle))
+            messages.insert(0, status.build_heartbeat(vehicle))
         return [(logger, message, stamp) for message in reversed(messages)]
 
     def event(self, text: str) -> None:
