@@ -1,37 +1,31 @@
-"""The simulator process: real-time loop, links, log, signals.
+"""The simulator process: its options, and what it is made of: vehicles, links, log,
+view, signals.
 
-Each iteration steps the physics for every step that is due on the wall clock (times
-the speed factor), lets the server send what is due, then waits in select() on all
-sockets until the next step is due. The lateness of every step against its schedule
-is recorded: that is the timing jitter the benchmark reports. When the loop is short of
-time, telemetry slows down before the physics falls behind (:mod:`.degrade`).
-
-In lockstep the wall clock does not move the physics: each motor command does (see
-:mod:`.motor_path`). The loop polls for 1 ms after each command (the next one is
-usually microseconds away), then sleeps in select(), waking for the heartbeat, so a
-silent client costs no CPU.
+:class:`SimConfig` is everything ``quadsitl sim`` can be told, checked before anything
+starts; :class:`Simulator` builds the vehicles' group, the links, the telemetry log and
+a server per vehicle from it, and hands them to the real-time loop
+(:mod:`.realtime_loop`: when the physics steps, and what it waits on);
+:func:`run_simulator` runs it until a signal and says what it flies.
 """
 
 from __future__ import annotations
 
-import gc
 import math
 import os
-import select
 import signal
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
-from quadsitl.mavlink.degrade import TelemetryGovernor
 from quadsitl.mavlink.fleet_server import FleetServer
 from quadsitl.mavlink.identity import get_identity
 from quadsitl.mavlink.links import Link, is_loopback, parse_url
+from quadsitl.mavlink.realtime_loop import RealTimeLoop
 from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.physics import Airframe, get_airframe
@@ -45,11 +39,6 @@ from quadsitl.vehicle.motor_faults import check_efficiency, check_motor
 from quadsitl.vehicle.param_binding import show_weather
 from quadsitl.vehicle.results import Severity
 from quadsitl.vehicle.vehicle import Vehicle
-
-MAX_LAG = 0.1  # s: further behind than this, skip ahead instead of catching up
-LOCKSTEP_TICK = 0.002  # wall s between telemetry/heartbeat ticks while in lockstep
-LOCKSTEP_WAIT = 0.05  # wall s, longest sleep in lockstep (heartbeat, --duration, signals)
-LOCKSTEP_SPIN = 0.001  # wall s to keep polling after a motor command before sleeping
 
 
 @dataclass
@@ -163,35 +152,6 @@ MakeAutopilot = Callable[[Airframe], Autopilot]  # an autopilot for the airframe
 MakeView = Callable[[dict[int, Vehicle]], View]  # system id -> vehicle, all of them
 
 
-class Timing:
-    """Lateness of each physics step against its wall-clock schedule (last ~17 min)."""
-
-    def __init__(self, capacity: int = 1_000_000) -> None:
-        self._ring = np.zeros(capacity, dtype=np.float32)  # s
-        self.steps = 0
-        self.skipped_steps = 0
-        self.slowed_seconds = 0.0  # wall s with the telemetry slowed down under load
-
-    def record(self, lateness: float) -> None:
-        self._ring[self.steps % self._ring.size] = lateness
-        self.steps += 1
-
-    @property
-    def lateness(self) -> np.ndarray:
-        """Recorded lateness, s."""
-        return self._ring[: min(self.steps, self._ring.size)]
-
-    def summary(self) -> str:
-        if not self.steps:
-            return "timing: no steps"
-        late = self.lateness.astype(np.float64) * 1000
-        return (
-            f"timing: {late.size} steps, lateness p50 {np.percentile(late, 50):.3f} ms, "
-            f"p99 {np.percentile(late, 99):.3f} ms, max {late.max():.3f} ms, "
-            f"skipped {self.skipped_steps}, telemetry slowed {self.slowed_seconds:.1f} s"
-        )
-
-
 class Simulator:
     """The vehicle, its links and log. Collaborators come in from the caller (the command
     line composes them): ``make_autopilot`` flies instead of the cascaded controller (a
@@ -264,10 +224,9 @@ class Simulator:
             for i, vehicle in enumerate(self.group.vehicles)
         ]
         self.server = FleetServer(self.group, self.servers, self.tlog)
-        self.timing = Timing()
-        self.governor = TelemetryGovernor()
-        self._socket_map: dict[Any, Link] | None = None
-        self.stopping = False
+        self.loop = RealTimeLoop(
+            self.group, self.server, self.links, config.speed, config.duration, self._housekeeping
+        )
         if make_view is not None:
             self.view = make_view(
                 {config.system_id + i: v for i, v in enumerate(self.group.vehicles)}
@@ -287,70 +246,11 @@ class Simulator:
             view.event(text)
 
     def stop(self, *_: object) -> None:
-        self.stopping = True
+        self.loop.stop()
 
     def run(self) -> None:
         """Until stopped (a signal, ``duration``)."""
-        # What exists now lives while the loop runs: keep it out of the garbage
-        # collector's full passes, whose scan of every object would stall the loop for
-        # milliseconds (and hand it back afterwards).
-        gc.collect()
-        gc.freeze()
-        try:
-            self._loop()
-        finally:
-            gc.unfreeze()
-
-    def _loop(self) -> None:
-        dt = self.group.physics.dt
-        wall_per_step = dt / self.config.speed
-        start = time.monotonic()
-        steps = 0  # physics steps taken on the wall-clock schedule since ``start``
-        end = None if self.config.duration is None else start + self.config.duration
-        last_tick = -math.inf
-        while not self.stopping:
-            now = time.monotonic()
-            if end is not None and now >= end:
-                break
-            if self.server.in_lockstep(now):
-                start, steps = now, 0  # real time resumes from here when lockstep ends
-                # Poll while commands are flowing (waking from sleep costs more than a
-                # round trip); sleep once the client pauses.
-                busy = now - self.server.last_lockstep_wall < LOCKSTEP_SPIN
-                wait = 0.0 if busy else LOCKSTEP_WAIT
-                if now - last_tick >= LOCKSTEP_TICK:
-                    self._govern(now, lockstep=True)
-                    self.server.tick(now)
-                    last_tick = now
-                    self._housekeeping(now, math.inf)
-            else:
-                steps = self._real_time_steps(start, steps, wall_per_step)
-                self._govern(now)
-                self.server.tick(now)
-                next_step = start + (steps + 1) * wall_per_step
-                self._housekeeping(now, next_step - time.monotonic())
-                wait = next_step - time.monotonic()
-            sockets = self._sockets()
-            asleep = time.monotonic()
-            readable, _, _ = select.select(list(sockets), [], [], max(0.0, wait))
-            self.governor.waited(time.monotonic() - asleep)
-            if not readable and wait == 0.0:
-                os.sched_yield()  # polling: let a client sharing this core run first
-            received_at = time.time()
-            for link in {sockets[s] for s in readable}:
-                self.server.receive(link, received_at)
-
-    def _govern(self, now: float, lockstep: bool = False) -> None:
-        """Slow the telemetry down while the real-time loop is short of time, restore
-        it when it has time to spare (at once in lockstep), and say so."""
-        governor = self.governor
-        changed, text = governor.reset(now) if lockstep else governor.update(now)
-        self.timing.slowed_seconds = governor.slowed_seconds
-        if changed:
-            self.server.slow_telemetry(governor.slowdown)
-        if text is not None:
-            severity = Severity.WARNING if governor.level else Severity.NOTICE
-            self.server.statustext(severity, text)
+        self.loop.run()
 
     def _housekeeping(self, now: float, spare: float) -> None:
         """The log and the view (with the telemetry: not on every poll in lockstep);
@@ -359,13 +259,6 @@ class Simulator:
             self._flush_log(self.tlog)
         if self.view is not None:
             self.view.tick(now, spare)
-
-    def _sockets(self) -> dict[Any, Link]:
-        """Every socket to wait on, and its link (cached unless a TCP link has peers
-        coming and going)."""
-        if self._socket_map is None or any(link.kind == "tcpin" for link in self.links):
-            self._socket_map = {s: link for link in self.links for s in link.sockets()}
-        return self._socket_map
 
     def _flush_log(self, tlog: TlogWriter) -> None:
         """Write the log; if it fails, say so on the console and to every ground station,
@@ -382,22 +275,6 @@ class Simulator:
             flush=True,
         )
         self.server.statustext(Severity.WARNING, "telemetry log stopped: write failed")
-
-    def _real_time_steps(self, start: float, steps: int, wall_per_step: float) -> int:
-        """Take the physics steps due by now; returns the new step count."""
-        due = int((time.monotonic() - start) / wall_per_step) - steps
-        if due * wall_per_step > MAX_LAG:  # e.g. the machine was suspended
-            self.timing.skipped_steps += due - 1
-            steps += due - 1
-            due = 1
-        for _ in range(due):
-            scheduled = start + (steps + 1) * wall_per_step
-            lateness = max(0.0, time.monotonic() - scheduled)
-            self.timing.record(lateness)
-            self.governor.step(lateness)
-            self.group.step()
-            steps += 1
-        return steps
 
     def close(self) -> None:
         for server in getattr(self, "servers", []):
@@ -460,5 +337,5 @@ def run_simulator(
         sim.run()
     finally:
         sim.close()
-        print(sim.timing.summary(), file=sys.stderr, flush=True)
+        print(sim.loop.timing.summary(), file=sys.stderr, flush=True)
     return 0
