@@ -11,6 +11,7 @@ import pytest
 
 from quadsitl import frames
 from quadsitl.bridges.fake_px4 import HilState, Px4HoverController, state_from
+from quadsitl.bridges.frame_reader import FrameReader
 from quadsitl.bridges.px4_airframe import (
     SCRIPT_NAME,
     SHIPPED,
@@ -23,7 +24,6 @@ from quadsitl.bridges.px4_hil import (
     FIELDS_MAG,
     LOCKSTEP_FLAG,
     ROUND_US,
-    FrameReader,
     HilPhysics,
 )
 from quadsitl.mavlink import mavlink as mav

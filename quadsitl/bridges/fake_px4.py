@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 from quadsitl.bridges.fake_ardupilot import HoverController, Kinematics
+from quadsitl.bridges.frame_reader import FrameReader
 from quadsitl.bridges.px4_hil import (
     ARMED_FLAG,
     FIELDS_ACCEL,
@@ -30,7 +31,6 @@ from quadsitl.bridges.px4_hil import (
     LOCKSTEP_FLAG,
     PORT,
     ROUND_US,
-    FrameReader,
 )
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.vehicle.geo import Home

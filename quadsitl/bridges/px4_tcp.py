@@ -22,8 +22,9 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
+from quadsitl.bridges.frame_reader import FrameReader
 from quadsitl.bridges.px4_airframe import parameter_folder
-from quadsitl.bridges.px4_hil import PORT, ROUND_US, FrameReader, HilPhysics
+from quadsitl.bridges.px4_hil import PORT, ROUND_US, HilPhysics
 from quadsitl.mavlink.links import is_loopback
 from quadsitl.physics.fleet import Fleet
 from quadsitl.physics.wind import Wind
