@@ -20,25 +20,14 @@ vehicle to reset in one datagram, resent for the vehicles whose answers are miss
 from __future__ import annotations
 
 import math
-import os
-import select
-import socket
 import time
-from collections import deque
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from quadsitl.client.motor_client import (
-    RESEND_AFTER,
-    SPIN_SECONDS,
-    SimulatorError,
-    refusal,
-    resend_wait,
-)
-from quadsitl.mavlink.links import MAX_DATAGRAM, is_loopback
-from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
+from quadsitl.client.fleet_link import FleetLink
+from quadsitl.client.motor_client import RESEND_AFTER, SimulatorError, resend_wait
 from quadsitl.physics import layout as L
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.answer import ANSWER_IDS, Answer, AnswerReader, decode_answer, field_slices
@@ -51,7 +40,6 @@ from quadsitl.wire.lockstep import (
     STAGE_MOTION,
 )
 from quadsitl.wire.state import WireState
-from quadsitl.wire.statustext import TextJoiner
 
 HEARTBEAT_WAIT = 2.5  # s: the shortest wait for every vehicle's heartbeat (1 Hz each)
 ODOMETRY = mav.MAVLINK_MSG_ID_ODOMETRY
@@ -59,10 +47,9 @@ COMMAND_ACK = mav.MAVLINK_MSG_ID_COMMAND_ACK
 SET_ACTUATOR_CONTROL_TARGET = mav.MAVLink_set_actuator_control_target_message
 RESET_COMMANDS = 3  # stage motion, reset, arm
 _ACK = field_slices(mav.MAVLink_command_ack_message)
-_TEXT = field_slices(mav.MAVLink_statustext_message)
 
 
-class FleetClient:
+class FleetClient(FleetLink):
     """Lockstep rounds with the vehicles ``first_system_id`` … ``+ n − 1`` of one
     simulator process, listening at ``host``:``port``.
 
@@ -71,6 +58,8 @@ class FleetClient:
         answer: the last answer of every vehicle, a :class:`WireState` of (n, ·) arrays.
         resent: rounds (and resets) that needed a resend; ``late``: answers dropped
             because they belonged to an earlier round.
+
+    The socket, the frames' encoding and what the simulator says are :class:`FleetLink`'s.
     """
 
     def __init__(
@@ -83,27 +72,16 @@ class FleetClient:
         signing_key: bytes | None = None,
         resend_after: float = RESEND_AFTER,
     ) -> None:
-        self.address = (host, port)
+        super().__init__(host, port, timeout, signing_key)
         self.n, self.first = n, first_system_id
-        self.timeout, self.resend_after = timeout, resend_after
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1" if is_loopback(host) else "0.0.0.0", 0))
-        self.sock.setblocking(False)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 * 2**20)
-        self._frames: list[bytes] = []
-        self.mav = mav.MAVLink(_Sink(self._frames), srcSystem=255, srcComponent=191)
-        self.signing = signing_key is not None
-        if signing_key is not None:
-            sign_outgoing(self.mav, signing_key, link_id=0)
+        self.resend_after = resend_after
         self.seq = 0
         self.time_usec = 0
         self.answer = _empty_answer(n)
-        self.statustexts: deque[str] = deque(maxlen=100)
         self.resent = 0
         self.late = 0
         self._round: list[list[Any]] = []
         self._rows: list[Answer | None] = [None] * n  # each vehicle's answer of this exchange
-        self._texts = TextJoiner()  # a long STATUSTEXT being put together
         self._sent_at = 0.0
         self.round_trip = math.nan  # s, running mean of rounds answered without a resend
 
@@ -112,72 +90,6 @@ class FleetClient:
         """A COMMAND_LONG to vehicle ``index`` (encoded when sent: see :meth:`_send`)."""
         values = list(params) + [0.0] * (7 - len(params))
         return self.mav.command_long_encode(self.first + index, 1, command, 0, *values)
-
-    def _encode(self, message: Any) -> bytes:
-        if self.signing:
-            keep_signing_clock(self.mav)
-        self.mav.send(message)
-        return self._frames.pop()
-
-    def _send(self, items: list[Any]) -> None:
-        """Frames in as few datagrams as fit. An item is a packed frame or a pymavlink
-        message, encoded now: each resend of a signed message gets a new signature (a
-        signed frame sent twice is a replay, which the simulator refuses)."""
-        frames = [item if isinstance(item, bytes) else self._encode(item) for item in items]
-        for datagram in FC.datagrams(frames):
-            self.sock.sendto(datagram, self.address)
-
-    def _receive(self, until: float) -> list[FC.Frame]:
-        """The frames of the datagrams that arrive before ``until`` (wall, monotonic);
-        returns as soon as one datagram has been read. Polls for the first SPIN_SECONDS
-        (an answer is usually tens of microseconds away, and waking from select() costs
-        about as much again), yielding the core to a simulator that shares it."""
-        started = time.monotonic()
-        while True:
-            try:
-                data = self.sock.recv(MAX_DATAGRAM)
-            except BlockingIOError:
-                now = time.monotonic()
-                wait = until - now
-                if wait <= 0:
-                    return []
-                if now - started < SPIN_SECONDS:
-                    os.sched_yield()
-                    continue
-                select.select([self.sock], [], [], wait)
-                continue
-            except ConnectionRefusedError:
-                raise SimulatorError(f"nothing listens at {self._where()}") from None
-            frames = list(FC.parse(data))
-            for frame in frames:
-                if frame.msgid == mav.MAVLINK_MSG_ID_STATUSTEXT:
-                    values = frame.unpack()
-                    text = self._texts.take(
-                        values[_TEXT["text"].start],
-                        values[_TEXT["id"].start],
-                        values[_TEXT["chunk_seq"].start],
-                    )
-                    if text is not None:
-                        self._text(text)
-            return frames
-
-    def _text(self, text: str) -> None:
-        """Keep a text; one saying the simulator belongs to another client ends the
-        exchange at once (waiting would not change it)."""
-        self.statustexts.append(text)
-        refused = refusal(text, self._where())
-        if refused is not None:
-            raise refused
-
-    def _where(self) -> str:
-        return f"{self.address[0]}:{self.address[1]}"
-
-    def _silent(self, what: str) -> SimulatorError:
-        recent = "; ".join(list(self.statustexts)[-3:])
-        return SimulatorError(
-            f"no {what} from the simulator at {self._where()} within {self.timeout:g} s"
-            + (f" (it said: {recent})" if recent else "")
-        )
 
     def _index(self, sysid: int) -> int:
         """Vehicle index of a system id, or −1 for one this client does not fly."""
@@ -396,14 +308,6 @@ class FleetClient:
         except OSError:
             pass
         self.sock.close()
-
-
-class _Sink:
-    def __init__(self, frames: list[bytes]) -> None:
-        self.frames = frames
-
-    def write(self, data: bytes) -> None:
-        self.frames.append(bytes(data))
 
 
 def _empty_answer(n: int) -> WireState:
