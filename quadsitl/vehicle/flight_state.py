@@ -20,8 +20,8 @@ from quadsitl.vehicle import guidance as G
 from quadsitl.vehicle.controller import Setpoint, Vec
 from quadsitl.vehicle.mission_runner import MissionRunner
 from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
-from quadsitl.vehicle.navigator import Activity, Hold, Leg
-from quadsitl.vehicle.results import ACCEPTED, Result, Severity, denied
+from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg
+from quadsitl.vehicle.results import ACCEPTED, LandedState, Result, Severity, denied
 from quadsitl.vehicle.view import VehicleView
 
 
@@ -41,6 +41,18 @@ class FlightState:
         self.rtl_stages: list[Activity] = []  # the return's activities after this one
         self.takeoff_altitude: float | None = None  # m above home, of the pending take-off
         self.mission_speed: float | None = None  # m/s, set by DO_CHANGE_SPEED
+        self.offboard: Setpoint | None = None  # the latest offboard setpoint
+        self.offboard_time = -math.inf  # s, simulated, when it came
+
+    @property
+    def landed_state(self) -> int:
+        if self.v.on_ground:
+            return LandedState.ON_GROUND
+        if isinstance(self.activity, Land):
+            return LandedState.LANDING
+        if self.mode is Mode.TAKEOFF:
+            return LandedState.TAKING_OFF
+        return LandedState.IN_AIR
 
     # --- what the ground station asks -------------------------------------------------
     def set_mode(self, mode: Mode) -> Result:
@@ -51,7 +63,7 @@ class FlightState:
             return denied("mission mode denied: no mission uploaded")
         if mode is Mode.MISSION and self.missions.finished:
             self.missions.restart()
-        if mode is Mode.OFFBOARD and not v.offboard_alive():
+        if mode is Mode.OFFBOARD and not self.offboard_alive():
             return denied("offboard denied: stream setpoints first")
         if mode is Mode.RTL and v.on_ground:
             return denied("return denied: vehicle is on the ground")
@@ -98,6 +110,18 @@ class FlightState:
             self.v.event(Severity.INFO, "mode LOITER")
         self.mode, self.activity, self.rtl_stages = Mode.LOITER, leg, []
         return ACCEPTED
+
+    def stream_offboard(self, setpoint: Setpoint) -> None:
+        """Latest offboard target (world ENU); kept until the next one or a timeout."""
+        self.offboard = setpoint
+        self.offboard_time = self.v.time
+
+    def offboard_alive(self) -> bool:
+        """Offboard setpoints came within COM_OF_LOSS_T."""
+        return (
+            self.offboard is not None
+            and self.v.time - self.offboard_time <= self.v.params["COM_OF_LOSS_T"]
+        )
 
     def change_speed(self, speed: float) -> None:
         """The cruise speed of the legs from now on (DO_CHANGE_SPEED), m/s."""
@@ -155,7 +179,7 @@ class FlightState:
         """Mode logic at the controller rate: timeouts, ground timers, take-off and
         return stages, mission progress."""
         v = self.v
-        if self.mode is Mode.OFFBOARD and not v.offboard_alive():
+        if self.mode is Mode.OFFBOARD and not self.offboard_alive():
             v.event(Severity.WARNING, "offboard setpoints lost: holding position")
             self.enter(Mode.LOITER)
         if v.on_ground and not v.crashed:
@@ -175,8 +199,8 @@ class FlightState:
     def setpoint(self, state: Vec) -> Setpoint:
         """What the controller flies to from ``state`` (the flight software's)."""
         v = self.v
-        if self.mode is Mode.OFFBOARD and v.offboard is not None:
-            return v.offboard
+        if self.mode is Mode.OFFBOARD and self.offboard is not None:
+            return self.offboard
         setpoint = self.activity.setpoint(state[L.POS], state[L.VEL], v.time)
         if v.on_ground and G.stays_on_ground(self.activity, v.airframe.gear_height):
             return Setpoint(idle=True)

@@ -6,6 +6,9 @@ Pure: no sockets, no files, no clocks. The MAVLink server calls the command meth
 reached mission items back. Local frame ENU, SI units: its origin (``origin``, fixed) is
 the start position on the flat ground; home (``home_position``, where RTL returns and
 what relative altitudes count from) starts there and can be moved (DO_SET_HOME).
+
+The vehicle assembles its flight software's parts; the mode and the activity flown are
+its :class:`~quadsitl.vehicle.flight_state.FlightState`'s, which alone changes them.
 """
 
 from __future__ import annotations
@@ -35,9 +38,9 @@ from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.mission_runner import MissionRunner
 from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
 from quadsitl.vehicle.motor_faults import MotorFaults
-from quadsitl.vehicle.navigator import Activity, Land, Sticks
+from quadsitl.vehicle.navigator import Activity, Sticks
 from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
-from quadsitl.vehicle.results import ACCEPTED, LandedState, Result, Severity, denied
+from quadsitl.vehicle.results import ACCEPTED, Result, Severity, denied
 
 MOTOR_TIMEOUT = 0.5  # s (simulated) without motor commands: the onboard controller resumes
 STICK_TIMEOUT = 0.5  # s (simulated) without MANUAL_CONTROL: sticks centred (COM_RC_LOSS_T)
@@ -69,8 +72,6 @@ class Vehicle:
     armed_at: float  # s, simulated
     flew: bool  # left the ground since arming
     landed_at: float | None
-    offboard: Setpoint | None
-    offboard_time: float
     motor_control: bool  # rotors commanded by an external controller, not the onboard one
     motor_command_time: float  # s, simulated, of the last external motor command
     sticks: Vec  # (4,) forward, right, up, yaw in [-1, 1], from MANUAL_CONTROL
@@ -194,13 +195,7 @@ class Vehicle:
 
     @property
     def landed_state(self) -> int:
-        if self.on_ground:
-            return LandedState.ON_GROUND
-        if isinstance(self.activity, Land):
-            return LandedState.LANDING
-        if self.mode is Mode.TAKEOFF:
-            return LandedState.TAKING_OFF
-        return LandedState.IN_AIR
+        return self.flight.landed_state
 
     # --- commands ---------------------------------------------------------------------
     def arm(self, force: bool = False) -> Result:
@@ -277,8 +272,7 @@ class Vehicle:
 
     def offboard_setpoint(self, setpoint: Setpoint) -> None:
         """Latest offboard target (world ENU); kept until the next one or a timeout."""
-        self.offboard = setpoint
-        self.offboard_time = self.time
+        self.flight.stream_offboard(setpoint)
 
     def set_param(self, name: str, value: float) -> float:
         """Set a parameter; returns the value stored. ParamError when refused."""
@@ -381,13 +375,6 @@ class Vehicle:
         self.rotor_cmd[:] = self.controller.rotor_command(state, setpoint, self.control_period)
 
     # --- helpers ----------------------------------------------------------------------
-    def offboard_alive(self) -> bool:
-        """Offboard setpoints came within COM_OF_LOSS_T."""
-        return (
-            self.offboard is not None
-            and self.time - self.offboard_time <= self.params["COM_OF_LOSS_T"]
-        )
-
     def event(self, severity: int, text: str) -> None:
         self.events.append((severity, text))
 
@@ -400,8 +387,6 @@ class Vehicle:
         self.armed_at = 0.0
         self.flew = False
         self.landed_at = None
-        self.offboard = None
-        self.offboard_time = -math.inf
         self.physics_steps = 0
         self.motor_control = False
         self.motor_command_time = -math.inf

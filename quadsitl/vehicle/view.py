@@ -15,7 +15,7 @@ from typing import Protocol
 from quadsitl.physics import Airframe, Fleet
 from quadsitl.physics.fleet_slot import FleetSlot
 from quadsitl.vehicle.battery import Battery
-from quadsitl.vehicle.controller import Autopilot, CascadedController, Setpoint, Vec
+from quadsitl.vehicle.controller import Autopilot, CascadedController, Vec
 from quadsitl.vehicle.estimator import EstimatorSlot
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.modes import Mode
@@ -67,7 +67,6 @@ class VehicleView(Protocol):
     armed_at: float
     flew: bool
     landed_at: float | None
-    offboard: Setpoint | None
     motor_control: bool
     motor_command_time: float
 
@@ -87,7 +86,6 @@ class VehicleView(Protocol):
     def crashed(self) -> bool: ...
     def event(self, severity: int, text: str) -> None: ...
     def disarm(self, force: bool = False) -> Result: ...
-    def offboard_alive(self) -> bool: ...
     def follow_battery(self) -> None: ...
     def step(self) -> None: ...
     def begin_period(self) -> int: ...
