@@ -294,7 +294,7 @@ class Commands:
         speed = c.params[1]
         if not (math.isfinite(speed) and speed > 0):
             return Result(Outcome.DENIED, f"change speed: {speed} m/s is not a speed")
-        self.server.vehicle.mission_speed = speed
+        self.server.vehicle.flight.change_speed(speed)
         return ACCEPTED
 
     def _cmd_reboot(self, c: Command, link: Link) -> Result:

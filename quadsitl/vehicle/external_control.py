@@ -1,13 +1,12 @@
 """What an external controller drives: rotor speeds in (the motor path's
 HIL_ACTUATOR_CONTROLS), whole-state resets for training episodes, and stepping one
-control period at a time: functions of a :class:`~quadsitl.vehicle.vehicle.Vehicle`,
+control period at a time: functions of a vehicle (:class:`~quadsitl.vehicle.view.VehicleView`),
 kept apart because the onboard flight software never uses them.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,36 +14,34 @@ from quadsitl.physics import layout as L
 from quadsitl.vehicle.controller import Vec
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import ACCEPTED, Result, Severity, denied
-
-if TYPE_CHECKING:
-    from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.vehicle.view import VehicleView
 
 
-def motor_command(v: Vehicle, rotor_speeds: Vec | None) -> None:
+def motor_command(v: VehicleView, rotor_speeds: Vec | None) -> None:
     """Rotor speeds (rad/s, finite, within [0, Ω_max]; the caller checks) from an
     external controller: the onboard controller is bypassed until the commands stop
     for MOTOR_TIMEOUT, the mode changes, or :meth:`release_motors`. A disarmed vehicle
     keeps its rotors stopped. ``None``: the caller writes ``v.rotor_cmd`` itself."""
     if not v.motor_control:
         v.motor_control = True
-        v.mode = Mode.OFFBOARD
+        v.flight.take_motors()
         v.event(Severity.INFO, "external motor control")
     v.motor_command_time = v.time
     if rotor_speeds is not None:
         v.rotor_cmd[:] = rotor_speeds if v.armed else 0.0
 
 
-def release_motors(v: Vehicle, reason: str) -> None:
+def release_motors(v: VehicleView, reason: str) -> None:
     """Hand the rotors back to the onboard controller, holding the current position."""
     if not v.motor_control:
         return
     v.motor_control = False
     v.controller.reset()
-    v.enter_mode(Mode.LOITER)
+    v.flight.enter(Mode.LOITER)
     v.event(Severity.NOTICE, f"motor control ended ({reason}): onboard controller holding")
 
 
-def reset_state(v: Vehicle, state: Vec) -> Result:
+def reset_state(v: VehicleView, state: Vec) -> Result:
     """Put the vehicle in ``state`` (17 values, world ENU, layout of
     :mod:`quadsitl.physics.layout`): for training episodes. Clears a crash; arming,
     simulated time and motor control are kept. Not under motor control, the onboard
@@ -68,11 +65,11 @@ def reset_state(v: Vehicle, state: Vec) -> Result:
     v.landed_at = v.time if resting else None
     if not v.motor_control:
         v.controller.reset()
-        v.enter_mode(Mode.LOITER)
+        v.flight.enter(Mode.LOITER)
     return ACCEPTED
 
 
-def advance(v: Vehicle, step_physics: Callable[..., None] | None = None) -> None:
+def advance(v: VehicleView, step_physics: Callable[..., None] | None = None) -> None:
     """One control period. Under motor control the physics takes it in one call
     (``step_physics``: the delays of :mod:`quadsitl.vehicle.episodes`, else the fleet's)."""
     if not v.motor_control:

@@ -9,14 +9,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from quadsitl.vehicle import external_control as X
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import Severity
-
-if TYPE_CHECKING:
-    from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.vehicle.view import VehicleView
 
 # COM_LOW_BAT_ACT, NAV_DLL_ACT and GF_ACTION values -> the mode flown (None: warn only).
 BATTERY_ACTIONS = {0: None, 2: Mode.LAND, 3: Mode.RTL}
@@ -91,27 +88,27 @@ class Failsafes:
         self.fence_breached = False
 
 
-def check(v: Vehicle) -> None:
-    """Each control tick: the battery and the geofence."""
+def check(v: VehicleView, failsafes: Failsafes) -> None:
+    """Each control tick: the battery and the geofence (``failsafes``: which fired)."""
     p = v.params.values
-    react(v, v.failsafes.battery(v.battery.remaining, p))
+    react(v, failsafes.battery(v.battery.remaining, p))
     x, y, z = v.nav_position.tolist()
     home_x, home_y, home_z = v.home_position.tolist()
     height = z - home_z - v.airframe.gear_height
-    react(v, v.failsafes.geofence(math.hypot(x - home_x, y - home_y), height, p))
+    react(v, failsafes.geofence(math.hypot(x - home_x, y - home_y), height, p))
 
 
-def react(v: Vehicle, reaction: Reaction | None) -> None:
+def react(v: VehicleView, reaction: Reaction | None) -> None:
     """Announce a failsafe; fly its mode if armed and in the air."""
     if reaction is None:
         return
     v.event(reaction.severity, reaction.text)
     mode = reaction.mode
-    if mode is None or not v.armed or v.on_ground or mode is v.mode:
+    if mode is None or not v.armed or v.on_ground or mode is v.flight.mode:
         return
-    if mode is Mode.RTL and v.mode is Mode.LAND:
+    if mode is Mode.RTL and v.flight.mode is Mode.LAND:
         return  # already coming down
     if v.motor_control:
         X.release_motors(v, reaction.text)
     v.event(Severity.INFO, f"mode {mode.name}")
-    v.enter_mode(mode)
+    v.flight.enter(mode)

@@ -3,30 +3,23 @@ automatic disarms on the ground (PX4's COM_DISARM_LAND and COM_DISARM_PRFLT)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from quadsitl.physics import layout as L
-from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.navigator import Land
 from quadsitl.vehicle.results import Severity
-
-if TYPE_CHECKING:
-    from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.vehicle.view import VehicleView
 
 
-def on_ground_timers(v: Vehicle) -> None:
+def on_ground_timers(v: VehicleView) -> None:
     """Disarm after landing (COM_DISARM_LAND) or without a take-off (COM_DISARM_PRFLT)."""
-    landing = isinstance(v.activity, Land)
-    if landing and v.armed:
-        v.activity.done = True
+    activity = v.flight.activity
+    if isinstance(activity, Land) and v.armed:
+        activity.done = True
         if v.landed_at is None:
             v.landed_at = v.time
         if v.time - v.landed_at >= v.params["COM_DISARM_LAND"]:
             v.disarm()
             v.event(Severity.INFO, "landed: disarmed")
-            if v.mode is Mode.MISSION:
-                v.missions.item_reached()
-            v.enter_mode(Mode.LOITER)
+            v.flight.landing_done()
         return
     limit = v.params["COM_DISARM_PRFLT"]
     if v.armed and limit > 0 and v.time - v.armed_at > limit and not v.flew:
@@ -34,7 +27,7 @@ def on_ground_timers(v: Vehicle) -> None:
         v.event(Severity.NOTICE, f"disarmed: no take-off within {limit:g} s")
 
 
-def watch_contact(v: Vehicle, before: int) -> None:
+def watch_contact(v: VehicleView, before: int) -> None:
     """Events and flight state when the ground contact changes (after a physics step)."""
     after = int(v.fleet.contact[0])
     if after == before:

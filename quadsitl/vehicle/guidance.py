@@ -8,25 +8,22 @@ keeps a landed vehicle on the ground (rotors at idle).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from quadsitl.vehicle.controller import Vec
 from quadsitl.vehicle.modes import STICK_MODES, Mode
 from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg, Limits, Orbit, Sticks
-
-if TYPE_CHECKING:
-    from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.vehicle.view import VehicleView
 
 LIFT_OFF_HEIGHT = 0.3  # m above the resting height: lower goals keep a landed vehicle idle
 
 
-def limits(v: Vehicle, cruise: float | None = None, climb: float | None = None) -> Limits:
+def limits(v: VehicleView, cruise: float | None = None, climb: float | None = None) -> Limits:
     """Speed limits of a leg: ``cruise`` (else the mission speed, else MPC_XY_CRUISE) and
     ``climb``, within the MPC_*_MAX limits."""
     p = v.params
-    speed = cruise or v.mission_speed or p["MPC_XY_CRUISE"]
+    speed = cruise or v.flight.mission_speed or p["MPC_XY_CRUISE"]
     return Limits(
         cruise_xy=min(speed, p["MPC_XY_VEL_MAX"]),
         climb=min(climb or p["MPC_Z_VEL_MAX_UP"], p["MPC_Z_VEL_MAX_UP"]),
@@ -35,12 +32,12 @@ def limits(v: Vehicle, cruise: float | None = None, climb: float | None = None) 
     )
 
 
-def activity_for(v: Vehicle, mode: Mode, here: Vec, yaw: float) -> Activity:
+def activity_for(v: VehicleView, mode: Mode, here: Vec, yaw: float) -> Activity:
     """The activity ``mode`` starts with at ``here`` (ENU, m) heading ``yaw`` (missions and
     returns are planned by their own code)."""
     p = v.params
     if mode is Mode.TAKEOFF:
-        altitude = v.takeoff_altitude or p["MIS_TAKEOFF_ALT"]
+        altitude = v.flight.takeoff_altitude or p["MIS_TAKEOFF_ALT"]
         top = np.array([here[0], here[1], altitude + v.airframe.gear_height])
         return Leg(here, top, limits(v, climb=p["MPC_TKO_SPEED"]), radius=0.2, yaw=yaw)
     if mode is Mode.LAND:
@@ -51,7 +48,7 @@ def activity_for(v: Vehicle, mode: Mode, here: Vec, yaw: float) -> Activity:
 
 
 def reposition(
-    v: Vehicle, east: float, north: float, up: float, speed: float | None, yaw: float | None
+    v: VehicleView, east: float, north: float, up: float, speed: float | None, yaw: float | None
 ) -> Leg | None:
     """The leg to a local point (NaN keeps the current coordinate; ``up`` above the
     ground), or None if the point is not finite or farther than 50 km."""
@@ -69,7 +66,7 @@ def reposition(
     return Leg(here.copy(), target, leg_limits, v.params["NAV_ACC_RAD"], yaw, face_travel=True)
 
 
-def return_to_launch(v: Vehicle, here: Vec, yaw: float) -> tuple[Activity, list[Activity]]:
+def return_to_launch(v: VehicleView, here: Vec, yaw: float) -> tuple[Activity, list[Activity]]:
     """(first activity, later stages): climb to RTL_RETURN_ALT above home if lower, fly
     above home, land."""
     gear, home = v.airframe.gear_height, v.home_position

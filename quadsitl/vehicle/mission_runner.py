@@ -1,35 +1,32 @@
 """The mission executor: which item is current, what flying it means, when it is done.
 
-PX4 keeps its commander, navigator and mission apart; here the :class:`Vehicle` owns
-modes and activities and this class sequences a mission's items for it: a flown item
-becomes an activity (a leg, a take-off, a landing, an orbit, a return), jumps and
-speed changes act at once, payload items are skipped with a message. State for the
-ground station: ``current``, ``started``, ``finished``, and the reached items the vehicle
-reports.
+PX4 keeps its commander, navigator and mission apart; here the vehicle's
+:class:`~quadsitl.vehicle.flight_state.FlightState` owns modes and activities and this
+class sequences a mission's items for it: a flown item becomes an activity (a leg, a
+take-off, a landing, an orbit, a return), jumps and speed changes act at once, payload
+items are skipped with a message. State for the ground station: ``current``,
+``started``, ``finished``, and the reached items the vehicle reports.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from quadsitl import frames
+from quadsitl.vehicle import guidance as G
 from quadsitl.vehicle import mission as M
 from quadsitl.vehicle.controller import Vec
-from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.navigator import Hold, Land, Leg, Orbit
 from quadsitl.vehicle.results import ACCEPTED, Result, Severity, denied
-
-if TYPE_CHECKING:
-    from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.vehicle.view import VehicleView
 
 
 class MissionRunner:
     """Runs ``items`` on ``vehicle`` while it is in MISSION mode."""
 
-    def __init__(self, vehicle: Vehicle) -> None:
+    def __init__(self, vehicle: VehicleView) -> None:
         self.v = vehicle
         self.items: list[M.MissionItem] = []
         self.current = 0
@@ -90,20 +87,20 @@ class MissionRunner:
         yaw_deg = item.param(4, math.nan)
         yaw = None if math.isnan(yaw_deg) else float(frames.yaw_ned_to_enu(math.radians(yaw_deg)))
         radius = item.param(2) if item.command == M.NAV_WAYPOINT and item.param(2) > 0 else None
-        limits = v.limits()
+        limits, acceptance = G.limits(v), v.params["NAV_ACC_RAD"]
         if item.command == M.NAV_TAKEOFF:
             target[:2] = here[:2]
-            limits = v.limits(climb=v.params["MPC_TKO_SPEED"])
-            v.activity = Leg(here, target, limits, 0.2, yaw)
+            limits = G.limits(v, climb=v.params["MPC_TKO_SPEED"])
+            v.flight.fly(Leg(here, target, limits, 0.2, yaw))
         elif item.command == M.NAV_LAND:
             target[2] = here[2]
             start = self._leg_start(here)
-            v.activity = Leg(start, target, limits, v.acceptance(), yaw, face_travel=True)
+            v.flight.fly(Leg(start, target, limits, acceptance, yaw, face_travel=True))
         elif item.command == M.NAV_RETURN_TO_LAUNCH:
-            v.plan_rtl(here, 0.0)
+            v.flight.plan_return(here, 0.0)
         else:  # waypoints and loiters fly there first
             start = self._leg_start(here)
-            v.activity = Leg(start, target, limits, radius or v.acceptance(), yaw, True)
+            v.flight.fly(Leg(start, target, limits, radius or acceptance, yaw, True))
         self.land_after_leg = item.command == M.NAV_LAND
         self.target = target
 
@@ -112,27 +109,28 @@ class MissionRunner:
         v = self.v
         item = self.items[self.current]
         if item.command == M.NAV_RETURN_TO_LAUNCH:
-            if v.activity.done and v.rtl_stages:
-                v.activity = v.rtl_stages.pop(0)
-            return  # landing completes it (the vehicle calls item_reached)
-        if not v.activity.done or isinstance(v.activity, Land):
+            v.flight.next_return_stage()
+            return  # landing completes it (the flight state calls item_reached)
+        activity = v.flight.activity
+        if not activity.done or isinstance(activity, Land):
             return
-        if self.land_after_leg and isinstance(v.activity, Leg):
-            v.activity = Land(v.activity.end, v.params["MPC_LAND_SPEED"], v.activity.yaw)
+        if self.land_after_leg and isinstance(activity, Leg):
+            v.flight.fly(Land(activity.end, v.params["MPC_LAND_SPEED"], activity.yaw))
             return
-        if isinstance(v.activity, Leg) and item.command == M.NAV_LOITER_TURNS:
-            cruise = v.limits().cruise_xy
+        if isinstance(activity, Leg) and item.command == M.NAV_LOITER_TURNS:
+            cruise = G.limits(v).cruise_xy
             here = v.nav_position
-            v.activity = Orbit(v.activity.end, item.param(3, 1.0), item.param1, cruise, here)
+            v.flight.fly(Orbit(activity.end, item.param(3, 1.0), item.param1, cruise, here))
             return
         if item.command == M.NAV_LOITER_UNLIM:
             return  # holds until the mission is changed
         hold = item.param(1) if item.command in (M.NAV_WAYPOINT, M.NAV_LOITER_TIME) else 0.0
         if self.hold_until is None:
             self.hold_until = v.time + max(hold, 0.0)
-            end = v.activity.end if isinstance(v.activity, Leg) else v.nav_position.copy()
-            v.activity = Hold(end, v.activity.yaw)
-            v.activity.done = True
+            end = activity.end if isinstance(activity, Leg) else v.nav_position.copy()
+            stay = Hold(end, activity.yaw)
+            stay.done = True
+            v.flight.fly(stay)
         if v.time >= self.hold_until:
             self.item_reached()
 
@@ -162,7 +160,7 @@ class MissionRunner:
             if item.command == M.DO_JUMP and self._jump(seq, item):
                 continue
             if item.command == M.DO_CHANGE_SPEED:
-                v.mission_speed = item.param2
+                v.flight.change_speed(item.param2)
             elif item.command in M.PAYLOAD:
                 v.event(Severity.INFO, f"mission item {seq}: {item.name} skipped (no payload)")
             v.items_reached.append(seq)
@@ -185,8 +183,7 @@ class MissionRunner:
         self.finished = True
         if v.armed and not v.on_ground:  # hold at the last item's point, as PX4 does
             v.event(Severity.INFO, "mission finished: holding")
-            v.mode = Mode.LOITER
-            v.activity = Hold(self._leg_start(here))
+            v.flight.hold(self._leg_start(here))
         else:
             v.event(Severity.INFO, "mission finished")
 

@@ -6,17 +6,14 @@ that cross)."""
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 from quadsitl.physics import get_airframe
 from quadsitl.vehicle.params import AIRFRAME_NAMES, SPECS, WEATHER_PARAMS, ParamError
 from quadsitl.vehicle.results import Severity
-
-if TYPE_CHECKING:
-    from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.vehicle.view import VehicleView
 
 
-def check(v: Vehicle, name: str, value: float) -> float:
+def check(v: VehicleView, name: str, value: float) -> float:
     """The value ``name`` would take on ``v``; ParamError naming the problem."""
     value = v.params.check(name, value)
     if name == "SIM_AIRFRAME" and value != v.params[name]:
@@ -41,7 +38,7 @@ def check(v: Vehicle, name: str, value: float) -> float:
     return value
 
 
-def apply(v: Vehicle, name: str) -> None:
+def apply(v: VehicleView, name: str) -> None:
     """Make the vehicle's parts follow parameter ``name``'s current value."""
     spec, value = SPECS[name], v.params[name]
     if spec.gain is not None:
@@ -76,7 +73,7 @@ def apply(v: Vehicle, name: str) -> None:
         v.estimator.enabled = enabled
 
 
-def _set_weather(v: Vehicle) -> None:
+def _set_weather(v: VehicleView) -> None:
     """Fly ``v`` in the weather its SIM_WIND_* parameters describe (its turbulence
     restarts; a gust set through the Python API stays). A σ_w equal to the current one
     keeps the turbulence as it was named (a severity stays a severity)."""
@@ -92,7 +89,7 @@ def _set_weather(v: Vehicle) -> None:
         v.event(Severity.INFO, text + f"sigma_w {weather.sigma_w:.2f} m/s")  # ASCII: STATUSTEXT
 
 
-def show_weather(v: Vehicle) -> None:
+def show_weather(v: VehicleView) -> None:
     """Write the weather ``v`` flies in (set through the Python API or ``quadsitl sim
     --wind``) into its SIM_WIND_* parameters, so that a ground station reads it."""
     weather = v.fleet.winds[0]

@@ -6,6 +6,9 @@ Pure: no sockets, no files, no clocks. The MAVLink server calls the command meth
 reached mission items back. Local frame ENU, SI units: its origin (``origin``, fixed) is
 the start position on the flat ground; home (``home_position``, where RTL returns and
 what relative altitudes count from) starts there and can be moved (DO_SET_HOME).
+
+The vehicle assembles its flight software's parts; the mode and the activity flown are
+its :class:`~quadsitl.vehicle.flight_state.FlightState`'s, which alone changes them.
 """
 
 from __future__ import annotations
@@ -23,7 +26,6 @@ from quadsitl.physics.sensors import SensorSlot, SensorSuite
 from quadsitl.vehicle import external_control as X
 from quadsitl.vehicle import failsafe as FS
 from quadsitl.vehicle import ground_contact as GC
-from quadsitl.vehicle import guidance as G
 from quadsitl.vehicle import mission as M
 from quadsitl.vehicle import param_binding as P
 from quadsitl.vehicle.battery import Battery
@@ -31,13 +33,14 @@ from quadsitl.vehicle.battery import shaft_power as battery_power
 from quadsitl.vehicle.controller import Autopilot, CascadedController, Setpoint, Vec
 from quadsitl.vehicle.estimator import Estimator, EstimatorSlot
 from quadsitl.vehicle.failsafe import Failsafes
+from quadsitl.vehicle.flight_state import FlightState
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.mission_runner import MissionRunner
 from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
 from quadsitl.vehicle.motor_faults import MotorFaults
-from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg, Limits, Sticks
+from quadsitl.vehicle.navigator import Activity, Sticks
 from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
-from quadsitl.vehicle.results import ACCEPTED, LandedState, Result, Severity, denied
+from quadsitl.vehicle.results import ACCEPTED, Result, Severity, denied
 
 MOTOR_TIMEOUT = 0.5  # s (simulated) without motor commands: the onboard controller resumes
 STICK_TIMEOUT = 0.5  # s (simulated) without MANUAL_CONTROL: sticks centred (COM_RC_LOSS_T)
@@ -68,14 +71,7 @@ class Vehicle:
     armed: bool
     armed_at: float  # s, simulated
     flew: bool  # left the ground since arming
-    mode: Mode
-    activity: Activity
-    rtl_stages: list[Activity]
     landed_at: float | None
-    offboard: Setpoint | None
-    offboard_time: float
-    takeoff_altitude: float | None  # m above home, of the pending take-off
-    mission_speed: float | None  # m/s, set by DO_CHANGE_SPEED
     motor_control: bool  # rotors commanded by an external controller, not the onboard one
     motor_command_time: float  # s, simulated, of the last external motor command
     sticks: Vec  # (4,) forward, right, up, yaw in [-1, 1], from MANUAL_CONTROL
@@ -126,6 +122,7 @@ class Vehicle:
         self.motors = MotorFaults(self.fleet)
         self.failsafes = Failsafes()
         self.missions = MissionRunner(self)
+        self.flight = FlightState(self, self.missions, self.position.copy())
         self.events: deque[tuple[int, str]] = deque(maxlen=100)
         self.items_reached: deque[int] = deque(maxlen=100)
         # rad/s, last command to the motors
@@ -176,6 +173,14 @@ class Vehicle:
         return float(self.position[2]) - self.airframe.gear_height
 
     @property
+    def mode(self) -> Mode:
+        return self.flight.mode
+
+    @property
+    def activity(self) -> Activity:
+        return self.flight.activity
+
+    @property
     def mission(self) -> list[M.MissionItem]:
         return self.missions.items
 
@@ -190,13 +195,7 @@ class Vehicle:
 
     @property
     def landed_state(self) -> int:
-        if self.on_ground:
-            return LandedState.ON_GROUND
-        if isinstance(self.activity, Land):
-            return LandedState.LANDING
-        if self.mode is Mode.TAKEOFF:
-            return LandedState.TAKING_OFF
-        return LandedState.IN_AIR
+        return self.flight.landed_state
 
     # --- commands ---------------------------------------------------------------------
     def arm(self, force: bool = False) -> Result:
@@ -212,7 +211,7 @@ class Vehicle:
         self.armed_at = self.time
         self.flew = False
         self.controller.reset()
-        self.enter_mode(self.mode)
+        self.flight.enter(self.mode)
         self.event(Severity.INFO, "armed")
         return ACCEPTED
 
@@ -226,43 +225,12 @@ class Vehicle:
         return ACCEPTED
 
     def set_mode(self, mode: Mode) -> Result:
-        if mode in NEEDS_PILOT:
-            return denied(f"mode {mode.name} denied: needs a pilot (RC)")
-        if mode is Mode.MISSION and not self.mission:
-            return denied("mission mode denied: no mission uploaded")
-        if mode is Mode.MISSION and self.missions.finished:
-            self.missions.restart()
-        if mode is Mode.OFFBOARD and not self._offboard_alive():
-            return denied("offboard denied: stream setpoints first")
-        if mode is Mode.RTL and self.on_ground:
-            return denied("return denied: vehicle is on the ground")
-        if mode is Mode.LAND and self.on_ground and not self.armed:
-            return denied("land denied: vehicle is on the ground")
-        if self.motor_control:
-            X.release_motors(self, f"mode {mode.name} requested")
-        if mode is not self.mode:
-            self.event(Severity.INFO, f"mode {mode.name}")
-        self.enter_mode(mode)
-        return ACCEPTED
+        return self.flight.set_mode(mode)
 
     def takeoff(self, altitude: float | None = None) -> Result:
-        """Climb above the current position to ``altitude`` m above home (None: the
-        MIS_TAKEOFF_ALT parameter). Disarmed on the ground, the vehicle switches to
-        TAKEOFF and climbs once armed (PX4's behaviour, which QGroundControl relies on)."""
-        if not self.armed and not self.on_ground:
-            return denied("take-off denied: not armed")
-        if altitude is not None:
-            above_ground = altitude + float(self.home_position[2])
-            if not (math.isfinite(altitude) and above_ground >= 0.3 and altitude <= 500):
-                return denied(
-                    f"take-off denied: {altitude:.1f} m above home is below the ground or "
-                    "above 500 m"
-                )
-        self.takeoff_altitude = altitude
-        result = self.set_mode(Mode.TAKEOFF)
-        if result.ok and not self.armed:
-            self.event(Severity.INFO, "take-off ready: arm to climb")
-        return result
+        """Climb to ``altitude`` m above home (None: MIS_TAKEOFF_ALT); see
+        :meth:`FlightState.takeoff`."""
+        return self.flight.takeoff(altitude)
 
     def land(self) -> Result:
         return self.set_mode(Mode.LAND)
@@ -300,20 +268,11 @@ class Vehicle:
     ) -> Result:
         """Go to a local point (m above the ground; NaN keeps the current coordinate) and
         hold there."""
-        if not self.armed:
-            return denied("reposition denied: not armed")
-        leg = G.reposition(self, east, north, up, speed, yaw)
-        if leg is None:
-            return denied("reposition denied: target not finite or too far")
-        if self.mode is not Mode.LOITER:
-            self.event(Severity.INFO, "mode LOITER")
-        self.mode, self.activity = Mode.LOITER, leg
-        return ACCEPTED
+        return self.flight.reposition(east, north, up, speed, yaw)
 
     def offboard_setpoint(self, setpoint: Setpoint) -> None:
         """Latest offboard target (world ENU); kept until the next one or a timeout."""
-        self.offboard = setpoint
-        self.offboard_time = self.time
+        self.flight.stream_offboard(setpoint)
 
     def set_param(self, name: str, value: float) -> float:
         """Set a parameter; returns the value stored. ParamError when refused."""
@@ -326,7 +285,7 @@ class Vehicle:
         """Replace the mission (a refused one leaves the old one in place)."""
         result = self.missions.set_items(items)
         if result.ok and self.mode is Mode.MISSION and self.armed:
-            self.enter_mode(Mode.LOITER)
+            self.flight.enter(Mode.LOITER)
         return result
 
     def set_mission_current(self, seq: int) -> Result:
@@ -405,77 +364,17 @@ class Vehicle:
             return
         if self.motor_control:
             return  # the external controller's command stands
-        self._navigate()
-        state = self.nav_state
-        if isinstance(self.activity, Sticks):
+        FS.check(self, self.failsafes)
+        self.flight.navigate()
+        state, activity = self.nav_state, self.flight.activity
+        if isinstance(activity, Sticks):
             fresh = self.time - self.stick_time <= STICK_TIMEOUT
             heading = float(frames.euler_from_quat(state[L.QUAT])[2])
-            self.activity.update(self.sticks if fresh else np.zeros(4), heading)
-        setpoint = self._current_setpoint(state)
+            activity.update(self.sticks if fresh else np.zeros(4), heading)
+        setpoint = self.flight.setpoint(state)
         self.rotor_cmd[:] = self.controller.rotor_command(state, setpoint, self.control_period)
 
-    def _current_setpoint(self, state: Vec) -> Setpoint:
-        position, velocity = state[L.POS], state[L.VEL]
-        if self.mode is Mode.OFFBOARD and self.offboard is not None:
-            return self.offboard
-        setpoint = self.activity.setpoint(position, velocity, self.time)
-        if self.on_ground and G.stays_on_ground(self.activity, self.airframe.gear_height):
-            return Setpoint(idle=True)
-        return setpoint
-
-    def _navigate(self) -> None:
-        """Mode logic at the controller rate: timeouts, failsafes, mission progress."""
-        FS.check(self)
-        if self.mode is Mode.OFFBOARD and not self._offboard_alive():
-            self.event(Severity.WARNING, "offboard setpoints lost: holding position")
-            self.enter_mode(Mode.LOITER)
-        if self.on_ground and not self.crashed:
-            GC.on_ground_timers(self)
-        if self.mode is Mode.TAKEOFF and self.activity.done:
-            self.event(Severity.INFO, "take-off complete: holding")
-            climb = self.activity
-            self.enter_mode(Mode.LOITER)
-            if isinstance(climb, Leg):  # hold the take-off target, not where it is now
-                self.activity = Hold(climb.end, climb.yaw)
-        elif self.mode is Mode.RTL and self.activity.done and self.rtl_stages:
-            self.activity = self.rtl_stages.pop(0)
-        elif self.mode is Mode.MISSION:
-            self.missions.progress()
-
-    # --- modes ------------------------------------------------------------------------
-    def enter_mode(self, mode: Mode) -> None:
-        self.mode = mode
-        state = self.nav_state
-        here = state[L.POS].copy()
-        yaw = float(frames.euler_from_quat(state[L.QUAT])[2])
-        self.rtl_stages = []
-        if mode is Mode.MISSION:
-            self.missions.started = True
-            self.missions.start_item()
-        elif mode is Mode.RTL:
-            self.plan_rtl(here, yaw)
-        else:
-            self.activity = G.activity_for(self, mode, here, yaw)
-        if mode is Mode.OFFBOARD:
-            self.controller.reset()
-
-    def plan_rtl(self, here: Vec, yaw: float) -> None:
-        self.activity, self.rtl_stages = G.return_to_launch(self, here, yaw)
-        self.event(Severity.INFO, "returning to launch")
-
     # --- helpers ----------------------------------------------------------------------
-    def limits(self, cruise: float | None = None, climb: float | None = None) -> Limits:
-        return G.limits(self, cruise, climb)
-
-    def acceptance(self) -> float:
-        return self.params["NAV_ACC_RAD"]
-
-    def _offboard_alive(self) -> bool:
-        return (
-            self.offboard is not None
-            and self.time - self.offboard_time <= self.params["COM_OF_LOSS_T"]
-        )
-
     def event(self, severity: int, text: str) -> None:
         self.events.append((severity, text))
 
@@ -488,10 +387,6 @@ class Vehicle:
         self.armed_at = 0.0
         self.flew = False
         self.landed_at = None
-        self.offboard = None
-        self.offboard_time = -math.inf
-        self.takeoff_altitude = None
-        self.mission_speed = None
         self.physics_steps = 0
         self.motor_control = False
         self.motor_command_time = -math.inf
@@ -500,6 +395,4 @@ class Vehicle:
         self.stick_time = -math.inf
         self.rotor_cmd[:] = 0.0
         self.controller.reset()
-        self.mode = Mode.LOITER
-        self.activity = Hold(self.position.copy())
-        self.rtl_stages = []
+        self.flight.reset(self.position.copy())
