@@ -19,7 +19,6 @@ from numpy.typing import ArrayLike, NDArray
 from quadsitl.frames import quat_from_euler
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
-from quadsitl.physics.fleet import FleetLike
 from quadsitl.physics.sensors.observation import ObservationNoise
 from quadsitl.physics.wind import Wind
 from quadsitl.tasks import faults as FT
@@ -28,6 +27,7 @@ from quadsitl.tasks import recording as R
 from quadsitl.tasks import spec as S
 from quadsitl.tasks.batch import StepBatch
 from quadsitl.tasks.delay import Delay, DelayLine
+from quadsitl.tasks.fleet_like import FleetLike
 from quadsitl.tasks.options import TaskOptions
 from quadsitl.tasks.randomization import Randomization, airframe_scale_row
 from quadsitl.tasks.sensor_faults import SensorFaults
