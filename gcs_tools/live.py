@@ -15,7 +15,8 @@ from collections.abc import Sequence
 from pymavlink import mavutil
 
 from quadsitl.viz.live import LiveLogger
-from quadsitl.viz.scene import LIVE_PANELS, blueprint, open_recording
+from quadsitl.viz.scene import LIVE_PANELS, blueprint
+from quadsitl.viz.viewer import open_recording
 
 
 def watch(

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from gcs_tools.replay_scene import System, route, send_fleet, send_one, vehicles_of
 from gcs_tools.tlog_reader import ReadStats, read_tlog
-from quadsitl.viz.scene import check_output_path
+from quadsitl.viz.viewer import check_output_path
 
 DUPLICATE_US = 10_000  # a message repeated within 10 ms on another link is the same one
 

@@ -19,9 +19,9 @@ from quadsitl.viz.scene import (
     blueprint,
     framing,
     model_scale,
-    open_recording,
     series_style,
 )
+from quadsitl.viz.viewer import open_recording
 
 
 class Columns:

@@ -22,7 +22,7 @@ from quadsitl.physics import Airframe
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS, TaskOptions
 from quadsitl.tasks import features as F
-from quadsitl.tasks.engine import commanded_rotor_speed
+from quadsitl.tasks.step_kernels import commanded_rotor_speed
 from quadsitl.vehicle.controller import CascadedController, Setpoint
 
 # m: the farthest goal shown to the policy, by the task it learned (TaskSpec.carrot);

@@ -32,8 +32,7 @@ import numpy as np
 import torch
 
 from policies import checkpoint
-from policies.algos import algorithm_class
-from policies.algos.base import Algorithm
+from policies.algos.base import Algorithm, algorithm_class
 from policies.config import TrainConfig
 from policies.evaluate import VALIDATION_SEED, evaluate
 from policies.rollout import SEED_SPACING, explained_variance, make_vector_env

@@ -1,8 +1,10 @@
-"""What the algorithms share: the network, collecting a rollout, the critic loss."""
+"""What the algorithms share: the network, collecting a rollout, the critic loss; and
+:func:`algorithm_class`, which finds an algorithm by its name."""
 
 from __future__ import annotations
 
 import abc
+import importlib
 from typing import Any
 
 import numpy as np
@@ -10,6 +12,7 @@ import torch
 from gymnasium.vector import VectorEnv
 from torch.nn import functional as F
 
+from policies.algos import ALGORITHMS, REGISTRY
 from policies.config import TrainConfig
 from policies.networks import ActorCritic
 from policies.rollout import Rollout, compute_gae, final_observations
@@ -144,6 +147,15 @@ class Algorithm(abc.ABC):
             params = [p for group in optimizer.param_groups for p in group["params"]]
             torch.nn.utils.clip_grad_norm_(params, self.config.max_grad_norm)
         optimizer.step()
+
+
+def algorithm_class(name: str) -> type[Algorithm]:
+    """The class of algorithm ``name``; ValueError naming the known ones."""
+    try:
+        module, cls = REGISTRY[name].split(":")
+    except KeyError:
+        raise ValueError(f"unknown algorithm {name!r}; choose one of {ALGORITHMS}") from None
+    return getattr(importlib.import_module(module), cls)  # type: ignore[no-any-return]
 
 
 def _episode_ends(

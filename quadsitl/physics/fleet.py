@@ -2,20 +2,20 @@
 
 :class:`VehicleStates` holds the arrays and checks input; :class:`Fleet` steps them with
 the compiled kernel (or, with ``backend="reference"``, the numpy reference it is tested
-against). A single vehicle is a fleet of one. Whatever steps vehicles elsewhere (the
-simulator processes of the MAVLink backend) is a VehicleStates with its own ``step``:
-:class:`FleetLike` is what the task engine needs of it.
+against: :func:`quadsitl.physics.reference.step_in_place`). A single vehicle is a fleet
+of one. Whatever steps vehicles elsewhere (the simulator processes of the MAVLink
+backend) is a VehicleStates with its own ``step``; what the task engine needs of either
+is :class:`quadsitl.tasks.fleet_like.FleetLike`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from quadsitl.frames import quat_to_matrix
 from quadsitl.physics import kernel, reference, wind
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe, get_airframe, hover_rotor_speed
@@ -48,46 +48,6 @@ def initial_state(
     state[:, L.I_QZ] = np.sin(half_yaw)
     state[:, L.ROTORS] = np.reshape(rotor_speed, (-1, 1))
     return state
-
-
-class FleetLike(Protocol):
-    """What the task engine needs of a fleet: its arrays, a reset, a step and its
-    weather."""
-
-    state: NDArray[np.float64]
-    params: NDArray[np.float64]
-    contact: NDArray[np.int8]
-    touchdown_speed: NDArray[np.float64]
-    wind_state: NDArray[np.float64]  # (n, N_WIND_STATE): the air at each vehicle
-
-    @property
-    def hover_rotor_speed(self) -> NDArray[np.float64]: ...
-
-    @property
-    def windy(self) -> bool: ...
-
-    def reset(
-        self,
-        state: ArrayLike | None = None,
-        contact: ArrayLike | int = L.AIRBORNE,
-        mask: ArrayLike | None = None,
-    ) -> None: ...
-
-    def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None: ...
-
-    def set_wind(
-        self,
-        weather: Wind | Sequence[Wind],
-        seed: int | Sequence[int] | None = None,
-        mask: ArrayLike | None = None,
-        restart: bool = True,
-    ) -> None: ...
-
-    def set_ground_effect(self, on: bool, mask: ArrayLike | None = None) -> None: ...
-
-    def set_motor_efficiency(
-        self, efficiency: ArrayLike, mask: ArrayLike | None = None
-    ) -> None: ...
 
 
 class VehicleStates:
@@ -366,12 +326,12 @@ class Fleet(VehicleStates):
         the parameters always."""
         if not self.world:
             still = kernel.single_step if self.n == 1 else kernel.batch_step
-            self._step_arrays = _reference_step if self.backend == "reference" else still
+            self._step_arrays = reference.step_in_place if self.backend == "reference" else still
             return
         windy = self.windy
         weather = (self.wind_params, self.wind_state, self.wind_streams)
         if self.backend == "reference":
-            step: Callable[..., int] = _reference_step
+            step: Callable[..., int] = reference.step_in_place
             self._step_arrays = (lambda *arrays: step(*arrays, *weather)) if windy else step
             return
         world = kernel.single_step_wind if self.n == 1 else kernel.batch_step_wind
@@ -423,35 +383,3 @@ class Fleet(VehicleStates):
 def _span(airframe: Airframe) -> float:
     """m, rotor tip to rotor tip: the "wingspan" b of the angular-rate gust filters."""
     return 2.0 * (airframe.arm_length + airframe.rotor_radius)
-
-
-def _reference_step(
-    state,
-    params,
-    rotor_cmd,
-    contact,
-    touchdown_speed,
-    dt,
-    n_substeps,
-    wind_params=None,
-    wind_state=None,
-    streams=None,
-) -> int:
-    """The kernel's ``step`` contract in numpy: steps in place; returns -1, or the first
-    vehicle with a non-finite command (and then changes nothing). The weather steps
-    before each physics step unless every vehicle is in still air."""
-    cmd = rotor_cmd.reshape(len(state), L.N_ROTORS)
-    bad_rows = ~np.isfinite(cmd).all(axis=1)
-    if bad_rows.any():
-        return int(np.argmax(bad_rows))
-    for _ in range(n_substeps):
-        air = None
-        if wind_params is not None:
-            wind.advance(wind_state, wind_params, state, params, streams, dt)
-            rotation = quat_to_matrix(state[:, L.QUAT])  # (N, 3, 3) body -> world
-            rates_body = np.einsum("nji,nj->ni", rotation, wind_state[:, L.WS_AIR_RATES])
-            air = np.concatenate([wind_state[:, L.WS_AIR_VELOCITY], rates_body], axis=1)
-        state[:], contact[:], touchdown_speed[:] = reference.step(
-            state, params, cmd, contact, touchdown_speed, dt, air
-        )
-    return -1

@@ -5,9 +5,12 @@ blocks of B (``BLOCK`` for a batch, 1 for a single vehicle) into structure-of-ar
 scratch (value k of vehicle j at ``s[k * B + j]``) so that the compiler vectorises
 each RK4 stage across vehicles. The row length B is a compile-time constant on purpose:
 with it the compiler can tell the rows apart and vectorises the derivative (4× over 2-D
-scratch, whose row length is only known at run time). The same source is compiled once
-per block size (:func:`compile_step`): ``batch_step`` and ``single_step`` agree bit for
-bit, and ``tests/test_physics_equivalence.py`` holds them to the reference within 1e-12.
+scratch, whose row length is only known at run time). This module holds the RK4 step
+over blocks (scratch, substeps, the weather first); the derivative and the ground
+contact it inlines are in :mod:`quadsitl.physics.kernel_dynamics`. The same source is
+compiled once per block size (:func:`compile_step`): ``batch_step`` and ``single_step``
+agree bit for bit, and ``tests/test_physics_equivalence.py`` holds them to the reference
+within 1e-12.
 Read the reference to understand the physics; read this only to change its speed.
 """
 
@@ -19,14 +22,11 @@ from typing import Any
 import numba
 import numpy as np
 
-from quadsitl.physics import ground_effect as GE
 from quadsitl.physics import layout as L
 from quadsitl.physics import wind_kernel
+from quadsitl.physics.kernel_dynamics import SUMS_ROWS, derivative, ground_contact
 
 BLOCK = 32  # vehicles per vectorised block (measured best of 16..256)
-THRUST, ROLL_MOMENT, PITCH_MOMENT, YAW_SUM = 0, 1, 2, 3  # rows of the rotor sums
-GAIN0 = 4  # rows 4..7 of the same scratch: the rotors' ground-effect gains (world build)
-SUMS_ROWS = GAIN0 + L.N_ROTORS
 # FMA contraction and reciprocal division only: no fast-math NaN/inf assumptions, so
 # the finiteness check stays exact.
 _OPTIONS: dict[str, Any] = dict(
@@ -34,141 +34,6 @@ _OPTIONS: dict[str, Any] = dict(
 )
 # The helpers are inlined into ``step`` (numba IR), where B is a compile-time constant.
 _inline = numba.njit(inline="always", **_OPTIONS)
-
-
-@_inline
-def _derivative(s, p, cmd, out, m, sums, air, B, WIND):  # pragma: no cover - compiled
-    """ṡ of the first m vehicles of a block: s, p and cmd hold rows of B values; ``sums``
-    (SUMS_ROWS rows) is scratch for the rotor sums and gains; ``air`` (6 rows) the air's
-    velocity (world) and angular velocity (body). The compile-time flag WIND builds the
-    world: the air, and each rotor's efficiency and ground effect (without it, the
-    still-air arithmetic of the paper, unchanged). Each loop runs over vehicles,
-    innermost, so that it is vectorised."""
-    for j in range(m):
-        for k in range(4):
-            sums[k * B + j] = 0.0
-    if WIND:  # the world: each rotor's ground-effect gain G_i, into sums rows 4..7
-        for i in range(L.N_ROTORS):
-            for j in range(m):
-                qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
-                qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
-                hub_z = (
-                    s[L.I_PZ * B + j]
-                    + 2 * (qx * qz - qw * qy) * p[(L.P_ROTOR_X0 + i) * B + j]
-                    + 2 * (qy * qz + qw * qx) * p[(L.P_ROTOR_Y0 + i) * B + j]
-                )
-                radius = p[L.P_ROTOR_RADIUS * B + j]
-                height = max(hub_z - p[L.P_GROUND_Z * B + j], GE.MIN_HEIGHT_RADII * radius)
-                k = radius / (4.0 * height)
-                ratio = 1.0 / (1.0 - k * k)  # Cheeseman–Bennett (+inf height: 1)
-                on = p[L.P_GROUND_EFFECT * B + j] > 0.0
-                sums[(GAIN0 + i) * B + j] = ratio if on else 1.0
-    for i in range(L.N_ROTORS):  # rotor i: thrust, its moments, and its motor lag
-        for j in range(m):
-            rotor = s[(L.I_ROTOR0 + i) * B + j]
-            rotor_sq = rotor * rotor
-            if WIND:  # the world: the rotor's efficiency η_i and ground-effect gain G_i
-                rotor_sq = rotor_sq * p[(L.P_ROTOR_EFFICIENCY0 + i) * B + j]
-                thrust = p[L.P_KT * B + j] * rotor_sq * sums[(GAIN0 + i) * B + j]
-            else:
-                thrust = p[L.P_KT * B + j] * rotor_sq
-            sums[THRUST * B + j] += thrust
-            sums[ROLL_MOMENT * B + j] += p[(L.P_ROTOR_Y0 + i) * B + j] * thrust
-            sums[PITCH_MOMENT * B + j] += p[(L.P_ROTOR_X0 + i) * B + j] * thrust
-            sums[YAW_SUM * B + j] += p[(L.P_ROTOR_YAW_SIGN0 + i) * B + j] * rotor_sq
-            c = min(max(cmd[i * B + j], 0.0), p[L.P_OMEGA_MAX * B + j])
-            out[(L.I_ROTOR0 + i) * B + j] = p[L.P_MOTOR_RATE * B + j] * (c - rotor)
-    for j in range(m):
-        vx, vy, vz = s[L.I_VX * B + j], s[L.I_VY * B + j], s[L.I_VZ * B + j]
-        qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
-        qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
-        wx, wy, wz = s[L.I_WX * B + j], s[L.I_WY * B + j], s[L.I_WZ * B + j]
-        total_thrust = sums[THRUST * B + j]
-        mx = sums[ROLL_MOMENT * B + j]
-        my = sums[PITCH_MOMENT * B + j]
-        yaw_sum = sums[YAW_SUM * B + j]
-
-        mass = p[L.P_MASS * B + j]
-        out[L.I_PX * B + j] = vx
-        out[L.I_PY * B + j] = vy
-        out[L.I_PZ * B + j] = vz
-        if WIND:  # velocity and rates through the air
-            ax, ay, az = vx - air[0 * B + j], vy - air[1 * B + j], vz - air[2 * B + j]
-            ox, oy, oz = wx - air[3 * B + j], wy - air[4 * B + j], wz - air[5 * B + j]
-        else:
-            ax, ay, az = vx, vy, vz
-            ox, oy, oz = wx, wy, wz
-        drag = p[L.P_KD * B + j] * math.sqrt(ax * ax + ay * ay + az * az)
-        out[L.I_VX * B + j] = (total_thrust * (2 * (qx * qz + qw * qy)) - drag * ax) / mass
-        out[L.I_VY * B + j] = (total_thrust * (2 * (qy * qz - qw * qx)) - drag * ay) / mass
-        gravity = p[L.P_GRAVITY * B + j]
-        out[L.I_VZ * B + j] = (
-            total_thrust * (1 - 2 * (qx * qx + qy * qy)) - drag * az
-        ) / mass - gravity
-
-        out[L.I_QW * B + j] = 0.5 * (-qx * wx - qy * wy - qz * wz)
-        out[L.I_QX * B + j] = 0.5 * (qw * wx + qy * wz - qz * wy)
-        out[L.I_QY * B + j] = 0.5 * (qw * wy - qx * wz + qz * wx)
-        out[L.I_QZ * B + j] = 0.5 * (qw * wz + qx * wy - qy * wx)
-
-        jxx, jyy, jzz = p[L.P_JXX * B + j], p[L.P_JYY * B + j], p[L.P_JZZ * B + j]
-        km_rate = p[L.P_KM * B + j] * math.sqrt(ox * ox + oy * oy + oz * oz)
-        mx = mx - km_rate * ox - (wy * (jzz * wz) - wz * (jyy * wy))
-        my = -my - km_rate * oy - (wz * (jxx * wx) - wx * (jzz * wz))
-        mz = p[L.P_KQ * B + j] * yaw_sum - km_rate * oz - (wx * (jyy * wy) - wy * (jxx * wx))
-        out[L.I_WX * B + j] = mx / jxx
-        out[L.I_WY * B + j] = my / jyy
-        out[L.I_WZ * B + j] = mz / jzz
-
-
-@_inline
-def _ground_contact(prev, s, p, j, contact, touchdown_speed, n, B):  # pragma: no cover - compiled
-    """Contact resolution of block column j (vehicle n), as reference.ground_contact."""
-    if contact[n] == L.CRASHED:
-        for k in range(L.I_ROTOR0):
-            s[k * B + j] = prev[k * B + j]
-        return
-    ground_z = p[L.P_GROUND_Z * B + j]
-    if ground_z == -math.inf:  # no ground: nothing to touch
-        contact[n] = L.AIRBORNE
-        return
-    qw, qx, qy, qz = s[L.I_QW * B + j], s[L.I_QX * B + j], s[L.I_QY * B + j], s[L.I_QZ * B + j]
-    pz = s[L.I_PZ * B + j]
-    cos_tilt = 1 - 2 * (qx * qx + qy * qy)
-    sin_tilt = math.sqrt(max(0.0, 1.0 - cos_tilt * cos_tilt))
-    r_zx = 2 * (qx * qz - qw * qy)
-    r_zy = 2 * (qy * qz + qw * qx)
-    strike = False
-    for i in range(L.N_ROTORS):
-        hub_z = pz + r_zx * p[(L.P_ROTOR_X0 + i) * B + j] + r_zy * p[(L.P_ROTOR_Y0 + i) * B + j]
-        if hub_z - p[L.P_ROTOR_RADIUS * B + j] * sin_tilt < ground_z:
-            strike = True
-    rest_z = ground_z + p[L.P_GEAR_HEIGHT * B + j]
-    below = pz < rest_z and not strike
-    if not (strike or below):
-        contact[n] = L.AIRBORNE
-        return
-    touching = below and contact[n] != L.ON_GROUND
-    speed = -s[L.I_VZ * B + j]
-    too_hard = touching and (
-        speed > p[L.P_MAX_TOUCHDOWN_SPEED * B + j] or cos_tilt < p[L.P_COS_MAX_TILT * B + j]
-    )
-    if touching:
-        touchdown_speed[n] = max(speed, 0.0)
-    resting = below and not too_hard
-    s[L.I_PZ * B + j] = max(pz, rest_z)
-    for k in range(3):
-        s[(L.I_VX + k) * B + j] = 0.0
-        s[(L.I_WX + k) * B + j] = 0.0
-    if resting:
-        yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
-        s[L.I_QW * B + j] = math.cos(0.5 * yaw)
-        s[L.I_QX * B + j] = 0.0
-        s[L.I_QY * B + j] = 0.0
-        s[L.I_QZ * B + j] = math.sin(0.5 * yaw)
-        contact[n] = L.ON_GROUND
-    else:
-        contact[n] = L.CRASHED
 
 
 @_inline
@@ -289,13 +154,13 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
                             prev[k * B + j] = s[k * B + j]
                 if weather:
                     wind_kernel.advance_block(s, p, wp, ws, rng, wscratch, air, B, B, dt)
-                _derivative(s, p, cmd, k1, m, sums, air, B, WIND)
+                derivative(s, p, cmd, k1, m, sums, air, B, WIND)
                 _axpy(tmp, s, 0.5 * dt, k1, m, B)
-                _derivative(tmp, p, cmd, k2, m, sums, air, B, WIND)
+                derivative(tmp, p, cmd, k2, m, sums, air, B, WIND)
                 _axpy(tmp, s, 0.5 * dt, k2, m, B)
-                _derivative(tmp, p, cmd, k3, m, sums, air, B, WIND)
+                derivative(tmp, p, cmd, k3, m, sums, air, B, WIND)
                 _axpy(tmp, s, dt, k3, m, B)
-                _derivative(tmp, p, cmd, k4, m, sums, air, B, WIND)
+                derivative(tmp, p, cmd, k4, m, sums, air, B, WIND)
                 for k in range(size):
                     for j in range(m):
                         i = k * B + j
@@ -310,7 +175,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
                     for k in range(L.I_ROTOR0, size):
                         s[k * B + j] = min(max(s[k * B + j], 0.0), omega_max)
                 for j in range(m):
-                    _ground_contact(prev, s, p, j, contact, touchdown_speed, first + j, B)
+                    ground_contact(prev, s, p, j, contact, touchdown_speed, first + j, B)
             for j in range(m):
                 for k in range(size):
                     state[first + j, k] = s[k * B + j]
@@ -367,13 +232,13 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
                     if contact[first + j] == L.CRASHED:
                         for k in range(size):
                             prev[k * B + j] = s[k * B + j]
-                _derivative(s, p, cmd, k1, m, sums, sums, B, False)
+                derivative(s, p, cmd, k1, m, sums, sums, B, False)
                 _axpy(tmp, s, 0.5 * dt, k1, m, B)
-                _derivative(tmp, p, cmd, k2, m, sums, sums, B, False)
+                derivative(tmp, p, cmd, k2, m, sums, sums, B, False)
                 _axpy(tmp, s, 0.5 * dt, k2, m, B)
-                _derivative(tmp, p, cmd, k3, m, sums, sums, B, False)
+                derivative(tmp, p, cmd, k3, m, sums, sums, B, False)
                 _axpy(tmp, s, dt, k3, m, B)
-                _derivative(tmp, p, cmd, k4, m, sums, sums, B, False)
+                derivative(tmp, p, cmd, k4, m, sums, sums, B, False)
                 for k in range(size):
                     for j in range(m):
                         i = k * B + j
@@ -388,7 +253,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
                     for k in range(L.I_ROTOR0, size):
                         s[k * B + j] = min(max(s[k * B + j], 0.0), omega_max)
                 for j in range(m):
-                    _ground_contact(prev, s, p, j, contact, touchdown_speed, first + j, B)
+                    ground_contact(prev, s, p, j, contact, touchdown_speed, first + j, B)
             for j in range(m):
                 for k in range(size):
                     state[first + j, k] = s[k * B + j]

@@ -2,8 +2,10 @@
 
 Pure functions over batched arrays (layout in :mod:`quadsitl.physics.layout`):
 ``derivative(state, params, rotor_cmd) -> dstate``, a generic :func:`rk4`, and
-:func:`ground_contact`. The compiled kernel (:mod:`quadsitl.physics.kernel`) computes
-the same thing fast and is tested against this module.
+:func:`ground_contact`; :func:`step_in_place` runs them, after the weather, under the
+kernel's in-place contract (the ``"reference"`` backend of the Fleet). The compiled
+kernel (:mod:`quadsitl.physics.kernel`) computes the same thing fast and is tested
+against this module.
 
 Model (world ENU, body FLU, paper Eqs. 1-9 with the moment signs of Σ r_i × F_i):
 
@@ -28,7 +30,9 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from quadsitl.frames import quat_to_matrix
 from quadsitl.physics import layout as L
+from quadsitl.physics import wind
 from quadsitl.physics.ground_effect import thrust_ratio
 
 Array = NDArray[np.float64]
@@ -188,3 +192,37 @@ def step(
     new[:, L.QUAT] /= np.linalg.norm(new[:, L.QUAT], axis=1, keepdims=True)
     new[:, L.ROTORS] = np.clip(new[:, L.ROTORS], 0.0, params[:, [L.P_OMEGA_MAX]])
     return ground_contact(state, new, params, contact, touchdown_speed)
+
+
+def step_in_place(
+    state,
+    params,
+    rotor_cmd,
+    contact,
+    touchdown_speed,
+    dt,
+    n_substeps,
+    wind_params=None,
+    wind_state=None,
+    streams=None,
+) -> int:
+    """The kernel's ``step`` contract in numpy (the reference backend of
+    :class:`~quadsitl.physics.fleet.Fleet`): ``n_substeps`` steps in place; returns -1,
+    or the first vehicle with a non-finite command (and then changes nothing). The
+    weather (:func:`quadsitl.physics.wind.advance`) steps before each physics step
+    unless every vehicle is in still air (no weather arrays)."""
+    cmd = rotor_cmd.reshape(len(state), L.N_ROTORS)
+    bad_rows = ~np.isfinite(cmd).all(axis=1)
+    if bad_rows.any():
+        return int(np.argmax(bad_rows))
+    for _ in range(n_substeps):
+        air = None
+        if wind_params is not None:
+            wind.advance(wind_state, wind_params, state, params, streams, dt)
+            rotation = quat_to_matrix(state[:, L.QUAT])  # (N, 3, 3) body -> world
+            rates_body = np.einsum("nji,nj->ni", rotation, wind_state[:, L.WS_AIR_RATES])
+            air = np.concatenate([wind_state[:, L.WS_AIR_VELOCITY], rates_body], axis=1)
+        state[:], contact[:], touchdown_speed[:] = step(
+            state, params, cmd, contact, touchdown_speed, dt, air
+        )
+    return -1

@@ -2,7 +2,8 @@
 
 Each step: the actions become rotor commands (Eq. 19), the physics steps, the task's
 compiled ``evaluate`` writes observation, reward and outcome, and the engine keeps the
-episode counters (truncation, time within the goal radius, returns). Resetting a subset
+episode counters (truncation, time within the goal radius, returns); the compiled ends
+of a step around ``evaluate`` are in ``step_kernels.py``. Resetting a subset
 of envs by mask and the episode metrics are here too. The single gym env, the native
 vector env and the SB3 adapter are faces of this class; it knows nothing of Gymnasium's
 reset conventions (the faces do that).
@@ -18,7 +19,6 @@ from numpy.typing import ArrayLike, NDArray
 from quadsitl.frames import quat_from_euler
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
-from quadsitl.physics.fleet import FleetLike
 from quadsitl.physics.sensors.observation import ObservationNoise
 from quadsitl.physics.wind import Wind
 from quadsitl.tasks import faults as FT
@@ -27,116 +27,11 @@ from quadsitl.tasks import recording as R
 from quadsitl.tasks import spec as S
 from quadsitl.tasks.batch import StepBatch
 from quadsitl.tasks.delay import Delay, DelayLine
+from quadsitl.tasks.fleet_like import FleetLike
 from quadsitl.tasks.options import TaskOptions
 from quadsitl.tasks.randomization import Randomization, airframe_scale_row
-from quadsitl.tasks.reward import jit
 from quadsitl.tasks.sensor_faults import SensorFaults
-
-
-@jit
-def commanded_rotor_speed(hover, beta, action):  # pragma: no cover - compiled
-    """Eq. 19: Ω_c = Ω_h + β·a, rad/s, of actions ``a`` (a number or an array; float64),
-    for the hover speed Ω_h (rad/s) and the action scale β (rad/s)."""
-    return hover + beta * action
-
-
-@jit
-def take_action(raw, active, hover, beta, low, high, action, rotor_cmd, steps):  # pragma: no cover
-    """Start a step: ``action`` = the raw actions clipped to [low, high] (0 where not
-    ``active``), rotor commands Ω_c = Ω_h + β·a (Eq. 19: the bounds are the rotor speeds
-    0 and Ω_max, which the physics clips to anyway), one more step counted. Returns -1, or
-    the first env whose action is not finite (nothing changed)."""
-    for n in range(raw.shape[0]):
-        if active[n]:
-            for i in range(raw.shape[1]):
-                if not math.isfinite(raw[n, i]):
-                    return n
-    for n in range(raw.shape[0]):
-        for i in range(raw.shape[1]):
-            a = min(max(raw[n, i], low), high) if active[n] else 0.0
-            action[n, i] = a
-            rotor_cmd[n, i] = commanded_rotor_speed(hover, beta, a)
-        steps[n] += 1
-    return -1
-
-
-@jit
-def close_step(
-    dist,
-    prev_dist,
-    reward,
-    outcome,
-    steps,
-    max_steps,
-    goal_radius,
-    control_period,
-    time_within,
-    reach_time,
-    episode_return,
-    terminated,
-    truncated,
-):  # pragma: no cover - compiled
-    """End a step: the episode counters, and truncation at the time limit. (Arrays, not
-    the StepBatch: numba's call takes arrays' types in C, a struct's in Python, which
-    costs more than the seven arrays it would save.)"""
-    for n in range(dist.shape[0]):
-        if dist[n, F.D_POS] < goal_radius:
-            time_within[n] += control_period
-            if math.isnan(reach_time[n]):
-                reach_time[n] = steps[n] * control_period
-        terminated[n] = outcome[n] != S.RUNNING
-        truncated[n] = steps[n] >= max_steps and not terminated[n]
-        if truncated[n]:
-            outcome[n] = S.TIMED_OUT
-        for c in range(F.N_DIST):
-            prev_dist[n, c] = dist[n, c]
-        episode_return[n] += reward[n]
-
-
-@jit
-def close_step_recording(
-    dist,
-    prev_dist,
-    reward,
-    outcome,
-    steps,
-    max_steps,
-    goal_radius,
-    control_period,
-    time_within,
-    reach_time,
-    episode_return,
-    terminated,
-    truncated,
-    state,
-    goal,
-    wind_state,
-    rows,
-    counters,
-):  # pragma: no cover - compiled
-    """:func:`close_step`, then the recorded env's row (:mod:`.recording`). Returns the
-    rows recorded, negated once that env's episode has ended."""
-    close_step(
-        dist,
-        prev_dist,
-        reward,
-        outcome,
-        steps,
-        max_steps,
-        goal_radius,
-        control_period,
-        time_within,
-        reach_time,
-        episode_return,
-        terminated,
-        truncated,
-    )
-    i = counters[R.ENV]
-    R.record_row(
-        rows, counters, state, goal, dist, wind_state, reward[i], steps[i], episode_return[i]
-    )
-    return counters[R.COUNT] if outcome[i] == S.RUNNING else -counters[R.COUNT]
-
+from quadsitl.tasks.step_kernels import close_step, close_step_recording, take_action
 
 OUTCOME_NAME_ARRAY = np.array([S.OUTCOME_NAMES[code] for code in range(len(S.OUTCOME_NAMES))])
 

@@ -18,8 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quadsitl.physics import layout as L
-from quadsitl.physics.fleet import FleetLike
 from quadsitl.tasks import sensor_faults as SF
+from quadsitl.tasks.fleet_like import FleetLike
 from quadsitl.tasks.sensor_faults import SensorFault
 from quadsitl.vehicle.motor_faults import check_efficiency, check_motor
 

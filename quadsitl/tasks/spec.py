@@ -15,16 +15,15 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 
+from quadsitl.physics.airframe import Airframe
 from quadsitl.registration import task_env_id, task_env_name
 from quadsitl.tasks import features as F
 from quadsitl.tasks.batch import StepBatch
-
-if TYPE_CHECKING:
-    from quadsitl.tasks.engine import TaskEngine
 
 # Episode outcomes, reported in ``info["outcome"]`` at episode end.
 RUNNING = 0
@@ -48,7 +47,7 @@ OUTCOME_NAMES = {
 class Metric(NamedTuple):
     """The figure that says how an episode of a task went, beyond success."""
 
-    key: str  # the episode-end info key (TaskEngine.episode_metrics)
+    key: str  # the episode-end info key (the engine's episode_metrics)
     name: str  # in words
     unit: str
 
@@ -65,6 +64,40 @@ class TaskDoc:
     rewards: str  # the per-step reward (reward.eq18_text and the task's terms)
     start: str  # the starting state
     end: str  # what terminates an episode (its time limit and success are added)
+
+
+class EngineView(Protocol):
+    """What a task's hooks (``on_reset``, ``advance_goal``, ``success``) may read and
+    write of the engine flying it: the goal, the task's own per-env state, the episode
+    counters and each env's generator. ``quadsitl.tasks.engine.TaskEngine`` is one; the
+    hooks see no more of it, so the spec needs no engine to be defined."""
+
+    @property
+    def airframe(self) -> Airframe: ...  # nominal, as the options name it
+
+    @property
+    def goal(self) -> NDArray[np.float64]: ...  # (N, 6), written in place
+
+    @property
+    def task_state(self) -> Any: ...  # what ``new_state`` made
+
+    @property
+    def rngs(self) -> list[np.random.Generator]: ...
+
+    @property
+    def control_period(self) -> float: ...
+
+    @property
+    def max_steps(self) -> int: ...
+
+    @property
+    def steps(self) -> NDArray[np.int64]: ...
+
+    @property
+    def outcome(self) -> NDArray[np.int8]: ...
+
+    @property
+    def time_within(self) -> NDArray[np.float64]: ...
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -97,9 +130,9 @@ class TaskSpec:
     goal: tuple[float, ...] | Callable[[np.random.Generator], np.ndarray] = (0.0,) * 6
     # For tasks whose goal moves or that keep more than a goal per env (target following).
     new_state: Callable[[int], Any] | None = None  # the task's own per-env state, for N envs
-    on_reset: Callable[[TaskEngine, np.ndarray], None] | None = None
-    advance_goal: Callable[[TaskEngine, np.ndarray], None] | None = None
-    success: Callable[[TaskEngine, np.ndarray], np.ndarray] | None = None
+    on_reset: Callable[[EngineView, np.ndarray], None] | None = None
+    advance_goal: Callable[[EngineView, np.ndarray], None] | None = None
+    success: Callable[[EngineView, np.ndarray], np.ndarray] | None = None
     # Training: the randomised start policies are trained and evaluated from (TaskOptions
     # init_* names), the fast preset's step budget that learns the task, and the shorter
     # one of the algorithm comparison (policies.comparison).

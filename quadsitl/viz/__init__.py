@@ -1,2 +1,3 @@
-"""Rerun views of flights: the scene (:mod:`.scene`), MAVLink messages as samples
-(:mod:`.flight_view`) and the row-by-row logger shared by the live views (:mod:`.live`)."""
+"""Rerun views of flights: the scene (:mod:`.scene`), where a recording is shown
+(:mod:`.viewer`), MAVLink messages as samples (:mod:`.flight_view`) and the row-by-row
+logger shared by the live views (:mod:`.live`)."""

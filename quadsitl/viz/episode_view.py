@@ -50,8 +50,8 @@ from quadsitl.viz.scene import (
     WIND_COLOR,
     blueprint,
     framing,
-    open_recording,
 )
+from quadsitl.viz.viewer import open_recording
 
 STEP_TIMELINE = "step"
 TERMS = ("position", "attitude", "velocity", "rates")  # the columns of engine.dist

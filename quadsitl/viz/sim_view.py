@@ -31,7 +31,8 @@ from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
 from quadsitl.viz.live import LiveLogger
-from quadsitl.viz.scene import LIVE_PANELS, blueprint, framing, open_recording
+from quadsitl.viz.scene import LIVE_PANELS, blueprint, framing
+from quadsitl.viz.viewer import open_recording
 
 RATE = 30.0  # Hz of wall time, per vehicle
 FLEET_SNAPSHOTS = 60.0  # Hz of wall time: vehicles logged a second, the fleet together
