@@ -15,6 +15,7 @@ from quadsitl.tasks import TASKS
 
 ROOT = Path(__file__).resolve().parents[1]
 CODE = ("quadsitl", "policies", "benchmarks")  # the project's code, tests and docs aside
+HOUSE = ROOT / "benchmarks" / "house.py"  # measures this count, so it names the example
 
 
 def files_naming(task: str) -> list[Path]:
@@ -25,7 +26,7 @@ def files_naming(task: str) -> list[Path]:
         path.relative_to(ROOT)
         for folder in CODE
         for path in (ROOT / folder).rglob("*.py")
-        if word.search(path.read_text(encoding="utf-8"))
+        if path != HOUSE and word.search(path.read_text(encoding="utf-8"))
     )
 
 
