@@ -233,3 +233,23 @@ def test_wrong_options_are_refused(options: list[str], says: str) -> None:
     command = [sys.executable, "-m", "quadsitl.cli", "sim", *options]
     done = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and says in done.stderr
+
+
+def test_the_banner_names_the_ardupilot_instance_each_port_serves() -> None:
+    """ArduPilot's -I i sends its servo frames to UDP 9002 + 10 i: ports from
+    --flight-stack-port 9032 are instances 3 and 4; another port is named to ArduPilot."""
+    from types import SimpleNamespace
+
+    from quadsitl.bridges.ardupilot_json import JsonPhysics
+    from quadsitl.bridges.ardupilot_udp import ArduPilotConfig, _banner
+    from quadsitl.physics.fleet import Fleet
+
+    physics = JsonPhysics(Fleet(2, "iris"))
+    lines: list[str] = []
+    config = ArduPilotConfig(vehicles=2, port=9032)
+    _banner(config, physics, SimpleNamespace(ports=[9032, 9042]), lines.append)  # type: ignore[arg-type]
+    assert "9032" in lines[1] and lines[1].endswith("-I 3")
+    assert "9042" in lines[2] and lines[2].endswith("-I 4")
+    lines.clear()
+    _banner(ArduPilotConfig(port=9005), physics, SimpleNamespace(ports=[9005]), lines.append)  # type: ignore[arg-type]
+    assert lines[1].endswith("-I 0 --sim-port-out 9005")

@@ -186,3 +186,19 @@ def test_wrong_options_are_refused(options: list[str], says: str) -> None:
     command = [sys.executable, "-m", "quadsitl.cli", "sim", *options]
     result = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert result.returncode == 2 and says in result.stderr
+
+
+def test_the_banner_names_the_px4_instance_each_port_serves() -> None:
+    """PX4's startup connects instance i to TCP 4560 + i: ports from --flight-stack-port
+    4563 are instances 3 and 4, not 0 and 1; a port below 4560 needs PX4 started by hand."""
+    from types import SimpleNamespace
+
+    from quadsitl.bridges.px4_tcp import Px4Config, _banner
+
+    lines: list[str] = []
+    _banner(Px4Config(vehicles=2, port=4563), SimpleNamespace(ports=[4563, 4564]), lines.append)  # type: ignore[arg-type]
+    assert "4563" in lines[1] and lines[1].endswith("px4 -i 3")
+    assert "4564" in lines[2] and lines[2].endswith("px4 -i 4")
+    lines.clear()
+    _banner(Px4Config(port=4000), SimpleNamespace(ports=[4000]), lines.append)  # type: ignore[arg-type]
+    assert "simulator_mavlink start -c 4000" in lines[1]

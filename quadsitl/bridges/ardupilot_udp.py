@@ -246,9 +246,14 @@ def _banner(
     )
     for index, port in enumerate(server.ports):
         target = "" if config.bind in ("127.0.0.1", "0.0.0.0") else f":{config.bind}"
+        # ArduPilot's -I i sends its servo frames to 9002 + 10 i; another port is named.
+        instance, off = divmod(port - PORT, PORT_STRIDE)
+        start = (
+            f"-I {instance}" if off == 0 and instance >= 0 else f"-I {index} --sim-port-out {port}"
+        )
         out(
             f"  vehicle {index}: UDP {config.bind}:{port}  <-  arducopter --model JSON{target}"
-            f"{defaults} -I {index}"
+            f"{defaults} {start}"
         )
     if parm is None:
         out(f"  (no parameter file ships for {config.airframe}; see docs/autopilots.md)")

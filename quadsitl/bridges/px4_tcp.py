@@ -258,10 +258,13 @@ def _banner(config: Px4Config, server: Px4TcpServer, out: Callable[[str], None])
     )
     path = f"PATH={folder}:$PATH " if folder else ""
     for index, port in enumerate(server.ports):
-        out(
-            f"  vehicle {index}: TCP {config.bind}:{port}  <-  {path}PX4_SIM_MODEL=none_iris "
-            f"px4 -i {index}"
+        instance = port - PORT  # PX4's startup connects instance i to 4560 + i
+        start = (
+            f"{path}PX4_SIM_MODEL=none_iris px4 -i {instance}"
+            if instance >= 0
+            else f"PX4 started by hand with 'simulator_mavlink start -c {port}'"
         )
+        out(f"  vehicle {index}: TCP {config.bind}:{port}  <-  {start}")
     if folder is None:
         out(f"  (no PX4 parameter file ships for {config.airframe}; see docs/autopilots.md)")
 
