@@ -19,21 +19,10 @@ from pymavlink import mavutil
 from quadsitl.mavlink.param_protocol import decode_value as decode_param
 from quadsitl.mavlink.param_protocol import encode_raw as encode_param
 from quadsitl.vehicle.geo import Home
+from quadsitl.vehicle.modes import Mode
 from quadsitl.wire.lockstep import FORCE_MAGIC
 
 mav = mavutil.mavlink
-
-# PX4 custom modes (main << 16 | sub << 24), as the vehicle reports them.
-MODES = {
-    "POSCTL": (3, 0),
-    "ALTCTL": (2, 0),
-    "OFFBOARD": (6, 0),
-    "TAKEOFF": (4, 2),
-    "LOITER": (4, 3),
-    "MISSION": (4, 4),
-    "RTL": (4, 5),
-    "LAND": (4, 6),
-}
 
 
 class ClientError(RuntimeError):
@@ -172,8 +161,10 @@ class VehicleClient:
         hb = self.latest.get("HEARTBEAT")
         if hb is None:
             return "?"
-        pair = ((hb.custom_mode >> 16) & 0xFF, (hb.custom_mode >> 24) & 0xFF)
-        return next((name for name, value in MODES.items() if value == pair), str(pair))
+        try:  # PX4's custom_mode layout (main << 16 | sub << 24)
+            return Mode.from_custom_mode(hb.custom_mode).name
+        except ValueError:
+            return str(((hb.custom_mode >> 16) & 0xFF, (hb.custom_mode >> 24) & 0xFF))
 
     def position_enu(self) -> tuple[float, float, float]:
         """Latest (east, north, up) m relative to home."""
@@ -206,7 +197,7 @@ class VehicleClient:
         self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, FORCE_MAGIC if force else 0)
 
     def set_mode(self, name: str) -> None:
-        main, sub = MODES[name]
+        main, sub = Mode[name].value
         self.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub)
 
     def takeoff(self, altitude: float) -> None:

@@ -28,12 +28,13 @@ from quadsitl.tasks import TaskEngine, TaskOptions, TaskSpec
 from quadsitl.tasks import faults as FT
 from quadsitl.tasks.delay import DELAY_KINDS, Delay
 from quadsitl.tasks.randomization import Randomization
+from quadsitl.wire.ids import MAX_SYSTEM_ID
 
 START_TIMEOUT = 60.0  # s for a new simulator process to answer (imports, kernel load; a
 # Ray worker starting on a busy machine took over 30 s)
 MAX_TIMEOUT = 3600.0  # s: longer than this, a stuck simulator looks like a hang
 SIM_PROCESS_BYTES = 200 * 2**20  # memory of one `quadsitl sim` process, measured
-MAX_SIMULATORS = 254  # one MAVLink system id each
+MAX_SIMULATORS = MAX_SYSTEM_ID  # one MAVLink system id each
 BACKENDS = ("inprocess", "mavlink")
 BACKEND_OPTIONS = (
     "sim_address",
@@ -184,8 +185,10 @@ def _check_options(
         raise ValueError(f"timeout must be in (0, {MAX_TIMEOUT:g}] s, got {timeout!r}")
     if isinstance(system_id, bool) or not isinstance(system_id, int):
         raise ValueError(f"system_id must be an integer, got {system_id!r}")
-    if not (system_id >= 1 and system_id + n - 1 <= 254):  # unique across processes
-        raise ValueError(f"system ids {system_id}..{system_id + n - 1} must lie in 1..254")
+    if not (system_id >= 1 and system_id + n - 1 <= MAX_SYSTEM_ID):  # unique across processes
+        raise ValueError(
+            f"system ids {system_id}..{system_id + n - 1} must lie in 1..{MAX_SYSTEM_ID}"
+        )
     if signing_key is not None:
         if not isinstance(signing_key, (bytes, bytearray)):
             raise ValueError(

@@ -39,6 +39,7 @@ from quadsitl.vehicle.motor_faults import check_efficiency, check_motor
 from quadsitl.vehicle.param_binding import show_weather
 from quadsitl.vehicle.results import Severity
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire.ids import MAX_SYSTEM_ID
 
 
 @dataclass
@@ -75,14 +76,14 @@ class SimConfig:
 
     def validate(self) -> None:
         get_identity(self.autopilot_id)
-        if not 1 <= self.system_id <= 254:
-            raise ValueError(f"system id must be 1..254, got {self.system_id}")
+        if not 1 <= self.system_id <= MAX_SYSTEM_ID:
+            raise ValueError(f"system id must be 1..{MAX_SYSTEM_ID}, got {self.system_id}")
         if self.vehicles < 1:
             raise ValueError(f"--vehicles must be at least 1, got {self.vehicles}")
-        if self.system_id + self.vehicles - 1 > 254:
+        if self.system_id + self.vehicles - 1 > MAX_SYSTEM_ID:
             raise ValueError(
                 f"{self.vehicles} vehicles from system id {self.system_id} need ids up to "
-                f"{self.system_id + self.vehicles - 1}; MAVLink system ids end at 254"
+                f"{self.system_id + self.vehicles - 1}; MAVLink system ids end at {MAX_SYSTEM_ID}"
             )
         if not (math.isfinite(self.spacing) and self.spacing >= 0):
             raise ValueError(f"--spacing must be a distance ≥ 0 m, got {self.spacing}")

@@ -160,6 +160,8 @@ class CascadedController:
                 *self.mixer.ravel(),
             ]
         )
+        if self.model_row.shape != (C.M_SIZE,):  # the compiled code reads it by position
+            raise AssertionError(f"model row of {self.model_row.size} values, not {C.M_SIZE}")
         self.reset()
 
     def reset(self) -> None:

@@ -12,6 +12,7 @@ import numpy as np
 
 from quadsitl.physics import layout as L
 from quadsitl.vehicle.controller import Vec
+from quadsitl.vehicle.geo import MAX_LOCAL_DISTANCE
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import ACCEPTED, Result, Severity, denied
 from quadsitl.vehicle.view import VehicleView
@@ -54,7 +55,7 @@ def reset_state(v: VehicleView, state: Vec) -> Result:
     gear = v.airframe.gear_height
     if state[L.I_PZ] < gear - 1e-6:
         return denied("reset denied: position below the ground")
-    if abs(state[L.POS]).max() > 50_000 or state[L.ROTORS].min() < 0:
+    if abs(state[L.POS]).max() > MAX_LOCAL_DISTANCE or state[L.ROTORS].min() < 0:
         return denied("reset denied: position too far or negative rotor speed")
     state[L.ROTORS] = np.minimum(state[L.ROTORS], v.airframe.max_rotor_speed)
     resting = state[L.I_PZ] <= gear + 1e-6 and not np.any(state[L.VEL])

@@ -10,6 +10,9 @@ import math
 from dataclasses import dataclass
 
 EARTH_RADIUS = 6_378_137.0  # m, WGS-84 equatorial radius
+# m from the local origin: the farthest local point the vehicle takes (a home, a
+# reposition target, a reset state); the flat-earth local frame is not meant farther.
+MAX_LOCAL_DISTANCE = 50_000.0
 
 
 @dataclass(frozen=True)

@@ -27,8 +27,9 @@ from quadsitl.vehicle.episodes import EpisodeOptions, MotorEpisodes
 from quadsitl.vehicle.estimator import Estimator, EstimatorSlot
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire.ids import MAX_SYSTEM_ID
 
-MAX_VEHICLES = 254  # one MAVLink system id each
+MAX_VEHICLES = MAX_SYSTEM_ID  # one MAVLink system id each
 
 
 def grid_offsets(n: int, spacing: float) -> list[tuple[float, float]]:

@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from quadsitl.vehicle.controller import Vec
+from quadsitl.vehicle.geo import MAX_LOCAL_DISTANCE
 from quadsitl.vehicle.modes import STICK_MODES, Mode
 from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg, Limits, Orbit, Sticks
 from quadsitl.vehicle.view import VehicleView
@@ -51,7 +52,7 @@ def reposition(
     v: VehicleView, east: float, north: float, up: float, speed: float | None, yaw: float | None
 ) -> Leg | None:
     """The leg to a local point (NaN keeps the current coordinate; ``up`` above the
-    ground), or None if the point is not finite or farther than 50 km."""
+    ground), or None if the point is not finite or farther than MAX_LOCAL_DISTANCE."""
     here = v.nav_position
     target = np.array(
         [
@@ -60,7 +61,7 @@ def reposition(
             here[2] if math.isnan(up) else up + v.airframe.gear_height,
         ]
     )
-    if not np.isfinite(target).all() or abs(target).max() > 50_000:
+    if not np.isfinite(target).all() or abs(target).max() > MAX_LOCAL_DISTANCE:
         return None
     leg_limits = limits(v, cruise=speed if speed and speed > 0 else None)
     return Leg(here.copy(), target, leg_limits, v.params["NAV_ACC_RAD"], yaw, face_travel=True)

@@ -34,7 +34,7 @@ from quadsitl.vehicle.controller import Autopilot, CascadedController, Setpoint,
 from quadsitl.vehicle.estimator import Estimator, EstimatorSlot
 from quadsitl.vehicle.failsafe import Failsafes
 from quadsitl.vehicle.flight_state import FlightState
-from quadsitl.vehicle.geo import Home
+from quadsitl.vehicle.geo import MAX_LOCAL_DISTANCE, Home
 from quadsitl.vehicle.mission_runner import MissionRunner
 from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
 from quadsitl.vehicle.motor_faults import MotorFaults
@@ -238,7 +238,7 @@ class Vehicle:
     def set_home(self, east: float, north: float, up: float) -> Result:
         """Move home to a local point (m; ``up`` above the ground)."""
         point = np.array([east, north, up], dtype=np.float64)
-        if not np.isfinite(point).all() or abs(point).max() > 50_000:
+        if not np.isfinite(point).all() or abs(point).max() > MAX_LOCAL_DISTANCE:
             return denied("set home denied: position not finite or too far")
         if up < -1e-6:
             return denied("set home denied: below the ground")
