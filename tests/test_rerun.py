@@ -187,6 +187,30 @@ def test_log_without_position_messages_still_converts(tmp_path):
     assert not {"plots/altitude", "plots/rotors", "plots/battery_voltage", "map"} & origins
 
 
+def test_a_foreign_logs_sensor_readings_are_shown_in_si_units(tmp_path):
+    """ArduPilot's SCALED_IMU (mG, mrad/s) and SCALED_PRESSURE (hPa): their panels, in
+    m/s² and deg/s."""
+    log = tmp_path / "sensors.tlog"
+    writer = TlogWriter(log)
+    enc = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    t0 = time.time()
+    writer.record(enc.heartbeat_encode(2, 3, 128 | 1, 0, 4).pack(enc), t0)  # ArduPilot, armed
+    for i in range(20):
+        imu = enc.scaled_imu_encode(i * 20, 0, 100, -1000, 500, 0, -250, 0, 0, 0)
+        writer.record(imu.pack(enc), t0 + 0.02 * i)
+        pressure = enc.scaled_pressure_encode(i * 20, 1001.5, 0.0, 2100)
+        writer.record(pressure.pack(enc), t0 + 0.02 * i)
+    writer.close()
+    out = tmp_path / "sensors.rrd"
+    convert(log, out)
+    check_panels(out, {"plots/accelerometer", "plots/gyroscope", "plots/barometer"})
+    assert scalars(out, "/plots/accelerometer/z") == pytest.approx(np.full(20, -9.80665))
+    assert scalars(out, "/plots/accelerometer/y") == pytest.approx(np.full(20, 0.980665))
+    assert scalars(out, "/plots/gyroscope/x") == pytest.approx(np.full(20, np.degrees(0.5)))
+    assert scalars(out, "/plots/gyroscope/z") == pytest.approx(np.full(20, np.degrees(-0.25)))
+    assert scalars(out, "/plots/barometer/pressure") == pytest.approx(np.full(20, 1001.5))
+
+
 def test_damaged_log_gives_a_partial_recording_and_a_warning(flight_log, tmp_path):
     data = bytearray(flight_log.read_bytes())
     whole = ReadStats()
@@ -394,10 +418,18 @@ def test_sim_streams_itself_to_a_recording(tmp_path):
     assert rows["/plots/rotors/rotor_1"] >= 30 and "/world/vehicle/model/rotors" in rows
     check_panels(
         out,
-        {"plots/state", "plots/altitude", "plots/attitude", "plots/rotors", "plots/rates"},
+        {"plots/state", "plots/altitude", "plots/attitude", "plots/rotors", "plots/rates"}
+        | {"plots/accelerometer", "plots/gyroscope", "plots/barometer"},  # the sensors
     )
     check_attitude(out)
     assert "/plots/state/mode/LOITER" in rows  # the heartbeat's flight mode band
+    # What the sensor models read, noise and all: at rest the accelerometer holds the
+    # ground's push (body FRD: −g on z), the gyroscope noise about 0, the barometer the
+    # pressure at home (488 m above sea level: about 955 hPa).
+    accel_z = scalars(out, "/plots/accelerometer/z")
+    assert len(accel_z) >= 30 and abs(np.median(accel_z) + 9.81) < 0.1 and np.std(accel_z) > 0
+    assert abs(np.median(scalars(out, "/plots/gyroscope/x"))) < 1.0  # deg/s
+    assert 940 < np.median(scalars(out, "/plots/barometer/pressure")) < 970
     assert "plots/wind" not in {origin for _, origin in views(out).values()}  # still air
 
 

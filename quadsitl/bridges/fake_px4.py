@@ -35,6 +35,7 @@ from quadsitl.bridges.px4_hil import (
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.vehicle.geo import Home
 from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.units import STANDARD_GRAVITY
 
 STATE_INTERVAL_US = 5_000  # what PX4 asks for HIL_STATE_QUATERNION
 MODE_CUSTOM = 1  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, always set in PX4's mode
@@ -194,7 +195,7 @@ def kinematics(state: HilState, home: Home) -> Kinematics:
     return Kinematics(
         timestamp=state.time_usec * 1e-6,
         gyro=tuple(state.rates),
-        accel_body=tuple(a * 9.80665e-3 for a in state.accel),
+        accel_body=tuple(a * STANDARD_GRAVITY / 1000 for a in state.accel),
         position=(north, east, -up),
         velocity=tuple(v / 100 for v in state.velocity),
         quaternion=tuple(state.quaternion),

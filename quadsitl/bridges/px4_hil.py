@@ -43,7 +43,7 @@ from quadsitl.physics.sensors.suite import specific_force
 from quadsitl.vehicle.geo import Home
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.lockstep import ARMED_FLAG, LOCKSTEP_FLAG
-from quadsitl.wire.units import rotor_speed
+from quadsitl.wire.units import STANDARD_GRAVITY, rotor_speed
 
 PORT = 4560  # TCP port of instance 0 (PX4's simulator_mavlink default); instance i: + i
 ROUND_US = 4_000  # µs of physics per lockstep round: PX4's 250 Hz IMU (IMU_INTEG_RATE)
@@ -61,7 +61,6 @@ SYSTEM_ID, COMPONENT_ID = 1, 1  # of the simulator's messages (PX4 does not chec
 PX4_SENSORS = SensorParams(gps=GpsParams(error_tau=60.0, fix_sigma_factor=1.0))
 _NORTH_ENU = 0.5 * math.pi  # rad, the ENU heading of north: vehicles start facing it
 _SQRT_HALF = math.sqrt(0.5)
-_G0 = 9.80665  # m/s² per g, for HIL_STATE_QUATERNION's mG
 
 
 @dataclass
@@ -307,7 +306,7 @@ class HilPhysics:
         )[0].tolist()  # m/s², body FLU
         lat, lon, alt = self.home.to_global(px, py, pz - self._gear[index])
         air_speed = float(np.linalg.norm(fleet.state[index, L.VEL] - fleet.air_velocity[index]))
-        h, mg = _SQRT_HALF, 1000.0 / _G0
+        h, mg = _SQRT_HALF, 1000.0 / STANDARD_GRAVITY
         state = (
             peer.time_us,
             *(h * (w + z), h * (x + y), h * (x - y), h * (w - z)),  # FLU->ENU to FRD->NED

@@ -39,13 +39,12 @@ from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.answer import answer_parts
 from quadsitl.wire.lockstep import ARMED_FLAG, LOCKSTEP_FLAG, check_controls
 from quadsitl.wire.state import WireState
-from quadsitl.wire.units import rotor_speed, to_time_usec
+from quadsitl.wire.units import STANDARD_GRAVITY, rotor_speed, to_time_usec
 
 LOCKSTEP_IDLE = 5.0  # wall s without lockstep commands before real time resumes
 # (only when lockstep was asked for by the flag; ``--lockstep`` waits for ever)
 
 _encoder = mav.MAVLink(None)
-STANDARD_GRAVITY = 9.80665  # m/s² per g: the unit of HIL_STATE_QUATERNION's mG fields
 
 
 def _int16(x: float) -> int:

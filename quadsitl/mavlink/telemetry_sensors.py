@@ -11,10 +11,10 @@ import math
 from typing import Any
 
 from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.motor_path import STANDARD_GRAVITY
 from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.physics import dryden as D
 from quadsitl.physics.sensors.gps import FIX_3D
+from quadsitl.wire.units import STANDARD_GRAVITY
 
 _encoder = mav.MAVLink(None)
 

@@ -26,6 +26,7 @@ from quadsitl import frames
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.modes import Mode
 from quadsitl.viz.scene import WIND_ARROW_SCALE, pose_from_ned, quat_xyzw
+from quadsitl.wire.units import STANDARD_GRAVITY
 
 M = mavutil.mavlink
 GCS_TYPE = 6  # MAV_TYPE_GCS
@@ -78,6 +79,9 @@ class FlightView:
             M.MAVLINK_MSG_ID_BATTERY_STATUS: self._battery_status,
             M.MAVLINK_MSG_ID_SYS_STATUS: self._sys_status,
             M.MAVLINK_MSG_ID_WIND_COV: self._wind_cov,
+            M.MAVLINK_MSG_ID_HIGHRES_IMU: self._highres_imu,
+            M.MAVLINK_MSG_ID_SCALED_IMU: self._scaled_imu,
+            M.MAVLINK_MSG_ID_SCALED_PRESSURE: self._scaled_pressure,
             M.MAVLINK_MSG_ID_STATUSTEXT: self._statustext,
         }
 
@@ -310,9 +314,43 @@ class FlightView:
             Sample("world/wind", "arrow", np.concatenate([self.position, air * WIND_ARROW_SCALE])),
         ]
 
+    def _highres_imu(self, msg: Any) -> list[Sample]:
+        """What the sensors read (body FRD): specific force m/s², rates in deg/s, and
+        the barometer's pressure in hPa."""
+        accel, rates = (msg.xacc, msg.yacc, msg.zacc), (msg.xgyro, msg.ygyro, msg.zgyro)
+        pressure = Sample("plots/barometer/pressure", "scalar", float(msg.abs_pressure))
+        return [*_imu_samples(accel, rates), pressure]
+
+    def _scaled_imu(self, msg: Any) -> list[Sample]:
+        """The same in mG and mrad/s (ArduPilot's and older logs), unless HIGHRES_IMU
+        says it already."""
+        if "HIGHRES_IMU" in self.seen:
+            return []
+        g = STANDARD_GRAVITY / 1000.0
+        accel = (msg.xacc * g, msg.yacc * g, msg.zacc * g)
+        return _imu_samples(accel, (msg.xgyro / 1e3, msg.ygyro / 1e3, msg.zgyro / 1e3))
+
+    def _scaled_pressure(self, msg: Any) -> list[Sample]:
+        if "HIGHRES_IMU" in self.seen:
+            return []
+        return [Sample("plots/barometer/pressure", "scalar", float(msg.press_abs))]
+
     def _statustext(self, msg: Any) -> list[Sample]:
         level = SEVERITY[min(max(msg.severity, 0), 7)]
         return [Sample("events", "text", str(msg.text).rstrip("\x00"), level)]
+
+
+def _imu_samples(accel: tuple, rates: tuple) -> list[Sample]:
+    """Accelerometer (m/s²) and gyroscope (rad/s in, deg/s out) series, body FRD."""
+    out = [
+        Sample(f"plots/accelerometer/{axis}", "scalar", float(value))
+        for axis, value in zip("xyz", accel, strict=True)
+    ]
+    out += [
+        Sample(f"plots/gyroscope/{axis}", "scalar", math.degrees(value))
+        for axis, value in zip("xyz", rates, strict=True)
+    ]
+    return out
 
 
 def _altitude_velocity(position: np.ndarray, velocity: np.ndarray) -> list[Sample]:

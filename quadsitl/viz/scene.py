@@ -129,6 +129,9 @@ PANELS = {
     "distance_to_goal": "distance to goal (m)",
     "speed": "speed (m/s)",
     "wind": "wind at the vehicle (m/s, ENU)",
+    "accelerometer": "accelerometer (m/s², body FRD)",
+    "gyroscope": "gyroscope (deg/s, body FRD)",
+    "barometer": "barometer (hPa)",
 }
 WIND_COLOR = [70, 150, 230]  # the wind arrow in the 3-D view
 WIND_ARROW_SCALE = 0.25  # m of arrow per m/s of wind
@@ -142,6 +145,7 @@ LIVE_PANELS = (
     "rotors",
     "battery_voltage",
 )
+SENSOR_PANELS = ("accelerometer", "gyroscope", "barometer")  # what the sensors read
 EPISODE_PANELS = ("reward", "reward_terms", "distance_to_goal", "altitude", "speed")
 
 

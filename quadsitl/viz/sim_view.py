@@ -31,7 +31,7 @@ from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
 from quadsitl.viz.live import LiveLogger
-from quadsitl.viz.scene import LIVE_PANELS, blueprint, framing
+from quadsitl.viz.scene import LIVE_PANELS, SENSOR_PANELS, blueprint, framing
 from quadsitl.viz.viewer import open_recording
 
 RATE = 30.0  # Hz of wall time, per vehicle
@@ -45,8 +45,9 @@ BUILDERS = (
     status.build_actuator_output_status,
     status.build_battery_status,
     status.build_mission_current,
+    sensors.build_highres_imu,  # what the sensor models read, noise and all
 )
-PANELS = (*LIVE_PANELS, "battery_remaining", "mission_item")
+PANELS = (*LIVE_PANELS, "battery_remaining", "mission_item", *SENSOR_PANELS)
 
 
 class SimView:

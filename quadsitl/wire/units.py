@@ -1,10 +1,12 @@
-"""The wire's units, one rule each: simulated time as ``time_usec``, and a normalised
-rotor command as a rotor speed. No pymavlink here: the flight-stack bridges that speak
-other protocols use these too."""
+"""The wire's units, one rule each: simulated time as ``time_usec``, a normalised
+rotor command as a rotor speed, and accelerations in mG. No pymavlink here: the
+flight-stack bridges that speak other protocols use these too."""
 
 from __future__ import annotations
 
 from typing import Any
+
+STANDARD_GRAVITY = 9.80665  # m/s² per g: the mG fields (SCALED_IMU, HIL_STATE_QUATERNION)
 
 
 def to_time_usec(seconds: float) -> int:
