@@ -20,10 +20,12 @@ $(VENV)/.installed: pyproject.toml
 demo: venv
 	$(BIN)/quadsitl demo
 
-# Test processes in parallel (pytest-xdist); TEST_WORKERS=0 runs the suite in one.
+# Test processes in parallel (pytest-xdist); TEST_WORKERS=0 runs the suite in one. The
+# tests that start a Ray of their own share one process (xdist_group "ray"), so that two
+# Rays never compete for the cores at once.
 TEST_WORKERS ?= 4
 test: venv
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS)
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup
 
 # MAVProxy's core for its slow test, without the GUI and vision packages it lists
 # (OpenCV, VTK, wxPython): the simulator's tests only drive its command line.

@@ -25,6 +25,8 @@ from tests.conftest import OBS_TOLERANCE, cli, fly_both
 ray = pytest.importorskip("ray")
 from ray.cluster_utils import Cluster  # noqa: E402
 
+pytestmark = pytest.mark.xdist_group("ray")  # one Ray at a time (Makefile)
+
 
 @pytest.fixture(scope="module")
 def two_nodes():

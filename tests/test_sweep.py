@@ -23,6 +23,7 @@ from policies import sweep_spec as SS
 from tests.conftest import cli
 
 pytest.importorskip("ray")  # the sweep extra, which `make test` installs
+pytestmark = pytest.mark.xdist_group("ray")  # one Ray at a time (Makefile)
 
 TWO_ITERATIONS = "8192"  # fast preset, hover: 128 envs x 32 steps = 4,096 per iteration
 
