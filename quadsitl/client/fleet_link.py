@@ -10,15 +10,12 @@ resets and resends on top of it are :class:`~.fleet_client.FleetClient`'s.
 
 from __future__ import annotations
 
-import os
-import select
 import socket
-import time
 from collections import deque
 from typing import Any
 
-from quadsitl.client.motor_client import SPIN_SECONDS, SimulatorError, refusal
-from quadsitl.mavlink.links import MAX_DATAGRAM, is_loopback
+from quadsitl.client.motor_client import SimulatorError, next_datagram, refusal
+from quadsitl.mavlink.links import is_loopback
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.answer import field_slices
@@ -69,37 +66,25 @@ class FleetLink:
 
     def _receive(self, until: float) -> list[FC.Frame]:
         """The frames of the datagrams that arrive before ``until`` (wall, monotonic);
-        returns as soon as one datagram has been read. Polls for the first SPIN_SECONDS
-        (an answer is usually tens of microseconds away, and waking from select() costs
-        about as much again), yielding the core to a simulator that shares it."""
-        started = time.monotonic()
-        while True:
-            try:
-                data = self.sock.recv(MAX_DATAGRAM)
-            except BlockingIOError:
-                now = time.monotonic()
-                wait = until - now
-                if wait <= 0:
-                    return []
-                if now - started < SPIN_SECONDS:
-                    os.sched_yield()
-                    continue
-                select.select([self.sock], [], [], wait)
-                continue
-            except ConnectionRefusedError:
-                raise SimulatorError(f"nothing listens at {self._where()}") from None
-            frames = list(FC.parse(data))
-            for frame in frames:
-                if frame.msgid == mav.MAVLINK_MSG_ID_STATUSTEXT:
-                    values = frame.unpack()
-                    text = self._texts.take(
-                        values[_TEXT["text"].start],
-                        values[_TEXT["id"].start],
-                        values[_TEXT["chunk_seq"].start],
-                    )
-                    if text is not None:
-                        self._text(text)
-            return frames
+        returns as soon as one datagram has been read (:func:`next_datagram`)."""
+        try:
+            data = next_datagram(self.sock, until)
+        except ConnectionRefusedError:
+            raise SimulatorError(f"nothing listens at {self._where()}") from None
+        if data is None:
+            return []
+        frames = list(FC.parse(data))
+        for frame in frames:
+            if frame.msgid == mav.MAVLINK_MSG_ID_STATUSTEXT:
+                values = frame.unpack()
+                text = self._texts.take(
+                    values[_TEXT["text"].start],
+                    values[_TEXT["id"].start],
+                    values[_TEXT["chunk_seq"].start],
+                )
+                if text is not None:
+                    self._text(text)
+        return frames
 
     def _text(self, text: str) -> None:
         """Keep a text; one saying the simulator belongs to another client ends the

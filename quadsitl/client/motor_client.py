@@ -48,6 +48,28 @@ from quadsitl.wire.state import WireState
 from quadsitl.wire.statustext import TextJoiner
 
 SPIN_SECONDS = 0.002  # poll this long for an answer before sleeping in select()
+
+
+def next_datagram(sock: socket.socket, until: float) -> bytes | None:
+    """The next datagram on the non-blocking ``sock``, or None at ``until`` (monotonic).
+    Polls for the first SPIN_SECONDS (an answer is usually tens of microseconds away,
+    and waking from select() costs about as much again), yielding the core to a
+    simulator that shares it; then sleeps in select(). ConnectionRefusedError (ICMP:
+    nothing listens at the address) is the caller's to word."""
+    started = time.monotonic()
+    while True:
+        try:
+            return sock.recv(MAX_DATAGRAM)
+        except BlockingIOError:
+            now = time.monotonic()
+            if now >= until:
+                return None
+            if now - started < SPIN_SECONDS:
+                os.sched_yield()
+                continue
+            select.select([sock], [], [], until - now)
+
+
 RESEND_AFTER = 0.05  # s: the longest wait for an answer before the commands go again
 MIN_RESEND_AFTER = 0.001  # s: the shortest; in between, RESEND_ROUND_TRIPS usual round trips
 RESEND_ROUND_TRIPS = 2.5
@@ -153,23 +175,12 @@ class MotorClient:
 
     def _receive(self, deadline: float) -> None:
         """Queue the next datagram's messages, waiting until ``deadline`` for one."""
-        started = time.monotonic()
-        while True:
-            try:
-                data = self.sock.recv(MAX_DATAGRAM)
-            except BlockingIOError:
-                now = time.monotonic()
-                if now >= deadline:
-                    return
-                if now - started < SPIN_SECONDS:
-                    os.sched_yield()  # the answer is usually microseconds away: poll, but
-                    continue  # let a simulator sharing this core run first
-                select.select([self.sock], [], [], deadline - now)
-                continue
-            except ConnectionRefusedError:  # ICMP: nothing listens at the address
-                raise SimulatorError(f"nothing listens at {self.address}") from None
+        try:
+            data = next_datagram(self.sock, deadline)
+        except ConnectionRefusedError:
+            raise SimulatorError(f"nothing listens at {self.address}") from None
+        if data is not None:
             self._inbox.extend(FC.parse(data))
-            return
 
     def _drain(self) -> None:
         """Drop what is waiting but the texts: late answers of earlier exchanges (a
