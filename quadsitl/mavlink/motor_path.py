@@ -32,7 +32,7 @@ from quadsitl import frames
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics import layout as L
 from quadsitl.vehicle import external_control as X
-from quadsitl.vehicle.episodes import MotorEpisodes, check_factors
+from quadsitl.vehicle.episodes import check_factors
 from quadsitl.vehicle.results import ACCEPTED, Outcome, Result
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire import fast_codec as FC
@@ -73,19 +73,17 @@ def fly(
 
 
 class MotorPath:
-    """State of the motor path for one vehicle. ``lockstep``: started with --lockstep;
-    ``episodes``: the airframes and delays of its group, ``row`` its row there (None: a
-    vehicle on its own, the preset, no delay)."""
+    """State of the motor path for one vehicle. ``lockstep``: started with --lockstep.
+    The airframes and delays of its episodes are its batch's
+    (:class:`~quadsitl.vehicle.episodes.MotorEpisodes`), in the vehicle's row."""
 
     def __init__(
         self,
         vehicle: Vehicle,
         lockstep: bool = False,
-        episodes: MotorEpisodes | None = None,
-        row: int = 0,
     ) -> None:
         self.vehicle = vehicle
-        self.episodes, self.row = episodes, row
+        self.episodes, self.row = vehicle.batch.episodes, vehicle.row
         self.staged_airframe: np.ndarray | None = None
         self.flown_since_reset = True  # a reset before any command repeats the last one
         self.always_lockstep = lockstep
@@ -151,7 +149,7 @@ class MotorPath:
         self.last_frame = frame if lockstep else None
         if lockstep:
             self.last_lockstep_wall = time.monotonic()
-            X.advance(self.vehicle, self.episodes.step if self.episodes else None)
+            self.vehicle.advance()
         return warning
 
     def take(self, armed: bool = True) -> str | None:
@@ -174,8 +172,6 @@ class MotorPath:
         """MAV_CMD_USER_4: the next reset's airframe, seven factors of the preset's
         parameters (mass, inertia, thrust, torque, drag, aerodynamic moment
         coefficients, motor rate), each in [0.1, 10]."""
-        if self.episodes is None:
-            return Result(Outcome.UNSUPPORTED, "airframe staging needs a simulator's group")
         problem = check_factors(params[:7])
         if problem is not None:
             return Result(Outcome.DENIED, problem)
@@ -225,8 +221,7 @@ class MotorPath:
         state[L.ROTORS] = rotor
         result = X.reset_state(v, state)
         if result.ok:
-            if self.episodes is not None:
-                self.episodes.new_episode(self.row, self.staged_airframe, self.flown_since_reset)
+            self.episodes.new_episode(self.row, self.staged_airframe, self.flown_since_reset)
             self.flown_since_reset = False
             self.staged, self.staged_airframe = None, None
             self.last_frame = None  # a command after a reset is never a repeat
@@ -244,11 +239,9 @@ class MotorPath:
         airborne) and last ODOMETRY (float32 pose and body-frame velocity)."""
         v = self.vehicle
         time_usec = to_time_usec(v.time)
-        if self.episodes is None:
-            state, contact, touchdown = v.state, int(v.fleet.contact[0]), v.fleet.touchdown_speed[0]
-        else:  # what the delay line lets the controller see
-            states, contacts, touchdowns = self.episodes.observed([self.row])
-            state, contact, touchdown = states[0], int(contacts[0]), touchdowns[0]
+        # what the delay line lets the controller see (without delays: the truth)
+        states, contacts, touchdowns = self.episodes.observed([self.row])
+        state, contact, touchdown = states[0], int(contacts[0]), touchdowns[0]
         wire = WireState.from_physics(
             state, v.airframe.gear_height, time_usec, contact, float(touchdown)
         )

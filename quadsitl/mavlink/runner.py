@@ -219,8 +219,6 @@ class Simulator:
                 lockstep=config.lockstep,
                 signing_key=config.signing_key,
                 identity=get_identity(config.autopilot_id),
-                episodes=self.group.episodes,
-                row=i,
             )
             for i, vehicle in enumerate(self.group.vehicles)
         ]

@@ -38,7 +38,6 @@ from quadsitl.mavlink.signing import (
 )
 from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.mavlink.tlog import TlogWriter
-from quadsitl.vehicle.episodes import MotorEpisodes
 from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import Outcome, Severity
 from quadsitl.vehicle.vehicle import Vehicle
@@ -67,11 +66,7 @@ class MavlinkServer:
         lockstep: bool = False,
         signing_key: bytes | None = None,
         identity: Identity = IDENTITIES["px4"],
-        episodes: MotorEpisodes | None = None,
-        row: int = 0,
     ) -> None:
-        """``episodes``, ``row``: the airframes and delays of the vehicle's group and its
-        row there, for the motor path (:mod:`quadsitl.vehicle.episodes`)."""
         self.vehicle = vehicle
         self.identity = identity
         self.links = links
@@ -80,7 +75,7 @@ class MavlinkServer:
         self.echo = echo  # prints vehicle events for the user
         self.encoder = mav.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self.schedules = {id(link): T.Schedule(streams=link.name != MOTOR_LINK) for link in links}
-        self.motors = MotorPath(vehicle, lockstep, episodes, row)
+        self.motors = MotorPath(vehicle, lockstep)
         self.without_hil_state: set[int] = set()  # links whose answers leave it out
         self.signing: SignatureCheck | None = None
         self.signing_notices = SigningNotices(lambda text: self.statustext(Severity.WARNING, text))

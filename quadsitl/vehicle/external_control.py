@@ -1,12 +1,12 @@
 """What an external controller drives: rotor speeds in (the motor path's
-HIL_ACTUATOR_CONTROLS), whole-state resets for training episodes, and stepping one
-control period at a time: functions of a vehicle (:class:`~quadsitl.vehicle.view.VehicleView`),
-kept apart because the onboard flight software never uses them.
+HIL_ACTUATOR_CONTROLS) and whole-state resets for training episodes (the vehicle's
+batch then steps a control period at a time: :meth:`Stepping.advance
+<quadsitl.vehicle.stepping.Stepping.advance>`): functions of a vehicle
+(:class:`~quadsitl.vehicle.view.VehicleView`), kept apart because the onboard flight
+software never uses them.
 """
 
 from __future__ import annotations
-
-from collections.abc import Callable
 
 import numpy as np
 
@@ -69,14 +69,3 @@ def reset_state(v: VehicleView, state: Vec) -> Result:
         v.flight.enter(Mode.LOITER)
     return ACCEPTED
 
-
-def advance(v: VehicleView, step_physics: Callable[..., None] | None = None) -> None:
-    """One control period. Under motor control the physics takes it in one call
-    (``step_physics``: the delays of :mod:`quadsitl.vehicle.episodes`, else the fleet's)."""
-    if not v.motor_control:
-        for _ in range(v.substeps):
-            v.step()
-        return
-    before = v.begin_period()
-    (step_physics or v.fleet.step)(v.rotor_cmd, n_substeps=v.substeps)
-    v.end_step(before, v.control_period)

@@ -4,9 +4,10 @@ Each :class:`~quadsitl.vehicle.vehicle.Vehicle` keeps its own flight software (a
 modes, missions, parameters, battery) and flies in its own local frame, whose origin is
 its start position; their homes on the globe lie on a grid ``spacing`` metres apart
 (east, then north), so a ground station shows them side by side. The physics of all of
-them is one :class:`~quadsitl.physics.Fleet`: each vehicle sees its row through a
-:class:`~quadsitl.physics.fleet.FleetSlot`. The vehicles do not collide with each other
-(each has its own ground contact).
+them is one :class:`~quadsitl.physics.Fleet`, stepped as one batch
+(:mod:`quadsitl.vehicle.stepping`, as a lone vehicle is stepped): each vehicle sees its
+row through a :class:`~quadsitl.physics.fleet_slot.FleetSlot`. The vehicles do not
+collide with each other (each has its own ground contact).
 """
 
 from __future__ import annotations
@@ -18,14 +19,12 @@ import numpy as np
 
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
-from quadsitl.physics.fleet_slot import FleetSlot
-from quadsitl.physics.sensors import SensorSlot, SensorSuite
-from quadsitl.vehicle import ground_contact as GC
-from quadsitl.vehicle.battery import shaft_power
+from quadsitl.physics.sensors import SensorSuite
 from quadsitl.vehicle.controller import Autopilot
 from quadsitl.vehicle.episodes import EpisodeOptions, MotorEpisodes
 from quadsitl.vehicle.estimator import Estimator, EstimatorSlot
 from quadsitl.vehicle.geo import Home
+from quadsitl.vehicle.stepping import Stepping
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire.ids import MAX_SYSTEM_ID
 
@@ -71,43 +70,41 @@ class VehicleGroup:
         if not (math.isfinite(spacing) and spacing >= 0):
             raise ValueError(f"spacing must be a distance ≥ 0 m, got {spacing!r}")
         home = home or Home()
-        self.physics = Fleet(n, get_airframe(airframe), dt=physics_dt)
-        self.rotor_cmd = np.zeros((n, L.N_ROTORS))  # rad/s; row i is vehicle i's
+        physics = Fleet(n, get_airframe(airframe), dt=physics_dt)
         homes = [home.to_global(east, north, 0.0) for east, north in grid_offsets(n, spacing)]
         lats, lons, alts = np.array(homes).T
         gear = get_airframe(airframe).gear_height  # the ground is at z = gear
-        self.sensors = SensorSuite(
+        sensors = SensorSuite(
             n, lats, lons, alts - gear, noise_scale=sensor_noise, seed=sensor_seed
         )
+        substeps = max(1, round(control_period / physics_dt))
+        hover = get_airframe(airframe).hover_rotor_speed
+        self.batch = Stepping(
+            physics,
+            sensors,
+            np.zeros((n, L.N_ROTORS)),  # rad/s; row i is vehicle i's
+            substeps,
+            MotorEpisodes(physics, substeps, hover, episodes),
+        )
+        self.physics, self.sensors, self.rotor_cmd = physics, sensors, self.batch.rotor_cmd
+        self.episodes = self.batch.episodes
+        self.substeps, self.control_period = substeps, self.batch.control_period
         # One estimator for all: it runs (as one batch) once a vehicle's EKF2_EN is 1.
-        self.estimator = Estimator(self.sensors, gear, get_airframe(airframe).gravity)
-        self.vehicles = []
-        for i, (lat, lon, alt) in enumerate(homes):
-            self.vehicles.append(
-                Vehicle(
-                    airframe,
-                    Home(lat, lon, alt),
-                    physics_dt=physics_dt,
-                    control_period=control_period,
-                    autopilot=make_autopilot() if make_autopilot else None,
-                    fleet=FleetSlot(self.physics, i),
-                    rotor_cmd=self.rotor_cmd[i],
-                    control_phase=i,  # the controllers take turns: no step runs them all
-                    sensors=SensorSlot(self.sensors, i),
-                    estimator=EstimatorSlot(self.estimator, i),
-                )
+        self.estimator = Estimator(sensors, gear, get_airframe(airframe).gravity)
+        self.vehicles = [
+            Vehicle(
+                airframe,
+                Home(lat, lon, alt),
+                physics_dt=physics_dt,
+                control_period=control_period,
+                autopilot=make_autopilot() if make_autopilot else None,
+                batch=self.batch,
+                row=i,
+                control_phase=i,  # the controllers take turns: no step runs them all
+                estimator=EstimatorSlot(self.estimator, i),
             )
-        self.substeps = self.vehicles[0].substeps
-        self.control_period = self.vehicles[0].control_period
-        hover = self.vehicles[0].airframe.hover_rotor_speed
-        self.episodes = MotorEpisodes(self.physics, self.substeps, hover, episodes)
-        # The vehicles whose controller runs at each physics step of a control period.
-        self._due_at = [
-            [v for v in self.vehicles if (step + v.control_phase) % self.substeps == 0]
-            for step in range(self.substeps)
+            for i, (lat, lon, alt) in enumerate(homes)
         ]
-        self._steps = 0  # physics steps taken (advance takes a whole period)
-        self._undrawn = 0.0  # s of flight not yet drawn from the batteries
 
     def __len__(self) -> int:
         return len(self.vehicles)
@@ -115,42 +112,9 @@ class VehicleGroup:
     def step(self) -> None:
         """One physics step of every vehicle; the controllers whose turn it is run first
         (each vehicle's once per control period)."""
-        for v in self._due_at[self._steps % self.substeps]:
-            v.control()
-        self._steps += 1
-        self._move(1, self.physics.dt)
+        self.batch.step()
 
     def advance(self) -> None:
         """One control period of every vehicle under external motor control (lockstep
         rounds), in one call of the physics."""
-        for v in self.vehicles:
-            v.control()
-        self._steps += self.substeps
-        self._move(self.substeps, self.control_period, self.episodes.step)
-
-    def _move(self, substeps: int, seconds: float, step_physics: Callable | None = None) -> None:
-        """The physics of all vehicles, their sensors, then what each vehicle's flight
-        software does about it: contact events for the vehicles whose ground contact
-        changed, and, once per control period, the batteries (each drawing its rotors'
-        shaft power of that moment for the whole period: the power changes little in
-        one). ``step_physics``: what steps the physics (motor commands: with their
-        delays)."""
-        physics = self.physics
-        before = physics.contact.tolist()
-        (step_physics or physics.step)(self.rotor_cmd, n_substeps=substeps)
-        self.sensors.update(
-            physics.time, physics.state, physics.params, physics.contact, physics.air_velocity
-        )
-        after = physics.contact.tolist()
-        if before != after:
-            for v, was, now in zip(self.vehicles, before, after, strict=True):
-                if was != now:
-                    GC.watch_contact(v, was)
-        self._undrawn += seconds
-        if self._steps % self.substeps == 0:
-            powers = shaft_power(
-                physics.params[:, L.P_KQ], physics.state[:, L.ROTORS], physics.motor_efficiency
-            )
-            for v, power in zip(self.vehicles, powers.tolist(), strict=True):
-                v.drain_battery(power, self._undrawn)
-            self._undrawn = 0.0
+        self.batch.advance()

@@ -25,12 +25,11 @@ from quadsitl.physics.fleet_slot import FleetSlot
 from quadsitl.physics.sensors import SensorSlot, SensorSuite
 from quadsitl.vehicle import external_control as X
 from quadsitl.vehicle import failsafe as FS
-from quadsitl.vehicle import ground_contact as GC
 from quadsitl.vehicle import mission as M
 from quadsitl.vehicle import param_binding as P
 from quadsitl.vehicle.battery import Battery
-from quadsitl.vehicle.battery import shaft_power as battery_power
 from quadsitl.vehicle.controller import Autopilot, CascadedController, Setpoint, Vec
+from quadsitl.vehicle.episodes import MotorEpisodes
 from quadsitl.vehicle.estimator import Estimator, EstimatorSlot
 from quadsitl.vehicle.failsafe import Failsafes
 from quadsitl.vehicle.flight_state import FlightState
@@ -41,6 +40,7 @@ from quadsitl.vehicle.motor_faults import MotorFaults
 from quadsitl.vehicle.navigator import Activity, Sticks
 from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
 from quadsitl.vehicle.results import ACCEPTED, Result, Severity, denied
+from quadsitl.vehicle.stepping import Stepping
 
 MOTOR_TIMEOUT = 0.5  # s (simulated) without motor commands: the onboard controller resumes
 STICK_TIMEOUT = 0.5  # s (simulated) without MANUAL_CONTROL: sticks centred (COM_RC_LOSS_T)
@@ -55,13 +55,12 @@ class Vehicle:
             home position.
         physics_dt: physics step, s.
         control_period: onboard controller period, s (a multiple of ``physics_dt``).
-        fleet, rotor_cmd: for a vehicle of a group (:mod:`quadsitl.vehicle.group`), its
-            row of the group's physics and of the group's rotor commands; alone, it has
-            a physics of its own.
+        batch, row: for a vehicle of a group (:mod:`quadsitl.vehicle.group`), the
+            group's batch and this vehicle's row in it: its physics, sensors and motor
+            command are that row of the group's. Alone (None), it is a batch of one, with
+            a physics of its own and sensors at the default noise.
         control_phase: physics steps by which this vehicle's controller runs early (a
             group spreads its vehicles' controllers over the steps of a period).
-        sensors: for a vehicle of a group, its row of the group's sensors (the group
-            updates them); alone, it has sensors of its own at the default noise.
         estimator: for a vehicle of a group, its row of the group's estimator; alone,
             an estimator of its own. It runs, and the flight software flies on it, when
             the EKF2_EN parameter is 1 (:attr:`nav_state`).
@@ -84,10 +83,9 @@ class Vehicle:
         physics_dt: float = 0.001,
         control_period: float = 0.004,
         autopilot: Autopilot | None = None,
-        fleet: FleetSlot | None = None,
-        rotor_cmd: Vec | None = None,
+        batch: Stepping | None = None,
+        row: int = 0,
         control_phase: int = 0,
-        sensors: SensorSlot | None = None,
         estimator: EstimatorSlot | None = None,
     ) -> None:
         self.origin = home or Home()
@@ -97,24 +95,19 @@ class Vehicle:
             AIRFRAME_NAMES.index(get_airframe(airframe).name)
         )
         self.airframe = get_airframe(airframe)
-        self.fleet: Fleet | FleetSlot = fleet or Fleet(1, self.airframe, dt=physics_dt)
         self.substeps = max(1, round(control_period / physics_dt))
+        self.batch, self.row = batch or self._batch_of_one(physics_dt), row
+        self.fleet: Fleet | FleetSlot = (
+            self.batch.physics if batch is None else FleetSlot(batch.physics, row)
+        )
+        self.sensors = SensorSlot(self.batch.sensors, row)
+        self.rotor_cmd = self.batch.rotor_cmd[row]  # rad/s, last command to the motors
         self.control_phase = control_phase % self.substeps
         self.control_period = self.substeps * physics_dt
         # The cascade always exists: the gain parameters tune it, and it flies unless
         # another autopilot (e.g. a trained policy) is passed in.
         self.cascade = CascadedController(self.airframe)
         self.controller: Autopilot = autopilot or self.cascade
-        self._own_sensors = sensors is None
-        self.sensors = sensors or SensorSlot(
-            SensorSuite(
-                1,
-                self.origin.latitude,
-                self.origin.longitude,
-                self.origin.altitude - self.airframe.gear_height,  # the ground is at z = gear
-            ),
-            0,
-        )
         self.estimator = estimator or EstimatorSlot(
             Estimator(self.sensors.suite, self.airframe.gear_height, self.airframe.gravity), 0
         )
@@ -125,11 +118,22 @@ class Vehicle:
         self.flight = FlightState(self, self.missions, self.position.copy())
         self.events: deque[tuple[int, str]] = deque(maxlen=100)
         self.items_reached: deque[int] = deque(maxlen=100)
-        # rad/s, last command to the motors
-        self.rotor_cmd = rotor_cmd if rotor_cmd is not None else np.zeros(L.N_ROTORS)
         for spec in PARAMETERS:
             P.apply(self, spec.name)
         self._reset_flight_state()
+        self.batch.join(self)
+
+    def _batch_of_one(self, physics_dt: float) -> Stepping:
+        physics = Fleet(1, self.airframe, dt=physics_dt)
+        sensors = SensorSuite(
+            1,
+            self.origin.latitude,
+            self.origin.longitude,
+            self.origin.altitude - self.airframe.gear_height,  # the ground is at z = gear
+        )
+        hover = self.airframe.hover_rotor_speed
+        episodes = MotorEpisodes(physics, self.substeps, hover, None)
+        return Stepping(physics, sensors, np.zeros((1, L.N_ROTORS)), self.substeps, episodes)
 
     # --- state, read by telemetry -----------------------------------------------------
     @property
@@ -308,38 +312,20 @@ class Vehicle:
 
     # --- stepping ---------------------------------------------------------------------
     def step(self) -> None:
-        """Advance one physics step; the controller runs every ``substeps`` of them. (A
-        vehicle of a group of several is stepped by its group, which does the same for
-        all of them at once: :mod:`quadsitl.vehicle.group`.)"""
-        before = self.begin_step()
-        self.fleet.step(self.rotor_cmd)
-        self.end_step(before, self.fleet.dt)
+        """Advance one physics step; the controller runs every ``substeps`` of them."""
+        self._alone().step()
 
-    def begin_step(self) -> int:
-        """Before one physics step of this vehicle: run the controller when due.
-        Returns the ground contact before the step."""
-        if (self.physics_steps + self.control_phase) % self.substeps == 0:
-            self.control()
-        self.physics_steps += 1
-        return int(self.fleet.contact[0])
+    def advance(self) -> None:
+        """One control period under external motor control, in one call of the physics
+        (:meth:`Stepping.advance <quadsitl.vehicle.stepping.Stepping.advance>`)."""
+        self._alone().advance()
 
-    def begin_period(self) -> int:
-        """Before one whole control period under external motor control, taken by the
-        physics in one call. Returns the ground contact before it."""
-        self.control()
-        self.physics_steps += self.substeps
-        return int(self.fleet.contact[0])
-
-    def end_step(self, contact_before: int, seconds: float) -> None:
-        """After the physics moved ``seconds``: touchdowns and crashes, battery, and the
-        sensors (a vehicle of a group: the group's)."""
-        GC.watch_contact(self, contact_before)
-        if self._own_sensors:
-            f = self.fleet
-            self.sensors.suite.update(f.time, f.state, f.params, f.contact, f.air_velocity)
-        rotors = self.fleet.state[0, L.ROTORS]
-        power = battery_power(self.airframe.torque_coeff, rotors, self.motors.efficiency)
-        self.drain_battery(float(power), seconds)
+    def _alone(self) -> Stepping:
+        """The batch, which this vehicle steps for itself when it is alone in it (a
+        vehicle of a group of several is stepped by its group, with the others)."""
+        if len(self.batch.vehicles) > 1:
+            raise RuntimeError("a vehicle of a group is stepped with its group")
+        return self.batch
 
     def drain_battery(self, shaft_power: float, seconds: float) -> None:
         """The rotors drew ``shaft_power`` (W) for ``seconds``: drain the battery, and let
@@ -387,7 +373,6 @@ class Vehicle:
         self.armed_at = 0.0
         self.flew = False
         self.landed_at = None
-        self.physics_steps = 0
         self.motor_control = False
         self.motor_command_time = -math.inf
         self.missions.reset_flight()
