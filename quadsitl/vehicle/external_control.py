@@ -68,4 +68,3 @@ def reset_state(v: VehicleView, state: Vec) -> Result:
         v.controller.reset()
         v.flight.enter(Mode.LOITER)
     return ACCEPTED
-
