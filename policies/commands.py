@@ -182,7 +182,7 @@ def _eval(args: argparse.Namespace) -> int:
         result = evaluate(net, config, args.task, args.episodes, args.backend, on_step=on_step)
     finally:
         if view is not None:
-            view.close()
+            view.close(wait=True)  # the recording is complete when eval says it is done
     print("\n".join(result.lines()))
     return 0
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import rerun.chunk as rrc
 
+from quadsitl.viz.episode_writer import wait_for_recordings
 from tests.test_rerun import check_panels, rows_per_entity, scalars
 
 
@@ -31,6 +32,7 @@ def test_render_mode_rerun_records_episodes(tmp_path):
             if terminated or truncated:
                 break
     env.close()
+    wait_for_recordings()  # close() hands over; the writer process finishes the file
     rows = rows_per_entity(out, static=False)
     assert rows["/world/vehicle"] == rows["/plots/altitude/altitude"] == steps
     # A waypoint stays put: logged every 10 steps (episodes share the step timeline).
@@ -66,6 +68,7 @@ def test_episodes_in_wind_show_it(tmp_path):
     for _ in range(40):
         env.step(np.zeros(4, np.float32))
     env.close()
+    wait_for_recordings()
     check_panels(out, {"plots/wind", "plots/altitude"})
     speed = scalars(out, "/plots/wind/speed")
     assert len(speed) == 41 and 3.0 < speed.mean() < 7.0 and speed.std() > 0.01
@@ -90,6 +93,7 @@ def _record_episodes(path: Path, task: str, seeds: tuple[int, ...]) -> int:
             steps += 1
             done = terminated or truncated
     env.close()
+    wait_for_recordings()
     return steps
 
 
@@ -163,3 +167,43 @@ def _paths(rrd: Path) -> dict[tuple[int, int], list]:
 
 def _poses(rrd: Path) -> dict[tuple[int, int], list]:
     return _per_row(rrd, "/world/vehicle", "Transform3D:translation")
+
+
+def test_an_env_never_closed_still_leaves_its_whole_recording(tmp_path):
+    """The rows go to a writer process; when the program ends without closing the env,
+    what it buffered is handed over and written before the program exits."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "unclosed.rrd"
+    script = (
+        "import gymnasium as gym, numpy as np, quadsitl\n"
+        f"env = gym.make('QuadSITL/Hover-v0', render_mode='rerun', rerun_save={str(out)!r})\n"
+        "env.reset(seed=0)\n"
+        "for _ in range(300): env.step(np.zeros(4, np.float32))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert rows_per_entity(out, static=False)["/world/vehicle"] == 301
+
+
+def test_a_dead_writer_loses_the_recording_not_the_env(tmp_path):
+    import gymnasium as gym
+
+    import quadsitl  # noqa: F401
+
+    env = gym.make("QuadSITL/Hover-v0", render_mode="rerun", rerun_save=str(tmp_path / "x.rrd"))
+    env.reset(seed=0)
+    view = env.unwrapped.view
+    view.writer.process.kill()
+    view.writer.process.join()
+    with pytest.warns(RuntimeWarning, match="Rerun recording lost"):
+        for _ in range(50):
+            env.step(np.zeros(4, np.float32))
+        view.flush()
+        view.writer.feeder.join(10)
+    obs, *_ = env.step(np.zeros(4, np.float32))  # the env flies on
+    assert np.isfinite(obs).all()
+    env.close()
