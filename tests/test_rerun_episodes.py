@@ -198,7 +198,7 @@ def test_a_dead_writer_loses_the_recording_not_the_env(tmp_path):
     env.reset(seed=0)
     view = env.unwrapped.view
     view.writer.process.kill()
-    view.writer.process.join()
+    view.writer.process.wait()
     with pytest.warns(RuntimeWarning, match="Rerun recording lost"):
         for _ in range(50):
             env.step(np.zeros(4, np.float32))

@@ -14,13 +14,16 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import json
 import math
-import multiprocessing
 import os
 import queue
+import struct
+import subprocess
+import sys
 import threading
 import warnings
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 import pyarrow as pa
@@ -233,31 +236,51 @@ class EpisodeSender:
         self.rec.disconnect()
 
 
-def _any_core(pid: int = 0) -> None:
-    """Let process ``pid`` (0: the calling thread) run on any core: an env pinned to one
-    (a benchmark, a trainer's worker) must not share it with its writer."""
-    if hasattr(os, "sched_setaffinity"):
-        with contextlib.suppress(OSError):
-            os.sched_setaffinity(pid, range(os.cpu_count() or 1))
+def _away_from_the_env(pid: int = 0) -> None:
+    """Run process ``pid`` (0: the calling thread) on the cores the calling thread (the
+    env's, or one it started) is not pinned to, if there are any (a benchmark or a
+    trainer's worker pins the env to one: the writer must not take its time), else on
+    any core."""
+    if not hasattr(os, "sched_setaffinity"):
+        return
+    every = set(range(os.cpu_count() or 1))
+    others = every - os.sched_getaffinity(0)  # the caller's: the env's, or inherited from it
+    with contextlib.suppress(OSError):
+        os.sched_setaffinity(pid, others or every)
 
 
-def serve(connection: Any, name: str, save: str | None, windy: bool) -> None:
+# The pipe from the env to its writer carries messages: a 4-byte length and a JSON
+# header ``[kind, detail]``; a "rows" message then 8 bytes of length and the rows' raw
+# float64 bytes. Data, never code: nothing is unpickled.
+_HEADER, _PAYLOAD = struct.Struct("<I"), struct.Struct("<Q")
+
+
+def _read_exactly(stream: BinaryIO, size: int) -> bytes:
+    data = stream.read(size)
+    if len(data) != size:
+        raise EOFError("the env's end of the pipe closed")
+    return data
+
+
+def serve(stream: BinaryIO, name: str, save: str | None, windy: bool) -> None:
     """The writer process: what the env hands over, in order, until ``close`` (or until
     the env's process is gone: then what came is kept)."""
-    _any_core()
     sender = EpisodeSender(name, save, windy)
     while True:
         try:
-            kind, detail = connection.recv()
+            (size,) = _HEADER.unpack(_read_exactly(stream, _HEADER.size))
+            kind, detail = json.loads(_read_exactly(stream, size))
+            if kind == "rows":
+                (size,) = _PAYLOAD.unpack(_read_exactly(stream, _PAYLOAD.size))
+                data = _read_exactly(stream, size)
         except EOFError:
             sender.close()
             return
         if kind == "frame":
             sender.frame(**detail)
-        elif kind == "rows":  # the rows follow as raw bytes
-            data = connection.recv_bytes()
+        elif kind == "rows":
             sender.rows(np.frombuffer(data).reshape(detail["shape"]))
-            sender.events(detail["events"])
+            sender.events([tuple(event) for event in detail["events"]])
         elif kind == "close":
             sender.close()
             return
@@ -271,25 +294,25 @@ _WRITERS: list[EpisodeWriter] = []
 
 
 class EpisodeWriter:
-    """The env's handle on its writer process. Nothing here waits for the writer: the
-    rows go to a queue, a thread of this process feeds them to the pipe."""
+    """The env's handle on its writer process (``python -m quadsitl.viz.episode_writer``,
+    a program of its own: nothing of the caller's script is run again in it). Nothing
+    here waits for the writer: the rows go to a queue, a thread of this process feeds
+    them to the pipe."""
 
     def __init__(self, name: str, save: str | None, windy: bool) -> None:
-        context = multiprocessing.get_context("spawn")  # not a fork of a busy process
-        self.connection, theirs = context.Pipe()
-        self.process = context.Process(
-            target=serve, args=(theirs, name, save, windy), name="quadsitl-rerun-writer"
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "quadsitl.viz.episode_writer", json.dumps([name, save, windy])],
+            stdin=subprocess.PIPE,
         )
-        self.process.start()
-        _any_core(self.process.pid)  # at once: its start-up (imports) is its busiest time
-        theirs.close()
+        # At once: its start-up (imports) is its busiest time.
+        _away_from_the_env(self.process.pid)
         self.outbox: queue.SimpleQueue[tuple[str, dict[str, Any], np.ndarray | None]] = (
             queue.SimpleQueue()
         )
         self.error: BaseException | None = None
         self.closed = False
         # A daemon: an env never closed must not keep the program from exiting; what it
-        # buffered is sent by _close_all at exit.
+        # buffered is sent by the views' and the writers' handlers at exit.
         self.feeder = threading.Thread(target=self._feed, name="quadsitl-rerun-feeder", daemon=True)
         self.feeder.start()
         _WRITERS.append(self)
@@ -299,7 +322,7 @@ class EpisodeWriter:
 
     def rows(self, rows: np.ndarray, events: list[Event]) -> None:
         """Hand over ``rows`` (copied: the caller reuses its buffer) and ``events``."""
-        detail = {"shape": rows.shape, "events": list(events)}
+        detail = {"shape": list(rows.shape), "events": [list(event) for event in events]}
         self.outbox.put(("rows", detail, np.ascontiguousarray(rows, np.float64).copy()))
 
     def close(self, wait: bool = False) -> None:
@@ -312,17 +335,26 @@ class EpisodeWriter:
 
     def join(self, timeout: float | None = None) -> None:
         self.feeder.join(timeout)
-        self.process.join(timeout)
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.process.wait(timeout)
 
     def _feed(self) -> None:
-        """In the feeder thread: each message down the pipe, the rows' bytes after it."""
-        _any_core()  # this thread only
+        """In the feeder thread: each message down the pipe (its writes release the GIL)."""
+        _away_from_the_env()  # this thread only (its writes are short)
+        pipe = self.process.stdin
+        assert pipe is not None
         while True:
             kind, detail, rows = self.outbox.get()
+            header = json.dumps([kind, detail]).encode()
             try:
-                self.connection.send((kind, detail))
+                pipe.write(_HEADER.pack(len(header)) + header)
                 if rows is not None:
-                    self.connection.send_bytes(memoryview(rows).cast("B"))
+                    pipe.write(_PAYLOAD.pack(rows.nbytes))
+                    pipe.write(memoryview(rows).cast("B"))
+                pipe.flush()
+                if kind == "close":
+                    pipe.close()
+                    return
             except (OSError, ValueError) as error:  # the writer died: nothing to send to
                 self.error = error
                 warnings.warn(
@@ -331,9 +363,6 @@ class EpisodeWriter:
                     stacklevel=1,
                 )
                 return
-            if kind == "close":
-                self.connection.close()
-                return
 
 
 def wait_for_recordings(timeout: float | None = None) -> None:
@@ -341,7 +370,7 @@ def wait_for_recordings(timeout: float | None = None) -> None:
     for writer in list(_WRITERS):
         if writer.closed:
             writer.join(timeout)
-            if not writer.process.is_alive():
+            if writer.process.poll() is not None:
                 _WRITERS.remove(writer)
 
 
@@ -351,3 +380,8 @@ def _close_all() -> None:
     for writer in _WRITERS:
         writer.close()
     wait_for_recordings()
+
+
+if __name__ == "__main__":
+    _name, _save, _windy = json.loads(sys.argv[1])
+    serve(sys.stdin.buffer, _name, _save, _windy)
