@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import signal
 import subprocess
@@ -129,6 +131,21 @@ def run_cli(*args: str, env: dict[str, str] | None = None, timeout: float = 120)
         timeout=timeout,
         env={**os.environ, **(env or {})},
     )
+
+
+def refused_here(*args: str) -> subprocess.CompletedProcess[str]:
+    """``quadsitl ARGS`` run in this process, output captured: for a command that must be
+    refused before it starts anything (a process of its own costs seconds of imports,
+    and the console entry point is the same ``main``)."""
+    from quadsitl.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(list(args))
+        except SystemExit as exit_:  # argparse's own refusals
+            code = exit_.code if isinstance(exit_.code, int) else 1
+    return subprocess.CompletedProcess(list(args), code, out.getvalue(), err.getvalue())
 
 
 def start_quiet_sim(*args: str) -> subprocess.Popen[str]:

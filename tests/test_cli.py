@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from quadsitl import __version__
+from tests.conftest import refused_here
 
 
 def _run(*args: str) -> subprocess.CompletedProcess[str]:
@@ -38,7 +39,7 @@ def test_demo_takes_off_hovers_and_lands():
 
 
 def test_demo_rejects_bad_options():
-    result = _run("demo", "--physics", "--airframe", "bogus")
+    result = refused_here("demo", "--physics", "--airframe", "bogus")
     assert result.returncode == 2
     assert "unknown airframe" in result.stderr
 
@@ -102,11 +103,11 @@ def test_sim_port_in_use_is_a_clear_error():
 
 
 def test_sim_rejects_bad_options():
-    assert "unknown parameter" in _run("sim", "--param", "NOPE=1", "--logs", "none").stderr
-    assert "LAT,LON,ALT" in _run("sim", "--home", "1,2", "--logs", "none").stderr
-    assert "kind must be" in _run("sim", "--gcs", "serial:x:1", "--logs", "none").stderr
+    assert "unknown parameter" in refused_here("sim", "--param", "NOPE=1", "--logs", "none").stderr
+    assert "LAT,LON,ALT" in refused_here("sim", "--home", "1,2", "--logs", "none").stderr
+    assert "kind must be" in refused_here("sim", "--gcs", "serial:x:1", "--logs", "none").stderr
     # 300 Hz physics cannot step a 250 Hz controller every whole number of steps
-    rates = _run("sim", "--physics-rate", "300", "--control-rate", "250", "--logs", "none")
+    rates = refused_here("sim", "--physics-rate", "300", "--control-rate", "250", "--logs", "none")
     assert rates.returncode == 2
     assert "not a whole multiple of the control rate 250 Hz" in rates.stderr
 

@@ -17,7 +17,7 @@ import pytest
 from gcs_tools.client import VehicleClient, Waypoint, mav
 from gcs_tools.scripted_flight import mission_items
 from quadsitl.wire import fast_codec as FC
-from tests.conftest import cli, free_udp_port
+from tests.conftest import cli, free_udp_port, refused_here
 
 VEHICLES = 4
 
@@ -109,11 +109,8 @@ def test_a_message_for_a_system_not_hosted_is_refused_and_the_others_fly_on(flee
     ],
 )
 def test_bad_fleet_options_are_refused_before_anything_starts(options, message):
-    done = subprocess.run(
-        cli(f"sim {options} --gcs none --api none --hil udpin:127.0.0.1:0 --logs none"),
-        capture_output=True,
-        text=True,
-        timeout=60,
+    done = refused_here(
+        *f"sim {options} --gcs none --api none --hil udpin:127.0.0.1:0 --logs none".split()
     )
     assert done.returncode == 2 and message in done.stderr
 

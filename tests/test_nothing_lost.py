@@ -21,7 +21,7 @@ from policies import checkpoint
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.runner import SimConfig, Simulator
 from quadsitl.mavlink.tlog import TlogWriter
-from tests.conftest import cli, interrupt, run_cli
+from tests.conftest import cli, interrupt, refused_here
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "checkpoints" / "hover.pt"
@@ -181,12 +181,14 @@ def test_a_log_folder_that_disappears_stops_the_log_not_the_vehicle(tmp_path):
 
 # --- 11. the smaller ones ---------------------------------------------------------------
 def test_small_mistakes_get_clear_messages(tmp_path):
-    bad_value = run_cli("sim", "--param", "MPC_XY_P=bar", "--logs", "none")
+    bad_value = refused_here("sim", "--param", "MPC_XY_P=bar", "--logs", "none")
     assert bad_value.returncode == 2
     assert "the value 'bar' of MPC_XY_P is not a number" in bad_value.stderr
-    duration = run_cli("sim", "--duration", "-1", "--logs", "none")
+    duration = refused_here("sim", "--duration", "-1", "--logs", "none")
     assert duration.returncode == 2 and "--duration must be a positive" in duration.stderr
-    airframe = run_cli("sim", "--param", "SIM_AIRFRAME=0.5", "--logs", "none", "--duration", "5")
+    airframe = refused_here(
+        "sim", "--param", "SIM_AIRFRAME=0.5", "--logs", "none", "--duration", "5"
+    )
     assert airframe.returncode == 2 and "whole number" in airframe.stderr
     replay = subprocess.run(
         [sys.executable, "-m", "gcs_tools.replay", str(SHIPPED), "-o", "/nonexistent/x.rrd"],

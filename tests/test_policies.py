@@ -26,7 +26,7 @@ from policies.evaluate import evaluate
 from policies.rollout import compute_gae
 from policies.train import train
 from quadsitl.physics import PAPER
-from tests.conftest import cli, run_cli
+from tests.conftest import cli, refused_here, run_cli
 
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "policies" / "checkpoints"
 
@@ -186,12 +186,7 @@ def test_train_and_eval_commands(tmp_path):
     )
     assert out.returncode == 0, out.stderr
     assert "touchdown speed" in out.stdout and "success_rate: " in out.stdout
-    bad = subprocess.run(
-        [sys.executable, "-m", "quadsitl.cli", "train", "--task", "hover", "--algo", "ddpg"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    bad = refused_here("train", "--task", "hover", "--algo", "ddpg")
     assert bad.returncode == 2 and "unknown algorithm" in bad.stderr
 
 
@@ -370,12 +365,7 @@ def test_eval_explains_every_outcome_name_and_each_tasks_success():
 
 
 def test_eval_of_zero_episodes_is_a_message_about_episodes(tmp_path):
-    result = subprocess.run(
-        cli("eval", CHECKPOINTS / "hover.pt", "--episodes", "0"),
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    result = refused_here("eval", str(CHECKPOINTS / "hover.pt"), "--episodes", "0")
     assert result.returncode == 2 and "--episodes: must be ≥ 1" in result.stderr, result.stderr
     assert "num_envs" not in result.stderr
     with pytest.raises(ValueError, match="episodes must be an integer ≥ 1"):
@@ -442,7 +432,7 @@ def test_training_into_an_unwritable_folder_is_one_line_before_any_work(tmp_path
 )
 def test_step_budgets_beyond_the_maximum_are_refused(tmp_path, steps, message):
     train = "train --task hover --algo ppo --preset fast --quiet --steps"
-    result = run_cli(*train.split(), steps, "--runs", str(tmp_path))
+    result = refused_here(*train.split(), steps, "--runs", str(tmp_path))
     assert result.returncode == 2 and message in result.stderr, result.stderr
     assert not any(tmp_path.iterdir())
     with pytest.raises(ValueError, match="total_steps must be at most 10,000,000,000"):

@@ -19,7 +19,7 @@ from quadsitl.envs.sim_process import SimProcess
 from quadsitl.physics import get_airframe
 from quadsitl.physics.fleet import initial_state
 from quadsitl.wire.state import WireState
-from tests.conftest import run_cli
+from tests.conftest import refused_here, run_cli
 
 AIRFRAME = get_airframe("paper")
 HOVER_U = AIRFRAME.hover_rotor_speed / AIRFRAME.max_rotor_speed  # normalised command
@@ -178,7 +178,7 @@ def test_the_banner_says_what_each_vehicle_drew_and_a_seed_repeats_it():
     ],
 )
 def test_bad_values_are_one_line_errors(option, message):
-    result = run_cli("sim", *RATES, "--logs", "none", "--lockstep", "--duration", "1", option)
+    result = refused_here("sim", *RATES, "--logs", "none", "--lockstep", "--duration", "1", option)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("quadsitl sim: error: "), result.stderr
@@ -186,7 +186,7 @@ def test_bad_values_are_one_line_errors(option, message):
 
 
 def test_delay_needs_lockstep():
-    result = run_cli("sim", *RATES, "--logs", "none", "--delay", "1,1", "--duration", "1")
+    result = refused_here("sim", *RATES, "--logs", "none", "--delay", "1,1", "--duration", "1")
     assert result.returncode == 2
     assert "quadsitl sim: error: --delay acts on lockstep motor commands" in result.stderr
 

@@ -3,7 +3,7 @@ from the task list (ENV_CLASSES)."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -17,7 +17,9 @@ from quadsitl.envs.mavlink_backend import (
 )
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS, TaskEngine, TaskSpec
-from quadsitl.viz.episode_view import EpisodeView
+
+if TYPE_CHECKING:  # imported when an env records: Rerun takes half a second to import
+    from quadsitl.viz.episode_view import EpisodeView
 
 
 def make_spaces(engine: TaskEngine) -> tuple[gym.spaces.Box, gym.spaces.Box]:
@@ -69,6 +71,8 @@ class QuadEnv(gym.Env):
         self._closed = False
         self.view: EpisodeView | None = None
         if render_mode == "rerun":  # episodes logged as they are flown; see quadsitl.viz
+            from quadsitl.viz.episode_view import EpisodeView
+
             engine = self.engine
             drawn = engine.randomization is not None and engine.randomization.wind is not None
             windy = engine.options.wind is not None or drawn
