@@ -99,7 +99,7 @@ class QuadEnv(gym.Env):
             reward, terminated, truncated = engine.step(action)
         except SimulatorError as error:
             raise self._explain(error) from None
-        if self.view is not None:
+        if self.view is not None and engine.recorded:  # (0: nothing for the view to do)
             self.view.step(engine)
         ended_early, timed_out = bool(terminated[0]), bool(truncated[0])
         info: dict[str, Any] = {}

@@ -99,9 +99,9 @@ class TaskEngine:
         self.time_within = np.zeros(num_envs)
         self.reach_time = np.full(num_envs, math.nan)
         self.episode_return = np.zeros(num_envs)
-        # A recorder's (rows, counters) (recording.py): see record(); rows written by the
-        # last step, negated once the recorded env's episode ended.
-        self.recording: tuple[NDArray[np.float64], NDArray[np.int64]] | None = None
+        # A recorder's buffer (recording.py): see record(); rows written by the last
+        # step, negated once the recorded env's episode ended.
+        self.recording: NDArray[np.float64] | None = None
         self.recorded = 0
         self.rngs = [np.random.default_rng() for _ in range(num_envs)]
         self._all = np.ones(num_envs, bool)
@@ -327,29 +327,29 @@ class TaskEngine:
         if self.recording is None:
             close_step(*closing)
         else:
-            rows, counters = self.recording
             self.recorded = close_step_recording(
-                *closing, fleet.state, self.goal, fleet.wind_state, rows, counters
+                *closing, fleet.state, self.goal, fleet.wind_state, self.recording
             )
         return self.reward, self.terminated, self.truncated
 
-    def record(self, rows: NDArray[np.float64], counters: NDArray[np.int64]) -> None:
-        """From the next step on, each step writes env ``counters[recording.ENV]``'s row
-        into ``rows`` (:func:`recording.new_buffer`) in its compiled end; ``step`` then
-        leaves the rows written in ``recorded`` (negated once that episode ended). The
-        recorder empties the buffer (``counters[recording.COUNT] = 0``) before it fills."""
-        self.recording = (rows, counters)
+    def record(self, buffer: NDArray[np.float64]) -> None:
+        """From the next step on, each step writes the recorded env's row into ``buffer``
+        (:func:`recording.new_buffer`) in its compiled end; ``step`` then
+        leaves the rows written in ``recorded`` (negated once that episode ended) when the
+        recorder has something to do, else 0 (:func:`~.step_kernels.close_step_recording`).
+        The recorder empties the buffer (its counter ``recording.COUNT`` to 0) before it
+        fills."""
+        self.recording = buffer
 
     def record_now(self, reward: float = math.nan) -> None:
         """The recorded env's row as it is now (a reset's: reward NaN)."""
         if self.recording is None:
             raise RuntimeError("record_now() before record()")
-        rows, counters = self.recording
-        i = int(counters[R.ENV])
+        buffer = self.recording
+        i = int(buffer[-1, R.ENV])
         fleet = self.fleet
         R.record_row(
-            rows,
-            counters,
+            buffer,
             fleet.state,
             self.goal,
             self.dist,

@@ -94,11 +94,12 @@ def close_step_recording(
     state,
     goal,
     wind_state,
-    rows,
-    counters,
+    buffer,
 ):  # pragma: no cover - compiled
     """:func:`close_step`, then the recorded env's row (:mod:`.recording`). Returns the
-    rows recorded, negated once that env's episode has ended."""
+    rows recorded, negated once that env's episode has ended, when the recorder has
+    something to do (that, or a look at its buffer is due: every CHECK_EVERY rows, or
+    near full); else 0."""
     close_step(
         dist,
         prev_dist,
@@ -114,8 +115,12 @@ def close_step_recording(
         terminated,
         truncated,
     )
-    i = counters[R.ENV]
-    R.record_row(
-        rows, counters, state, goal, dist, wind_state, reward[i], steps[i], episode_return[i]
-    )
-    return counters[R.COUNT] if outcome[i] == S.RUNNING else -counters[R.COUNT]
+    capacity = buffer.shape[0] - 1  # the last row holds the counters
+    i = int(buffer[capacity, R.ENV])
+    R.record_row(buffer, state, goal, dist, wind_state, reward[i], steps[i], episode_return[i])
+    count = int(buffer[capacity, R.COUNT])
+    if outcome[i] != S.RUNNING:
+        return -count
+    if count % R.CHECK_EVERY == 0 or count >= capacity - R.HEADROOM:
+        return count
+    return 0  # nothing for the recorder to do: the env does not call it

@@ -37,11 +37,6 @@ from quadsitl.viz.viewer import check_output_path
 CAPACITY = 32768  # steps buffered before they are sent
 FLUSH_AFTER = 0.5  # wall s: a buffer older than this is sent at the next step
 
-CLOCK_EVERY = 16  # rows between two looks at the clock (FLUSH_AFTER)
-# Rows a step's end may write before the view looks: the step's and, when the caller
-# resets the env at once (a vector env, eval), the reset's.
-HEADROOM = 2
-
 
 class EpisodeView:
     """Logs env ``index`` of an engine. ``save``: an .rrd path, else a viewer is spawned."""
@@ -58,7 +53,8 @@ class EpisodeView:
         self.episode = -1
         self.ended = False
         self.framed = False
-        self.rows, self.counters = R.new_buffer(CAPACITY, index)  # the engine writes them
+        # The engine writes the buffer; the rows and the counters are its views.
+        self.buffer, self.rows, self.counters = R.new_buffer(CAPACITY, index)
         self.oldest = time.monotonic()  # wall time of (about) the oldest buffered row
         self.events: list[Event] = []
 
@@ -73,25 +69,26 @@ class EpisodeView:
         if not self.framed:
             self.framed = True
             self._frame(engine)
-            engine.record(self.rows, self.counters)
+            engine.record(self.buffer)
         engine.record_now()
         self._rows_written(int(self.counters[R.COUNT]))
 
     def step(self, engine: TaskEngine) -> None:
-        """After a step of ``engine`` (which wrote its row): all a step costs, unless
-        the buffer is due to be sent."""
+        """After a step of ``engine`` (which wrote its row): an episode's end, or a look
+        at the buffer when one is due. The env calls this only then (``engine.recorded``
+        not 0): other steps cost the view nothing."""
         rows = engine.recorded
         if rows < 0:
             rows = -rows
             if not self.ended:
                 self._outcome(S.OUTCOME_NAMES[int(engine.outcome[self.index])])
-        if rows % CLOCK_EVERY == 0 or rows >= CAPACITY - HEADROOM:
+        if rows:
             self._rows_written(rows)
 
     def _rows_written(self, rows: int) -> None:
         """Send the buffer when it is (nearly) full, or its oldest row has waited long."""
-        if rows >= CAPACITY - HEADROOM or (
-            rows % CLOCK_EVERY == 0 and time.monotonic() - self.oldest > FLUSH_AFTER
+        if rows >= CAPACITY - R.HEADROOM or (
+            rows % R.CHECK_EVERY == 0 and time.monotonic() - self.oldest > FLUSH_AFTER
         ):
             self.flush()
 
@@ -122,7 +119,7 @@ class EpisodeView:
 
     def flush(self) -> None:
         """Hand the buffered rows and events to the writer."""
-        rows = self.rows[: self.counters[R.COUNT]]
+        rows = self.rows[: int(self.counters[R.COUNT])]
         self.counters[R.COUNT] = 0
         self.oldest = time.monotonic()  # (nearly) when the next row comes
         if len(rows) or self.events:
