@@ -4,8 +4,9 @@
 and the first test start in about two seconds instead of spending half a minute
 compiling (each kernel is compiled once per source version and then loaded from
 ``__pycache__``). Running it again costs only the loading. It compiles what a simulator
-loads before its clock starts (:func:`quadsitl.mavlink.runner.compile_for_sim`) and what
-the envs use: every task's single and vector env, in still air and in wind.
+loads before its clock starts (:func:`quadsitl.mavlink.runner.compile_for_sim`), a fleet
+of one stepped with a (4,) command, and what the envs use: every task's single and vector
+env, in still air and in wind.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ def main() -> int:
 
     import quadsitl  # noqa: F401  (registers the envs)
     from quadsitl.mavlink.runner import compile_for_sim
+    from quadsitl.physics import Fleet
     from quadsitl.physics.wind import Wind
     from quadsitl.registration import task_env_id
     from quadsitl.tasks import TASKS
@@ -30,6 +32,11 @@ def main() -> int:
     print("quadsitl: compiling the physics and controllers once (numba's cache)...", flush=True)
     compile_for_sim(1, "paper", Wind(speed=3.0, turbulence="light"))
     compile_for_sim(2, "paper")
+    for weather in (None, Wind(speed=3.0, turbulence="light")):
+        single = Fleet(1)  # a fleet of one takes a (4,) command too: a version of its own
+        if weather is not None:
+            single.set_wind(weather)
+        single.step(np.zeros(4))
     wind = {"speed": 3.0, "turbulence": "light"}
     still_and_windy: tuple[dict[str, Any], ...] = ({}, {"wind": wind})
     for name in TASKS:
