@@ -22,10 +22,10 @@ demo: venv
 
 # Test processes in parallel (pytest-xdist); TEST_WORKERS=0 runs the suite in one. The
 # tests that start a Ray of their own share one process (xdist_group "ray"), so that two
-# Rays never compete for the cores at once.
+# Rays never compete for the cores at once. The 20 slowest tests are listed at the end.
 TEST_WORKERS ?= 4
 test: venv
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --durations=20
 
 # MAVProxy's core for its slow test, without the GUI and vision packages it lists
 # (OpenCV, VTK, wxPython): the simulator's tests only drive its command line.
