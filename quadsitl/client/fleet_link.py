@@ -14,7 +14,8 @@ import socket
 from collections import deque
 from typing import Any
 
-from quadsitl.client.motor_client import SimulatorError, next_datagram, refusal
+from quadsitl.client.datagrams import next_datagram
+from quadsitl.client.motor_client import SimulatorError, refusal
 from quadsitl.mavlink.links import is_loopback
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.wire import fast_codec as FC

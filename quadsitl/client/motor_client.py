@@ -17,8 +17,6 @@ answered without stepping again; the commands (arm, the reset pair) are idempote
 from __future__ import annotations
 
 import math
-import os
-import select
 import socket
 import time
 from collections import deque
@@ -27,6 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from quadsitl.client.datagrams import next_datagram
 from quadsitl.mavlink.links import MAX_DATAGRAM, is_loopback
 from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
@@ -46,29 +45,6 @@ from quadsitl.wire.lockstep import (
 )
 from quadsitl.wire.state import WireState
 from quadsitl.wire.statustext import TextJoiner
-
-SPIN_SECONDS = 0.002  # poll this long for an answer before sleeping in select()
-
-
-def next_datagram(sock: socket.socket, until: float) -> bytes | None:
-    """The next datagram on the non-blocking ``sock``, or None at ``until`` (monotonic).
-    Polls for the first SPIN_SECONDS (an answer is usually tens of microseconds away,
-    and waking from select() costs about as much again), yielding the core to a
-    simulator that shares it; then sleeps in select(). ConnectionRefusedError (ICMP:
-    nothing listens at the address) is the caller's to word."""
-    started = time.monotonic()
-    while True:
-        try:
-            return sock.recv(MAX_DATAGRAM)
-        except BlockingIOError:
-            now = time.monotonic()
-            if now >= until:
-                return None
-            if now - started < SPIN_SECONDS:
-                os.sched_yield()
-                continue
-            select.select([sock], [], [], until - now)
-
 
 RESEND_AFTER = 0.05  # s: the longest wait for an answer before the commands go again
 MIN_RESEND_AFTER = 0.001  # s: the shortest; in between, RESEND_ROUND_TRIPS usual round trips
