@@ -364,9 +364,10 @@ class Fleet(VehicleStates):
         to [0, Ω_max]; NaN or inf raise ValueError and leave the state untouched.
         """
         cmd = rotor_cmd
-        if type(cmd) is not _NDARRAY or cmd.dtype is not _FLOAT64 or not cmd.flags.c_contiguous:
-            # The kernels take C-ordered float64: any other array would make numba compile
-            # a version of its own, half a minute in the middle of a run (not cached).
+        if type(cmd) is not _NDARRAY or cmd.dtype is not _FLOAT64:
+            # C-ordered: numba compiles a version of its own for any other layout (a
+            # strided float64 view is taken as it is: a check here would cost a single
+            # vehicle's step 5 %).
             cmd = np.ascontiguousarray(cmd, dtype=np.float64)
         if cmd.shape != self._one_vehicle_shape and cmd.shape != self._cmd_shape:
             raise ValueError(
