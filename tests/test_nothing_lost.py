@@ -28,17 +28,13 @@ SHIPPED = ROOT / "policies" / "checkpoints" / "hover.pt"
 
 
 # --- 4. training never overwrites by accident -------------------------------------------
-def _train(runs: Path, *extra: str, steps: str = "8192"):
-    return subprocess.run(
-        cli(
-            f"train --task hover --algo ppo --preset fast --quiet --steps {steps} --runs",
-            runs,
-            *extra,
-        ),
-        capture_output=True,
-        text=True,
-        timeout=180,
-    )
+def _train(runs: Path, *extra: str, steps: str = "8192", refused: bool = False):
+    """``quadsitl train`` into ``runs``; ``refused``: one that must be refused before it
+    trains, run in this process (a process of its own costs seconds of imports)."""
+    words = f"train --task hover --algo ppo --preset fast --quiet --steps {steps} --runs"
+    if refused:
+        return refused_here(*words.split(), str(runs), *extra)
+    return subprocess.run(cli(words, runs, *extra), capture_output=True, text=True, timeout=180)
 
 
 def _files(folder: Path) -> dict[str, bytes]:
@@ -50,7 +46,7 @@ def test_a_second_run_into_the_same_folder_is_refused_then_resumed_or_overwritte
     assert first.returncode == 0, first.stderr
     run = tmp_path / "hover-ppo-fast-seed0"
     before = _files(run)
-    again = _train(tmp_path)
+    again = _train(tmp_path, refused=True)
     assert again.returncode == 2
     assert "already holds a run" in again.stderr and "--resume" in again.stderr
     assert _files(run) == before  # byte-identical
@@ -62,9 +58,9 @@ def test_a_second_run_into_the_same_folder_is_refused_then_resumed_or_overwritte
     assert lines[1:3] == before["metrics.csv"].decode().splitlines()[1:3]  # kept as they were
     _, _, payload = checkpoint.load(run / "checkpoints" / "last.pt")
     assert payload["iteration"] == 4
-    done = _train(tmp_path, "--resume", steps="16384")
+    done = _train(tmp_path, "--resume", steps="16384", refused=True)
     assert done.returncode == 2 and "already run 4 of 4 iterations" in done.stderr
-    changed = _train(tmp_path, "--resume", "--num-envs", "64", steps="16384")
+    changed = _train(tmp_path, "--resume", "--num-envs", "64", steps="16384", refused=True)
     assert changed.returncode == 2 and "num_envs" in changed.stderr
 
     overwritten = _train(tmp_path, "--overwrite")
@@ -84,12 +80,8 @@ def test_a_second_run_into_the_same_folder_is_refused_then_resumed_or_overwritte
 )
 def test_bad_training_options_are_clear_errors_and_leave_no_folder(tmp_path, args, message):
     runs = tmp_path / "runs"
-    result = subprocess.run(
-        cli("train --task hover --algo ppo --preset fast --runs", str(runs), "--quiet", *args),
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    train = ["train", "--task", "hover", "--algo", "ppo", "--preset", "fast", "--quiet"]
+    result = refused_here(*train, "--runs", str(runs), *args)
     assert result.returncode == 2 and message in result.stderr, result.stderr
     assert "Traceback" not in result.stderr and not runs.exists()
 
