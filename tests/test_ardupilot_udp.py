@@ -17,6 +17,7 @@ import pytest
 from quadsitl.bridges.ardupilot_json import ServoFrame, encode_servo_packet
 from quadsitl.bridges.fake_ardupilot import FakeArduPilot, HoverController
 from quadsitl.physics.airframe import get_airframe
+from tests.conftest import refused_here
 
 START_TIMEOUT = 60.0  # s for the process to open its ports (numba loads its cache)
 
@@ -230,8 +231,7 @@ def test_a_port_in_use_is_a_one_line_error_naming_it() -> None:
     ],
 )
 def test_wrong_options_are_refused(options: list[str], says: str) -> None:
-    command = [sys.executable, "-m", "quadsitl.cli", "sim", *options]
-    done = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    done = refused_here("sim", *options)
     assert done.returncode == 2 and says in done.stderr
 
 

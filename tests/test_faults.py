@@ -17,7 +17,7 @@ from gcs_tools.client import VehicleClient
 from quadsitl.physics import PAPER, Fleet
 from quadsitl.physics import layout as L
 from quadsitl.vehicle.motor_faults import MotorFaults
-from tests.conftest import cli, free_udp_port, run_cli
+from tests.conftest import cli, free_udp_port, refused_here
 
 mav = mavutil.mavlink
 OMEGA = 250.0  # rad/s
@@ -118,7 +118,7 @@ def test_sim_refuses_bad_fail_motor_options_in_one_line():
         ("two", "--fail-motor must be N or N:EFFICIENCY"),
         ("2:nan", r"in \[0, 1\]"),
     ):
-        result = run_cli("sim", "--logs", "none", "--fail-motor", option, "--duration", "1")
+        result = refused_here("sim", "--logs", "none", "--fail-motor", option, "--duration", "1")
         assert result.returncode == 2, result.stderr
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and re.search(match, lines[0]), result.stderr

@@ -13,7 +13,7 @@ from gcs_tools.mission_file import read_mission
 from gcs_tools.scripted_flight import planned_path
 from quadsitl.mavlink.links import free_udp_port
 from quadsitl.vehicle.geo import Home
-from tests.conftest import cli, run_cli
+from tests.conftest import cli, refused_here, run_cli
 
 MISSIONS = Path(__file__).resolve().parent.parent / "docs" / "missions"
 
@@ -101,14 +101,14 @@ def test_the_waypoint_list_is_the_demos_mission_format():
 def test_a_bad_mission_file_is_one_line_and_flies_nothing(tmp_path, content, message):
     path = tmp_path / "mission.txt"
     path.write_text(content)
-    result = run_cli("fly", str(path), "--connect", "udpin:127.0.0.1:0")
+    result = refused_here("fly", str(path), "--connect", "udpin:127.0.0.1:0")
     assert result.returncode == 2
     assert result.stderr.startswith("quadsitl fly: error: ") and message in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
 
 
 def test_a_missing_file_is_a_clear_error(tmp_path):
-    result = run_cli("fly", str(tmp_path / "nope.plan"))
+    result = refused_here("fly", str(tmp_path / "nope.plan"))
     assert (
         result.returncode == 2 and "cannot read" in result.stderr and "nope.plan" in result.stderr
     )

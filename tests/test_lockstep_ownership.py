@@ -22,7 +22,7 @@ from quadsitl.envs.sim_process import SimProcess
 from quadsitl.mavlink.ownership import Ownership
 from quadsitl.mavlink.runner import SimConfig
 from quadsitl.wire.lockstep import OWNER_SILENCE, RESET_STATE, STAGE_MOTION
-from tests.conftest import OBS_TOLERANCE, REWARD_TOLERANCE, fly_both, run_cli
+from tests.conftest import OBS_TOLERANCE, REWARD_TOLERANCE, fly_both, refused_here
 
 RATES = ["--physics-rate", "100", "--control-rate", "20", "--gcs", "none", "--api", "none"]
 
@@ -182,7 +182,7 @@ def test_after_a_stalled_simulator_the_env_refuses_to_step_until_reset_then_matc
 
 def test_an_unsigned_lockstep_link_beyond_loopback_refuses_to_start():
     hil = "udpin:0.0.0.0:0"
-    result = run_cli("sim", "--lockstep", "--hil", hil, "--gcs", "none", "--api", "none")
+    result = refused_here("sim", "--lockstep", "--hil", hil, "--gcs", "none", "--api", "none")
     assert result.returncode == 2
     assert "listens beyond this host" in result.stderr and "--signing-passphrase" in result.stderr
     assert "Traceback" not in result.stderr

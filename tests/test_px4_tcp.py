@@ -17,6 +17,7 @@ import pytest
 from quadsitl.bridges.fake_px4 import FakePx4, Px4HoverController, problems
 from quadsitl.physics.airframe import get_airframe
 from quadsitl.vehicle.geo import Home
+from tests.conftest import refused_here
 from tests.test_ardupilot_udp import START_TIMEOUT, Sim
 
 
@@ -182,8 +183,7 @@ def test_a_port_in_use_is_a_one_line_error_naming_it() -> None:
     ],
 )
 def test_wrong_options_are_refused(options: list[str], says: str) -> None:
-    command = [sys.executable, "-m", "quadsitl.cli", "sim", *options]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    result = refused_here("sim", *options)
     assert result.returncode == 2 and says in result.stderr
 
 
