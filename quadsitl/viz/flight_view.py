@@ -26,9 +26,12 @@ from quadsitl import frames
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.modes import Mode
 from quadsitl.viz.scene import WIND_ARROW_SCALE, pose_from_ned, quat_xyzw
+from quadsitl.wire.dialect import mavlink as M
 from quadsitl.wire.units import STANDARD_GRAVITY
 
-M = mavutil.mavlink
+# M is the project's dialect, not mavutil.mavlink: that one is MAVLink 1's (no ODOMETRY)
+# unless MAVLINK20 was set in the environment before pymavlink was imported.
+
 GCS_TYPE = 6  # MAV_TYPE_GCS
 SEVERITY = ["CRITICAL"] * 3 + ["ERROR", "WARN", "INFO", "INFO", "DEBUG"]  # MAV_SEVERITY 0..7
 
@@ -120,7 +123,7 @@ class FlightView:
                 self.vehicle = source
             if source != self.vehicle:
                 return []
-        armed = bool(msg.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+        armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
         state = (armed, _mode_name(msg))
         band = f"plots/state/mode/{state[1]}"
         out = []
@@ -149,7 +152,7 @@ class FlightView:
 
     def _from_anyone(self, kind: str, msg: Any) -> list[Sample]:
         if kind == "SET_POSITION_TARGET_LOCAL_NED":
-            if msg.coordinate_frame != mavutil.mavlink.MAV_FRAME_LOCAL_NED:
+            if msg.coordinate_frame != M.MAV_FRAME_LOCAL_NED:
                 return []
             return self._position_target(msg)
         if getattr(msg, "mission_type", 0) != 0 or self.home is None:
@@ -244,7 +247,7 @@ class FlightView:
         ]
 
     def _position_target_local_ned(self, msg: Any) -> list[Sample]:
-        if msg.coordinate_frame != mavutil.mavlink.MAV_FRAME_LOCAL_NED:
+        if msg.coordinate_frame != M.MAV_FRAME_LOCAL_NED:
             return []
         return self._position_target(msg)
 
@@ -364,7 +367,7 @@ def _altitude_velocity(position: np.ndarray, velocity: np.ndarray) -> list[Sampl
 
 def _mode_name(msg: Any) -> str:
     """PX4-layout custom modes (PX4 and quadsitl), else pymavlink's names (ArduPilot...)."""
-    if msg.autopilot in (mavutil.mavlink.MAV_AUTOPILOT_PX4, mavutil.mavlink.MAV_AUTOPILOT_GENERIC):
+    if msg.autopilot in (M.MAV_AUTOPILOT_PX4, M.MAV_AUTOPILOT_GENERIC):
         try:
             return Mode.from_custom_mode(msg.custom_mode).name
         except ValueError:
