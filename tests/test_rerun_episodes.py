@@ -5,6 +5,7 @@ own reader."""
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -207,3 +208,38 @@ def test_a_dead_writer_loses_the_recording_not_the_env(tmp_path):
     obs, *_ = env.step(np.zeros(4, np.float32))  # the env flies on
     assert np.isfinite(obs).all()
     env.close()
+
+
+def test_ctrl_c_in_the_terminal_leaves_the_recording_whole(tmp_path):
+    """Ctrl-C reaches the env's program and its writer (one process group): the program
+    stops, the writer finishes the file with every row handed over."""
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "interrupted.rrd"
+    script = (
+        "import gymnasium as gym, numpy as np, quadsitl, sys, time\n"
+        f"env = gym.make('QuadSITL/Hover-v0', render_mode='rerun', rerun_save={str(out)!r})\n"
+        "env.reset(seed=0)\n"
+        "for _ in range(200): env.step(np.zeros(4, np.float32))\n"
+        "env.unwrapped.view.flush()\n"
+        "print('stepped', flush=True)\n"
+        "try:\n"
+        "    time.sleep(120)\n"
+        "except KeyboardInterrupt:\n"
+        "    sys.exit(130)\n"
+    )
+    process = subprocess.Popen(
+        [sys.executable, "-c", script],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # a process group of its own, as a terminal's job
+    )
+    assert process.stdout is not None
+    assert process.stdout.readline().strip() == "stepped"
+    os.killpg(process.pid, signal.SIGINT)  # what the terminal does on Ctrl-C
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130 and "Traceback" not in err, err[-2000:]
+    assert rows_per_entity(out, static=False)["/world/vehicle"] == 201

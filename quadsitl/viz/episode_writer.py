@@ -18,6 +18,7 @@ import json
 import math
 import os
 import queue
+import signal
 import struct
 import subprocess
 import sys
@@ -303,6 +304,9 @@ class EpisodeWriter:
         self.process = subprocess.Popen(
             [sys.executable, "-m", "quadsitl.viz.episode_writer", json.dumps([name, save, windy])],
             stdin=subprocess.PIPE,
+            # Its own process group: a terminal's Ctrl-C is for the env's program, which
+            # decides what it means; its end closes the pipe, and the writer finishes.
+            start_new_session=True,
         )
         # At once: its start-up (imports) is its busiest time.
         _away_from_the_env(self.process.pid)
@@ -383,5 +387,6 @@ def _close_all() -> None:
 
 
 if __name__ == "__main__":
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # (a session of its own: see EpisodeWriter)
     _name, _save, _windy = json.loads(sys.argv[1])
     serve(sys.stdin.buffer, _name, _save, _windy)
