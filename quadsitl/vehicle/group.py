@@ -24,7 +24,7 @@ from quadsitl.vehicle.controller import Autopilot
 from quadsitl.vehicle.episodes import EpisodeOptions, MotorEpisodes
 from quadsitl.vehicle.estimator import Estimator, EstimatorSlot
 from quadsitl.vehicle.geo import Home
-from quadsitl.vehicle.stepping import Stepping
+from quadsitl.vehicle.stepping import Stepping, physics_steps_per_period
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire.ids import MAX_SYSTEM_ID
 
@@ -77,7 +77,7 @@ class VehicleGroup:
         sensors = SensorSuite(
             n, lats, lons, alts - gear, noise_scale=sensor_noise, seed=sensor_seed
         )
-        substeps = max(1, round(control_period / physics_dt))
+        substeps = physics_steps_per_period(control_period, physics_dt)
         hover = get_airframe(airframe).hover_rotor_speed
         self.batch = Stepping(
             physics,
@@ -86,9 +86,6 @@ class VehicleGroup:
             substeps,
             MotorEpisodes(physics, substeps, hover, episodes),
         )
-        self.physics, self.sensors, self.rotor_cmd = physics, sensors, self.batch.rotor_cmd
-        self.episodes = self.batch.episodes
-        self.substeps, self.control_period = substeps, self.batch.control_period
         # One estimator for all: it runs (as one batch) once a vehicle's EKF2_EN is 1.
         self.estimator = Estimator(sensors, gear, get_airframe(airframe).gravity)
         self.vehicles = [
@@ -108,6 +105,32 @@ class VehicleGroup:
 
     def __len__(self) -> int:
         return len(self.vehicles)
+
+    # The batch's, under the names the simulator uses.
+    @property
+    def physics(self) -> Fleet:
+        return self.batch.physics
+
+    @property
+    def sensors(self) -> SensorSuite:
+        return self.batch.sensors
+
+    @property
+    def rotor_cmd(self) -> np.ndarray:
+        """(N, 4) rad/s; row i is vehicle i's motor command."""
+        return self.batch.rotor_cmd
+
+    @property
+    def episodes(self) -> MotorEpisodes:
+        return self.batch.episodes
+
+    @property
+    def substeps(self) -> int:
+        return self.batch.substeps
+
+    @property
+    def control_period(self) -> float:
+        return self.batch.control_period
 
     def step(self) -> None:
         """One physics step of every vehicle; the controllers whose turn it is run first

@@ -23,6 +23,11 @@ from quadsitl.vehicle.episodes import MotorEpisodes
 from quadsitl.vehicle.view import VehicleView
 
 
+def physics_steps_per_period(control_period: float, physics_dt: float) -> int:
+    """Physics steps per control period (at least one)."""
+    return max(1, round(control_period / physics_dt))
+
+
 class Stepped(VehicleView, Protocol):
     """A vehicle as its batch steps it."""
 

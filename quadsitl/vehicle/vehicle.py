@@ -40,7 +40,7 @@ from quadsitl.vehicle.motor_faults import MotorFaults
 from quadsitl.vehicle.navigator import Activity, Sticks
 from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
 from quadsitl.vehicle.results import ACCEPTED, Result, Severity, denied
-from quadsitl.vehicle.stepping import Stepping
+from quadsitl.vehicle.stepping import Stepping, physics_steps_per_period
 
 MOTOR_TIMEOUT = 0.5  # s (simulated) without motor commands: the onboard controller resumes
 STICK_TIMEOUT = 0.5  # s (simulated) without MANUAL_CONTROL: sticks centred (COM_RC_LOSS_T)
@@ -95,7 +95,7 @@ class Vehicle:
             AIRFRAME_NAMES.index(get_airframe(airframe).name)
         )
         self.airframe = get_airframe(airframe)
-        self.substeps = max(1, round(control_period / physics_dt))
+        self.substeps = physics_steps_per_period(control_period, physics_dt)
         self.batch, self.row = batch or self._batch_of_one(physics_dt), row
         self.fleet: Fleet | FleetSlot = (
             self.batch.physics if batch is None else FleetSlot(batch.physics, row)

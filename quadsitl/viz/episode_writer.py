@@ -354,7 +354,7 @@ class EpisodeWriter:
                 pipe.write(_HEADER.pack(len(header)) + header)
                 if rows is not None:
                     pipe.write(_PAYLOAD.pack(rows.nbytes))
-                    pipe.write(memoryview(rows).cast("B"))
+                    pipe.write(rows.data.cast("B"))
                 pipe.flush()
                 if kind == "close":
                     pipe.close()
