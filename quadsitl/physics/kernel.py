@@ -24,7 +24,12 @@ import numpy as np
 
 from quadsitl.physics import layout as L
 from quadsitl.physics import wind_kernel
-from quadsitl.physics.kernel_dynamics import SUMS_ROWS, derivative, ground_contact
+from quadsitl.physics.kernel_dynamics import (
+    SUMS_ROWS,
+    derivative,
+    ground_contact,
+    rotor_factors,
+)
 
 BLOCK = 32  # vehicles per vectorised block (measured best of 16..256)
 # FMA contraction and reciprocal division only: no fast-math NaN/inf assumptions, so
@@ -74,8 +79,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
     w_params = scratch_size
     w_state = w_params + L.N_WIND_PARAMS * B
     w_scratch = w_state + L.N_WIND_STATE * B
-    w_air = w_scratch + wind_kernel.N_SCRATCH * B
-    world_size = w_air + wind_kernel.AIR_ROWS * B
+    world_size = w_scratch + wind_kernel.N_SCRATCH * B
 
     def advance(
         state,
@@ -113,7 +117,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
         cmd = scratch[7 * z + L.N_PARAMS * B : 7 * z + (L.N_PARAMS + L.N_ROTORS) * B]
         sums = scratch[7 * z + (L.N_PARAMS + L.N_ROTORS) * B : scratch_size]
         wp, ws = scratch[w_params:w_state], scratch[w_state:w_scratch]
-        wscratch, air = scratch[w_scratch:w_air], scratch[w_air:world_size]
+        wscratch = scratch[w_scratch:world_size]
         rng = np.empty(B, np.uint64)
         sixth = dt / 6.0
         for first in range(0, state.shape[0], B):
@@ -153,14 +157,15 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
                         for k in range(size):
                             prev[k * B + j] = s[k * B + j]
                 if weather:
-                    wind_kernel.advance_block(s, p, wp, ws, rng, wscratch, air, B, B, dt)
-                derivative(s, p, cmd, k1, m, sums, air, B, WIND)
+                    wind_kernel.advance_block(s, p, wp, ws, rng, wscratch, sums, B, B, dt)
+                rotor_factors(s, p, sums, m, B)
+                derivative(s, p, cmd, k1, m, sums, B, WIND)
                 _axpy(tmp, s, 0.5 * dt, k1, m, B)
-                derivative(tmp, p, cmd, k2, m, sums, air, B, WIND)
+                derivative(tmp, p, cmd, k2, m, sums, B, WIND)
                 _axpy(tmp, s, 0.5 * dt, k2, m, B)
-                derivative(tmp, p, cmd, k3, m, sums, air, B, WIND)
+                derivative(tmp, p, cmd, k3, m, sums, B, WIND)
                 _axpy(tmp, s, dt, k3, m, B)
-                derivative(tmp, p, cmd, k4, m, sums, air, B, WIND)
+                derivative(tmp, p, cmd, k4, m, sums, B, WIND)
                 for k in range(size):
                     for j in range(m):
                         i = k * B + j
@@ -174,8 +179,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
                     omega_max = p[L.P_OMEGA_MAX * B + j]
                     for k in range(L.I_ROTOR0, size):
                         s[k * B + j] = min(max(s[k * B + j], 0.0), omega_max)
-                for j in range(m):
-                    ground_contact(prev, s, p, j, contact, touchdown_speed, first + j, B)
+                ground_contact(prev, s, p, contact, touchdown_speed, first, m, B)
             for j in range(m):
                 for k in range(size):
                     state[first + j, k] = s[k * B + j]
@@ -232,13 +236,13 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
                     if contact[first + j] == L.CRASHED:
                         for k in range(size):
                             prev[k * B + j] = s[k * B + j]
-                derivative(s, p, cmd, k1, m, sums, sums, B, False)
+                derivative(s, p, cmd, k1, m, sums, B, False)
                 _axpy(tmp, s, 0.5 * dt, k1, m, B)
-                derivative(tmp, p, cmd, k2, m, sums, sums, B, False)
+                derivative(tmp, p, cmd, k2, m, sums, B, False)
                 _axpy(tmp, s, 0.5 * dt, k2, m, B)
-                derivative(tmp, p, cmd, k3, m, sums, sums, B, False)
+                derivative(tmp, p, cmd, k3, m, sums, B, False)
                 _axpy(tmp, s, dt, k3, m, B)
-                derivative(tmp, p, cmd, k4, m, sums, sums, B, False)
+                derivative(tmp, p, cmd, k4, m, sums, B, False)
                 for k in range(size):
                     for j in range(m):
                         i = k * B + j
@@ -252,8 +256,7 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
                     omega_max = p[L.P_OMEGA_MAX * B + j]
                     for k in range(L.I_ROTOR0, size):
                         s[k * B + j] = min(max(s[k * B + j], 0.0), omega_max)
-                for j in range(m):
-                    ground_contact(prev, s, p, j, contact, touchdown_speed, first + j, B)
+                ground_contact(prev, s, p, contact, touchdown_speed, first, m, B)
             for j in range(m):
                 for k in range(size):
                     state[first + j, k] = s[k * B + j]

@@ -18,9 +18,14 @@ import numba
 from quadsitl.physics import ground_effect as GE
 from quadsitl.physics import layout as L
 
-THRUST, ROLL_MOMENT, PITCH_MOMENT, YAW_SUM = 0, 1, 2, 3  # rows of the rotor sums
-GAIN0 = 4  # rows 4..7 of the same scratch: the rotors' ground-effect gains (world build)
-SUMS_ROWS = GAIN0 + L.N_ROTORS
+# Rows of the block's ``sums`` scratch (each B values). The world build keeps there too
+# what it holds over a physics step: the air (written by the weather's step) and each
+# rotor's thrust and yaw factors (rotor_factors, once per step rather than per stage).
+THRUST, ROLL_MOMENT, PITCH_MOMENT, YAW_SUM = 0, 1, 2, 3  # the rotor sums
+AIR0 = 4  # 6 rows: the air's velocity (world ENU), then its angular velocity (body FLU)
+THRUST_FACTOR0 = AIR0 + 6  # 4 rows: k_T η_i G_i, rotor i's thrust per Ω² (N s²)
+YAW_FACTOR0 = THRUST_FACTOR0 + L.N_ROTORS  # 4 rows: ±η_i, rotor i's reaction-torque sign
+SUMS_ROWS = YAW_FACTOR0 + L.N_ROTORS
 # FMA contraction and reciprocal division only: no fast-math NaN/inf assumptions, so
 # the finiteness check stays exact.
 _OPTIONS: dict[str, Any] = dict(
@@ -31,45 +36,30 @@ _inline = numba.njit(inline="always", **_OPTIONS)
 
 
 @_inline
-def derivative(s, p, cmd, out, m, sums, air, B, WIND):  # pragma: no cover - compiled
+def derivative(s, p, cmd, out, m, sums, B, WIND):  # pragma: no cover - compiled
     """ṡ of the first m vehicles of a block: s, p and cmd hold rows of B values; ``sums``
-    (SUMS_ROWS rows) is scratch for the rotor sums and gains; ``air`` (6 rows) the air's
-    velocity (world) and angular velocity (body). The compile-time flag WIND builds the
-    world: the air, and each rotor's efficiency and ground effect (without it, the
-    still-air arithmetic of the paper, unchanged). Each loop runs over vehicles,
+    (SUMS_ROWS rows) is scratch for the rotor sums. The compile-time flag WIND builds the
+    world from what ``sums`` holds over the step: the air (rows AIR0..) and each rotor's
+    efficiency and ground effect (the factors of :func:`rotor_factors`); without it, the
+    still-air arithmetic of the paper, unchanged. Each loop runs over vehicles,
     innermost, so that it is vectorised."""
     for j in range(m):
         for k in range(4):
             sums[k * B + j] = 0.0
-    if WIND:  # the world: each rotor's ground-effect gain G_i, into sums rows 4..7
-        for i in range(L.N_ROTORS):
-            for j in range(m):
-                qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
-                qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
-                hub_z = (
-                    s[L.I_PZ * B + j]
-                    + 2 * (qx * qz - qw * qy) * p[(L.P_ROTOR_X0 + i) * B + j]
-                    + 2 * (qy * qz + qw * qx) * p[(L.P_ROTOR_Y0 + i) * B + j]
-                )
-                radius = p[L.P_ROTOR_RADIUS * B + j]
-                height = max(hub_z - p[L.P_GROUND_Z * B + j], GE.MIN_HEIGHT_RADII * radius)
-                k = radius / (4.0 * height)
-                ratio = 1.0 / (1.0 - k * k)  # Cheeseman–Bennett (+inf height: 1)
-                on = p[L.P_GROUND_EFFECT * B + j] > 0.0
-                sums[(GAIN0 + i) * B + j] = ratio if on else 1.0
     for i in range(L.N_ROTORS):  # rotor i: thrust, its moments, and its motor lag
         for j in range(m):
             rotor = s[(L.I_ROTOR0 + i) * B + j]
             rotor_sq = rotor * rotor
-            if WIND:  # the world: the rotor's efficiency η_i and ground-effect gain G_i
-                rotor_sq = rotor_sq * p[(L.P_ROTOR_EFFICIENCY0 + i) * B + j]
-                thrust = p[L.P_KT * B + j] * rotor_sq * sums[(GAIN0 + i) * B + j]
+            if WIND:  # the world: k_T η_i G_i and ±η_i of the step (rotor_factors)
+                thrust = sums[(THRUST_FACTOR0 + i) * B + j] * rotor_sq
+                yaw = sums[(YAW_FACTOR0 + i) * B + j] * rotor_sq
             else:
                 thrust = p[L.P_KT * B + j] * rotor_sq
+                yaw = p[(L.P_ROTOR_YAW_SIGN0 + i) * B + j] * rotor_sq
             sums[THRUST * B + j] += thrust
             sums[ROLL_MOMENT * B + j] += p[(L.P_ROTOR_Y0 + i) * B + j] * thrust
             sums[PITCH_MOMENT * B + j] += p[(L.P_ROTOR_X0 + i) * B + j] * thrust
-            sums[YAW_SUM * B + j] += p[(L.P_ROTOR_YAW_SIGN0 + i) * B + j] * rotor_sq
+            sums[YAW_SUM * B + j] += yaw
             c = min(max(cmd[i * B + j], 0.0), p[L.P_OMEGA_MAX * B + j])
             out[(L.I_ROTOR0 + i) * B + j] = p[L.P_MOTOR_RATE * B + j] * (c - rotor)
     for j in range(m):
@@ -87,8 +77,12 @@ def derivative(s, p, cmd, out, m, sums, air, B, WIND):  # pragma: no cover - com
         out[L.I_PY * B + j] = vy
         out[L.I_PZ * B + j] = vz
         if WIND:  # velocity and rates through the air
-            ax, ay, az = vx - air[0 * B + j], vy - air[1 * B + j], vz - air[2 * B + j]
-            ox, oy, oz = wx - air[3 * B + j], wy - air[4 * B + j], wz - air[5 * B + j]
+            ax = vx - sums[AIR0 * B + j]
+            ay = vy - sums[(AIR0 + 1) * B + j]
+            az = vz - sums[(AIR0 + 2) * B + j]
+            ox = wx - sums[(AIR0 + 3) * B + j]
+            oy = wy - sums[(AIR0 + 4) * B + j]
+            oz = wz - sums[(AIR0 + 5) * B + j]
         else:
             ax, ay, az = vx, vy, vz
             ox, oy, oz = wx, wy, wz
@@ -116,50 +110,82 @@ def derivative(s, p, cmd, out, m, sums, air, B, WIND):  # pragma: no cover - com
 
 
 @_inline
-def ground_contact(prev, s, p, j, contact, touchdown_speed, n, B):  # pragma: no cover - compiled
-    """Contact resolution of block column j (vehicle n), as reference.ground_contact."""
-    if contact[n] == L.CRASHED:
-        for k in range(L.I_ROTOR0):
-            s[k * B + j] = prev[k * B + j]
-        return
-    ground_z = p[L.P_GROUND_Z * B + j]
-    if ground_z == -math.inf:  # no ground: nothing to touch
-        contact[n] = L.AIRBORNE
-        return
-    qw, qx, qy, qz = s[L.I_QW * B + j], s[L.I_QX * B + j], s[L.I_QY * B + j], s[L.I_QZ * B + j]
-    pz = s[L.I_PZ * B + j]
-    cos_tilt = 1 - 2 * (qx * qx + qy * qy)
-    sin_tilt = math.sqrt(max(0.0, 1.0 - cos_tilt * cos_tilt))
-    r_zx = 2 * (qx * qz - qw * qy)
-    r_zy = 2 * (qy * qz + qw * qx)
-    strike = False
+def rotor_factors(s, p, sums, m, B):  # pragma: no cover - compiled
+    """Each rotor's thrust factor k_T η_i G_i and yaw factor ±η_i into ``sums`` rows
+    THRUST_FACTOR0.. and YAW_FACTOR0..: its efficiency η_i and its ground-effect gain
+    G_i (1 where ground effect is off) at the state s, the step's start (held over the
+    step, as the air is)."""
     for i in range(L.N_ROTORS):
-        hub_z = pz + r_zx * p[(L.P_ROTOR_X0 + i) * B + j] + r_zy * p[(L.P_ROTOR_Y0 + i) * B + j]
-        if hub_z - p[L.P_ROTOR_RADIUS * B + j] * sin_tilt < ground_z:
-            strike = True
-    rest_z = ground_z + p[L.P_GEAR_HEIGHT * B + j]
-    below = pz < rest_z and not strike
-    if not (strike or below):
-        contact[n] = L.AIRBORNE
-        return
-    touching = below and contact[n] != L.ON_GROUND
-    speed = -s[L.I_VZ * B + j]
-    too_hard = touching and (
-        speed > p[L.P_MAX_TOUCHDOWN_SPEED * B + j] or cos_tilt < p[L.P_COS_MAX_TILT * B + j]
-    )
-    if touching:
-        touchdown_speed[n] = max(speed, 0.0)
-    resting = below and not too_hard
-    s[L.I_PZ * B + j] = max(pz, rest_z)
-    for k in range(3):
-        s[(L.I_VX + k) * B + j] = 0.0
-        s[(L.I_WX + k) * B + j] = 0.0
-    if resting:
-        yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
-        s[L.I_QW * B + j] = math.cos(0.5 * yaw)
-        s[L.I_QX * B + j] = 0.0
-        s[L.I_QY * B + j] = 0.0
-        s[L.I_QZ * B + j] = math.sin(0.5 * yaw)
-        contact[n] = L.ON_GROUND
-    else:
-        contact[n] = L.CRASHED
+        for j in range(m):
+            qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
+            qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
+            hub_z = (
+                s[L.I_PZ * B + j]
+                + 2 * (qx * qz - qw * qy) * p[(L.P_ROTOR_X0 + i) * B + j]
+                + 2 * (qy * qz + qw * qx) * p[(L.P_ROTOR_Y0 + i) * B + j]
+            )
+            radius = p[L.P_ROTOR_RADIUS * B + j]
+            height = max(hub_z - p[L.P_GROUND_Z * B + j], GE.MIN_HEIGHT_RADII * radius)
+            k = radius / (4.0 * height)
+            ratio = 1.0 / (1.0 - k * k)  # Cheeseman–Bennett (+inf height: 1)
+            gain = 1.0 + (ratio - 1.0) * p[L.P_GROUND_EFFECT * B + j]  # switch: 1 or 0
+            efficiency = p[(L.P_ROTOR_EFFICIENCY0 + i) * B + j]
+            sums[(THRUST_FACTOR0 + i) * B + j] = p[L.P_KT * B + j] * (efficiency * gain)
+            sums[(YAW_FACTOR0 + i) * B + j] = p[(L.P_ROTOR_YAW_SIGN0 + i) * B + j] * efficiency
+
+
+@_inline
+def ground_contact(prev, s, p, contact, touchdown_speed, first, m, B):  # pragma: no cover
+    """Contact resolution of the block's first m columns (vehicles first..first+m−1), as
+    reference.ground_contact. The loop over the block is here, not at the call: numba
+    could not prune the reference counts of an inlined call per vehicle, and their
+    atomic updates (four pairs per vehicle and step) took 20-40 % of a step (measured
+    with perf: still air 51 -> 32 ns per vehicle step)."""
+    for j in range(m):
+        n = first + j
+        if contact[n] == L.CRASHED:
+            for k in range(L.I_ROTOR0):
+                s[k * B + j] = prev[k * B + j]
+            continue
+        ground_z = p[L.P_GROUND_Z * B + j]
+        if ground_z == -math.inf:  # no ground: nothing to touch
+            contact[n] = L.AIRBORNE
+            continue
+        qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
+        qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
+        pz = s[L.I_PZ * B + j]
+        cos_tilt = 1 - 2 * (qx * qx + qy * qy)
+        sin_tilt = math.sqrt(max(0.0, 1.0 - cos_tilt * cos_tilt))
+        r_zx = 2 * (qx * qz - qw * qy)
+        r_zy = 2 * (qy * qz + qw * qx)
+        strike = False
+        for i in range(L.N_ROTORS):
+            hub_z = pz + r_zx * p[(L.P_ROTOR_X0 + i) * B + j] + r_zy * p[(L.P_ROTOR_Y0 + i) * B + j]
+            if hub_z - p[L.P_ROTOR_RADIUS * B + j] * sin_tilt < ground_z:
+                strike = True
+        rest_z = ground_z + p[L.P_GEAR_HEIGHT * B + j]
+        below = pz < rest_z and not strike
+        if not (strike or below):
+            contact[n] = L.AIRBORNE
+            continue
+        touching = below and contact[n] != L.ON_GROUND
+        speed = -s[L.I_VZ * B + j]
+        too_hard = touching and (
+            speed > p[L.P_MAX_TOUCHDOWN_SPEED * B + j] or cos_tilt < p[L.P_COS_MAX_TILT * B + j]
+        )
+        if touching:
+            touchdown_speed[n] = max(speed, 0.0)
+        resting = below and not too_hard
+        s[L.I_PZ * B + j] = max(pz, rest_z)
+        for k in range(3):
+            s[(L.I_VX + k) * B + j] = 0.0
+            s[(L.I_WX + k) * B + j] = 0.0
+        if resting:
+            yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+            s[L.I_QW * B + j] = math.cos(0.5 * yaw)
+            s[L.I_QX * B + j] = 0.0
+            s[L.I_QY * B + j] = 0.0
+            s[L.I_QZ * B + j] = math.sin(0.5 * yaw)
+            contact[n] = L.ON_GROUND
+        else:
+            contact[n] = L.CRASHED

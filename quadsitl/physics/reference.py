@@ -18,7 +18,8 @@ gain (:mod:`quadsitl.physics.ground_effect`; 1 where it is off); both 1 by defau
 
 v_a = v − w and ω_a = ω − ω_w are the velocity and rates relative to the air (w, ω_w:
 the air's velocity and angular velocity, :mod:`quadsitl.physics.wind`); in still air
-they are v and ω.
+they are v and ω. The world around a vehicle (the air, and G_i at its hub heights) is
+evaluated at the start of each physics step and held over the step's RK4 stages.
 * Ω̇ = k_Ω (Ω_c − Ω), Ω_c clipped to [0, Ω_max]; the rotor speeds are integrated
   inside RK4 together with the rigid body.
 """
@@ -38,11 +39,19 @@ from quadsitl.physics.ground_effect import thrust_ratio
 Array = NDArray[np.float64]
 
 
-def derivative(state: Array, params: Array, rotor_cmd: Array, air: Array | None = None) -> Array:
+def derivative(
+    state: Array,
+    params: Array,
+    rotor_cmd: Array,
+    air: Array | None = None,
+    gain: Array | None = None,
+) -> Array:
     """Time derivative of the (N, 17) state under commanded rotor speeds (N, 4) rad/s.
 
     ``air``: None (still air) or (N, 6): the air's velocity (m/s, world ENU) and angular
-    velocity (rad/s, body FLU), held over the step.
+    velocity (rad/s, body FLU), held over the step. ``gain``: (N, 4) the rotors'
+    ground-effect gains G_i held over the step (:func:`ground_effect_gains`), or None:
+    those of ``state``.
     """
     vel = state[:, L.VEL]  # (N, 3) m/s, world
     qw, qx, qy, qz = state[:, L.QUAT].T  # body -> world
@@ -52,9 +61,8 @@ def derivative(state: Array, params: Array, rotor_cmd: Array, air: Array | None 
     inertia = params[:, L.P_INERTIA]  # (N, 3)
 
     rotor_sq = rotors * rotors * params[:, L.P_ROTOR_EFFICIENCY]  # (N, 4) η_i Ω_i², (rad/s)²
-    height = hub_heights(state, params) - params[:, [L.P_GROUND_Z]]  # (N, 4) m, +inf: no ground
-    ratio = thrust_ratio(height, params[:, [L.P_ROTOR_RADIUS]])
-    gain = np.where(params[:, [L.P_GROUND_EFFECT]] > 0, ratio, 1.0)  # (N, 4) G_i
+    if gain is None:
+        gain = ground_effect_gains(state, params)
     thrust = params[:, [L.P_KT]] * rotor_sq * gain  # (N, 4) N per rotor
     total_thrust = thrust.sum(axis=1)
     body_z_in_world = np.stack(
@@ -96,6 +104,13 @@ def derivative(state: Array, params: Array, rotor_cmd: Array, air: Array | None 
     rotors_dot = params[:, [L.P_MOTOR_RATE]] * (cmd - rotors)
 
     return np.concatenate([vel, accel, quat_dot, rates_dot, rotors_dot], axis=1)
+
+
+def ground_effect_gains(state: Array, params: Array) -> Array:
+    """(N, 4) G_i: each rotor's ground-effect gain at its hub height (1 where it is off)."""
+    height = hub_heights(state, params) - params[:, [L.P_GROUND_Z]]  # (N, 4) m, +inf: no ground
+    ratio = thrust_ratio(height, params[:, [L.P_ROTOR_RADIUS]])
+    return np.where(params[:, [L.P_GROUND_EFFECT]] > 0, ratio, 1.0)
 
 
 def hub_heights(state: Array, params: Array) -> Array:
@@ -187,8 +202,10 @@ def step(
 ) -> tuple[Array, NDArray[np.int8], Array]:
     """One physics step of length ``dt`` (s): RK4, renormalised attitude, ground contact.
 
-    ``air``: as in :func:`derivative`, held over the step."""
-    new = rk4(lambda y: derivative(y, params, rotor_cmd, air), state, dt)
+    ``air``: as in :func:`derivative`. The air and the ground-effect gains of the
+    step's start are held over its stages."""
+    gain = ground_effect_gains(state, params)
+    new = rk4(lambda y: derivative(y, params, rotor_cmd, air, gain), state, dt)
     new[:, L.QUAT] /= np.linalg.norm(new[:, L.QUAT], axis=1, keepdims=True)
     new[:, L.ROTORS] = np.clip(new[:, L.ROTORS], 0.0, params[:, [L.P_OMEGA_MAX]])
     return ground_contact(state, new, params, contact, touchdown_speed)

@@ -19,6 +19,7 @@ import numpy as np
 
 from quadsitl.physics import dryden as D
 from quadsitl.physics import layout as L
+from quadsitl.physics.kernel_dynamics import AIR0
 from quadsitl.physics.wind import N_NORMALS, Z0_FT
 
 _OPTIONS: dict = dict(cache=True, error_model="numpy", fastmath={"contract", "arcp", "nsz"})
@@ -170,7 +171,6 @@ def fill_normals(rng, out, m, B):  # pragma: no cover - compiled
 (_STEP, _LW, _LU, _LN_PROFILE, _LN_D, _LN_LW, _E_U, _E_W, _E_P, _E_R,
  _U, _V, _W, _P, _Q, _R, _MEAN_E, _MEAN_N) = range(N_NORMALS, N_NORMALS + 18)  # fmt: skip
 N_SCRATCH = N_NORMALS + 18
-AIR_ROWS = 6  # what the derivative reads: air velocity (world ENU), air rates (body FLU)
 
 
 @_inline
@@ -234,10 +234,11 @@ def _map_exp_neg(x, first, rows, B):  # pragma: no cover - compiled
 
 
 @_inline
-def advance_block(s, p, wp, ws, rng, scratch, air, m, B, dt):  # pragma: no cover - compiled
+def advance_block(s, p, wp, ws, rng, scratch, sums, m, B, dt):  # pragma: no cover - compiled
     """One physics step of the first m vehicles' weather (wind.advance), then the air
-    the derivative holds over the step: ``air`` rows 0-2 the air velocity, world ENU,
-    rows 3-5 the air's angular velocity in body axes at the step's start attitude.
+    the derivative holds over the step, into the kernel's ``sums`` rows AIR0..AIR0+5:
+    the air velocity, world ENU, then the air's angular velocity in body axes at the
+    step's start attitude.
     Many short loops: each is simple enough for the compiler to vectorise."""
     x = scratch
     x[_LN_PROFILE * B : (_E_R + 1) * B] = 1.0  # columns past m: finite for ln and exp
@@ -328,19 +329,19 @@ def advance_block(s, p, wp, ws, rng, scratch, air, m, B, dt):  # pragma: no cove
         ws[(L.WS_AIR_PE + 1) * B + j], ws[(L.WS_AIR_PE + 2) * B + j] = rn, ru
         qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
         qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
-        air[0 * B + j], air[1 * B + j], air[2 * B + j] = ve, vn, vu
+        sums[AIR0 * B + j], sums[(AIR0 + 1) * B + j], sums[(AIR0 + 2) * B + j] = ve, vn, vu
         # ω_body = Rᵀ ω_world, R the body -> world rotation of the quaternion
-        air[3 * B + j] = (
+        sums[(AIR0 + 3) * B + j] = (
             (1 - 2 * (qy * qy + qz * qz)) * re
             + 2 * (qx * qy + qw * qz) * rn
             + 2 * (qx * qz - qw * qy) * ru
         )
-        air[4 * B + j] = (
+        sums[(AIR0 + 4) * B + j] = (
             2 * (qx * qy - qw * qz) * re
             + (1 - 2 * (qx * qx + qz * qz)) * rn
             + 2 * (qy * qz + qw * qx) * ru
         )
-        air[5 * B + j] = (
+        sums[(AIR0 + 5) * B + j] = (
             2 * (qx * qz + qw * qy) * re
             + 2 * (qy * qz - qw * qx) * rn
             + (1 - 2 * (qx * qx + qy * qy)) * ru
