@@ -1,5 +1,6 @@
-"""The engine's StepBatch holds the engine's own arrays: compiled ``evaluate`` writes
-where the engine and the envs read, through resets, randomised airframes and steps."""
+"""The engine's StepBatch and StepEnd hold the engine's own arrays: compiled ``evaluate``
+and ``close_step`` write where the engine and the envs read, through resets, randomised
+airframes and steps (and a recorder's buffer, once it has set one)."""
 
 from __future__ import annotations
 
@@ -53,4 +54,44 @@ def test_the_batch_holds_the_arrays_the_engine_reads_after_resets_and_steps():
         assert np.shares_memory(fields[name], array), name
     # what evaluate wrote is what the env returned
     assert np.array_equal(engine.obs[0], obs) and engine.reward[0] == reward
+    env.close()
+
+
+@numba.njit
+def ended(e):
+    """The StepEnd's array fields, read as compiled code reads them."""
+    return (
+        e.dist,
+        e.prev_dist,
+        e.reward,
+        e.outcome,
+        e.steps,
+        e.time_within,
+        e.reach_time,
+        e.episode_return,
+        e.terminated,
+        e.truncated,
+        e.state,
+        e.goal,
+        e.wind_state,
+        e.recording,
+    )
+
+
+def test_the_step_end_holds_the_arrays_the_engine_reads_and_the_recorders_buffer(tmp_path):
+    save = str(tmp_path / "land.rrd")
+    env = gym.make("QuadSITL/Land-v0", randomize=True, render_mode="rerun", rerun_save=save)
+    engine = env.unwrapped.engine
+    for seed in (0, 1):
+        env.reset(seed=seed)
+        for _ in range(5):
+            _, reward, *_ = env.step(env.action_space.sample())
+    fleet = engine.fleet
+    own = {"state": fleet.state, "wind_state": fleet.wind_state, "recording": engine.recording}
+    names = ("dist", "prev_dist", "reward", "outcome", "steps", "time_within", "reach_time")
+    names += ("episode_return", "terminated", "truncated", "state", "goal", "wind_state")
+    for name, array in zip((*names, "recording"), ended(engine._end), strict=True):
+        expected = own.get(name, getattr(engine, name, None))
+        assert np.shares_memory(array, expected), name
+    assert engine.episode_return[0] != 0.0 and engine.reward[0] == reward
     env.close()

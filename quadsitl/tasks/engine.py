@@ -31,7 +31,8 @@ from quadsitl.tasks.fleet_like import FleetLike
 from quadsitl.tasks.options import TaskOptions
 from quadsitl.tasks.randomization import Randomization, airframe_scale_row
 from quadsitl.tasks.sensor_faults import SensorFaults
-from quadsitl.tasks.step_kernels import close_step, close_step_recording, take_action
+from quadsitl.tasks.step_end import StepEnd, not_recording, set_recording
+from quadsitl.tasks.step_kernels import close_step, take_action
 
 OUTCOME_NAME_ARRAY = np.array([S.OUTCOME_NAMES[code] for code in range(len(S.OUTCOME_NAMES))])
 
@@ -120,6 +121,25 @@ class TaskEngine:
             self.tilt,
             self.reward,
             self.outcome,
+        )
+        self._end = StepEnd(  # the arrays close_step() reads and writes, held once
+            dist=self.dist,
+            prev_dist=self.prev_dist,
+            reward=self.reward,
+            outcome=self.outcome,
+            steps=self.steps,
+            max_steps=self.max_steps,
+            goal_radius=task.goal_radius,
+            control_period=self.control_period,
+            time_within=self.time_within,
+            reach_time=self.reach_time,
+            episode_return=self.episode_return,
+            terminated=self.terminated,
+            truncated=self.truncated,
+            state=fleet.state,
+            goal=self.goal,
+            wind_state=fleet.wind_state,
+            recording=not_recording(),
         )
         self._action_shape = (num_envs, L.N_ROTORS)
         # Whatever state the task keeps per env beyond the goal (its own typed object).
@@ -309,37 +329,18 @@ class TaskEngine:
             self._observe_noisy(np.arange(self.n), self.control_period)
         if self.delay is not None:
             self.delay.delay_observations(self.obs, self.steps)
-        closing = (
-            self.dist,
-            self.prev_dist,
-            self.reward,
-            self.outcome,
-            self.steps,
-            self.max_steps,
-            self.task.goal_radius,
-            self.control_period,
-            self.time_within,
-            self.reach_time,
-            self.episode_return,
-            self.terminated,
-            self.truncated,
-        )
-        if self.recording is None:
-            close_step(*closing)
-        else:
-            self.recorded = close_step_recording(
-                *closing, fleet.state, self.goal, fleet.wind_state, self.recording
-            )
+        self.recorded = close_step(self._end)
         return self.reward, self.terminated, self.truncated
 
     def record(self, buffer: NDArray[np.float64]) -> None:
         """From the next step on, each step writes the recorded env's row into ``buffer``
         (:func:`recording.new_buffer`) in its compiled end; ``step`` then
         leaves the rows written in ``recorded`` (negated once that episode ended) when the
-        recorder has something to do, else 0 (:func:`~.step_kernels.close_step_recording`).
+        recorder has something to do, else 0 (:func:`~.step_kernels.close_step`).
         The recorder empties the buffer (its counter ``recording.COUNT`` to 0) before it
-        fills."""
+        fills, or gives a new one."""
         self.recording = buffer
+        set_recording(self._end, buffer)
 
     def record_now(self, reward: float = math.nan) -> None:
         """The recorded env's row as it is now (a reset's: reward NaN)."""

@@ -1,9 +1,10 @@
 """The engine's compiled step ends, around the task's ``evaluate``: ``take_action``
 turns the actions into rotor commands (Eq. 19) before the physics steps, and
 ``close_step`` keeps the episode counters (time within the goal radius, reach time,
-return, truncation at the time limit) after it, recording a row when asked
-(``close_step_recording``). :class:`quadsitl.tasks.engine.TaskEngine` calls them with
-its arrays; the policy autopilot shares Eq. 19 (``commanded_rotor_speed``).
+return, truncation at the time limit) after it, recording a row when asked.
+:class:`quadsitl.tasks.engine.TaskEngine` calls them with its arrays (``close_step``
+with its :class:`~quadsitl.tasks.step_end.StepEnd`); the policy autopilot shares Eq. 19
+(``commanded_rotor_speed``).
 """
 
 from __future__ import annotations
@@ -44,80 +45,34 @@ def take_action(raw, active, hover, beta, low, high, action, rotor_cmd, steps): 
 
 
 @jit
-def close_step(
-    dist,
-    prev_dist,
-    reward,
-    outcome,
-    steps,
-    max_steps,
-    goal_radius,
-    control_period,
-    time_within,
-    reach_time,
-    episode_return,
-    terminated,
-    truncated,
-):  # pragma: no cover - compiled
-    """End a step: the episode counters, and truncation at the time limit. (Arrays, not
-    the StepBatch: numba's call takes arrays' types in C, a struct's in Python, which
-    costs more than the seven arrays it would save.)"""
-    for n in range(dist.shape[0]):
-        if dist[n, F.D_POS] < goal_radius:
-            time_within[n] += control_period
-            if math.isnan(reach_time[n]):
-                reach_time[n] = steps[n] * control_period
-        terminated[n] = outcome[n] != S.RUNNING
-        truncated[n] = steps[n] >= max_steps and not terminated[n]
-        if truncated[n]:
-            outcome[n] = S.TIMED_OUT
-        for c in range(F.N_DIST):
-            prev_dist[n, c] = dist[n, c]
-        episode_return[n] += reward[n]
-
-
-@jit
-def close_step_recording(
-    dist,
-    prev_dist,
-    reward,
-    outcome,
-    steps,
-    max_steps,
-    goal_radius,
-    control_period,
-    time_within,
-    reach_time,
-    episode_return,
-    terminated,
-    truncated,
-    state,
-    goal,
-    wind_state,
-    buffer,
-):  # pragma: no cover - compiled
-    """:func:`close_step`, then the recorded env's row (:mod:`.recording`). Returns the
-    rows recorded, negated once that env's episode has ended, when the recorder has
+def close_step(e):  # pragma: no cover - compiled
+    """End a step (``e``: the engine's :class:`~quadsitl.tasks.step_end.StepEnd`): the
+    episode counters, truncation at the time limit, and the recorded env's row when a
+    recorder set its buffer (:mod:`.recording`). Returns, when recording, the rows
+    recorded, negated once that env's episode has ended, when the recorder has
     something to do (that, or a look at its buffer is due: every CHECK_EVERY rows, or
     near full); else 0."""
-    close_step(
-        dist,
-        prev_dist,
-        reward,
-        outcome,
-        steps,
-        max_steps,
-        goal_radius,
-        control_period,
-        time_within,
-        reach_time,
-        episode_return,
-        terminated,
-        truncated,
-    )
+    dist, outcome, steps = e.dist, e.outcome, e.steps
+    for n in range(dist.shape[0]):
+        if dist[n, F.D_POS] < e.goal_radius:
+            e.time_within[n] += e.control_period
+            if math.isnan(e.reach_time[n]):
+                e.reach_time[n] = steps[n] * e.control_period
+        e.terminated[n] = outcome[n] != S.RUNNING
+        e.truncated[n] = steps[n] >= e.max_steps and not e.terminated[n]
+        if e.truncated[n]:
+            outcome[n] = S.TIMED_OUT
+        for c in range(F.N_DIST):
+            e.prev_dist[n, c] = dist[n, c]
+        e.episode_return[n] += e.reward[n]
+    buffer = e.recording
     capacity = buffer.shape[0] - 1  # the last row holds the counters
+    if capacity == 0:
+        return 0
     i = int(buffer[capacity, R.ENV])
-    R.record_row(buffer, state, goal, dist, wind_state, reward[i], steps[i], episode_return[i])
+    R.record_row(
+        buffer, e.state, e.goal, dist, e.wind_state, e.reward[i], steps[i], e.episode_return[i]
+    )
     count = int(buffer[capacity, R.COUNT])
     if outcome[i] != S.RUNNING:
         return -count

@@ -13,17 +13,22 @@ start and goal on the first reset.
 Recording must not slow the env down (within 10 % of its steps per second), so a step
 only copies one row of numbers into a buffer; the buffer is handed to the recording's
 writer process (:mod:`quadsitl.viz.episode_writer`, which sends it to Rerun in whole
-columns) when it is full, when an episode has waited longer than ``FLUSH_AFTER`` wall
-seconds (a viewer watching a slow loop still sees it move), and at ``close``. ``close``
-returns at once; the .rrd is complete when the writer ends (before the program exits, or
-when :func:`~quadsitl.viz.episode_writer.wait_for_recordings` returns).
+columns), not copied (the engine goes on in a spare buffer, and the sent one becomes
+the next spare once it is down the pipe): when it is full, when an episode has waited
+longer than ``FLUSH_AFTER`` wall seconds (a viewer watching a slow loop still sees it
+move), and at ``close``. ``close`` returns at once; the .rrd is complete when the writer
+ends (before the program exits, or when
+:func:`~quadsitl.viz.episode_writer.wait_for_recordings` returns).
 """
 
 from __future__ import annotations
 
 import atexit
+import queue
 import time
 import weakref
+
+import numpy as np
 
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TaskEngine
@@ -55,6 +60,9 @@ class EpisodeView:
         self.framed = False
         # The engine writes the buffer; the rows and the counters are its views.
         self.buffer, self.rows, self.counters = R.new_buffer(CAPACITY, index)
+        self.spares: queue.SimpleQueue[np.ndarray] = queue.SimpleQueue()  # sent, free again
+        self.engine: TaskEngine | None = None  # the engine writing the buffer
+        self.last_sent: np.ndarray | None = None  # the last row of the last buffer sent
         self.oldest = time.monotonic()  # wall time of (about) the oldest buffered row
         self.events: list[Event] = []
 
@@ -70,6 +78,7 @@ class EpisodeView:
             self.framed = True
             self._frame(engine)
             engine.record(self.buffer)
+            self.engine = engine
         engine.record_now()
         self._rows_written(int(self.counters[R.COUNT]))
 
@@ -108,7 +117,8 @@ class EpisodeView:
 
     def _outcome(self, outcome: str) -> None:
         self.ended = True
-        last = self.rows[max(int(self.counters[R.COUNT]) - 1, 0)]  # the episode's last row
+        count = int(self.counters[R.COUNT])
+        last = self.rows[count - 1] if count or self.last_sent is None else self.last_sent
         steps, episode_return = int(last[C_STEP]), float(last[C_RETURN])
         level = "INFO" if outcome in ("landed", "timed_out") else "WARN"
         text = (
@@ -118,13 +128,32 @@ class EpisodeView:
         self.events.append((self.episode, steps, text, level))
 
     def flush(self) -> None:
-        """Hand the buffered rows and events to the writer."""
-        rows = self.rows[: int(self.counters[R.COUNT])]
-        self.counters[R.COUNT] = 0
+        """Hand the buffered rows and events to the writer: the rows in their buffer,
+        while the engine goes on in a spare one."""
+        count = int(self.counters[R.COUNT])
         self.oldest = time.monotonic()  # (nearly) when the next row comes
-        if len(rows) or self.events:
-            self.writer.rows(rows, self.events)
-            self.events.clear()
+        if not count:
+            if self.events:
+                self.writer.rows(self.rows[:0], self.events)
+                self.events.clear()
+            return
+        sent, rows = self.buffer, self.rows[:count]
+        self.last_sent = rows[-1].copy()
+        self._next_buffer()
+        self.writer.rows(rows, self.events, sent=lambda: self.spares.put(sent))
+        self.events.clear()
+
+    def _next_buffer(self) -> None:
+        """Go on in a spare buffer (a new one while every buffer is still being sent)."""
+        try:
+            self.buffer = self.spares.get_nowait()
+            self.rows, self.counters = self.buffer[:CAPACITY], self.buffer[CAPACITY]
+            self.counters[R.COUNT] = 0
+        except queue.Empty:
+            self.buffer, self.rows, self.counters = R.new_buffer(CAPACITY, self.index)
+        self.counters[R.EPISODE] = self.episode
+        if self.engine is not None:
+            self.engine.record(self.buffer)
 
     def close(self, wait: bool = False) -> None:
         """Hand over what is buffered and let the writer finish the recording; ``wait``:

@@ -2,8 +2,9 @@
 never takes the env's time.
 
 The env's side (:class:`~quadsitl.viz.episode_view.EpisodeView`) only buffers one row of
-numbers per step. When it sends a buffer, :class:`EpisodeWriter` hands a copy to a
-thread that pushes it down a pipe (the copy into the pipe releases the GIL), and the
+numbers per step. When it sends a buffer, :class:`EpisodeWriter` hands it (not a copy:
+the view goes on in a buffer of its own meanwhile) to a thread that pushes it down a
+pipe (the copy into the pipe releases the GIL) and then gives it back, and the
 writer process (:func:`serve`) turns the rows into Rerun columns and sends them
 (:class:`EpisodeSender`): the env goes on stepping meanwhile, and ``close()`` returns at
 once. The recording is complete when the writer process ends: at the latest before the
@@ -24,6 +25,7 @@ import subprocess
 import sys
 import threading
 import warnings
+from collections.abc import Callable
 from typing import Any, BinaryIO
 
 import numpy as np
@@ -57,6 +59,8 @@ PATH_EVERY = 10  # steps between two loggings of an episode's path
 MAX_PATH = 200  # points a path is thinned to (a long episode's path stays light)
 
 Event = tuple[int, int, str, str]  # episode, step, text, level
+# To the feeder thread: kind, detail, rows or None, what to call once the rows are sent.
+_Message = tuple[str, dict[str, Any], np.ndarray | None, "Callable[[], None] | None"]
 
 
 class _Arrow:
@@ -310,9 +314,8 @@ class EpisodeWriter:
         )
         # At once: its start-up (imports) is its busiest time.
         _away_from_the_env(self.process.pid)
-        self.outbox: queue.SimpleQueue[tuple[str, dict[str, Any], np.ndarray | None]] = (
-            queue.SimpleQueue()
-        )
+        # (kind, detail, rows or None, what to call once the rows are sent or None)
+        self.outbox: queue.SimpleQueue[_Message] = queue.SimpleQueue()
         self.error: BaseException | None = None
         self.closed = False
         # A daemon: an env never closed must not keep the program from exiting; what it
@@ -322,18 +325,23 @@ class EpisodeWriter:
         _WRITERS.append(self)
 
     def frame(self, **detail: Any) -> None:
-        self.outbox.put(("frame", detail, None))
+        self.outbox.put(("frame", detail, None, None))
 
-    def rows(self, rows: np.ndarray, events: list[Event]) -> None:
-        """Hand over ``rows`` (copied: the caller reuses its buffer) and ``events``."""
+    def rows(
+        self, rows: np.ndarray, events: list[Event], sent: Callable[[], None] | None = None
+    ) -> None:
+        """Hand over ``rows`` and ``events``. With ``sent``, the rows themselves: the
+        caller leaves them alone until ``sent()`` is called (from the feeder thread,
+        once they are down the pipe, or the writer is gone); without it, a copy."""
         detail = {"shape": list(rows.shape), "events": [list(event) for event in events]}
-        self.outbox.put(("rows", detail, np.ascontiguousarray(rows, np.float64).copy()))
+        data = np.ascontiguousarray(rows, np.float64)
+        self.outbox.put(("rows", detail, data if sent else data.copy(), sent))
 
     def close(self, wait: bool = False) -> None:
         """The last message; ``wait``: until the recording is complete."""
         if not self.closed:
             self.closed = True
-            self.outbox.put(("close", {}, None))
+            self.outbox.put(("close", {}, None, None))
         if wait:
             self.join()
 
@@ -348,7 +356,7 @@ class EpisodeWriter:
         pipe = self.process.stdin
         assert pipe is not None
         while True:
-            kind, detail, rows = self.outbox.get()
+            kind, detail, rows, sent = self.outbox.get()
             header = json.dumps([kind, detail]).encode()
             try:
                 pipe.write(_HEADER.pack(len(header)) + header)
@@ -356,6 +364,8 @@ class EpisodeWriter:
                     pipe.write(_PAYLOAD.pack(rows.nbytes))
                     pipe.write(rows.data.cast("B"))
                 pipe.flush()
+                if sent is not None:
+                    sent()
                 if kind == "close":
                     pipe.close()
                     return
