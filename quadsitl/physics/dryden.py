@@ -146,10 +146,17 @@ def rate_gains(rho: float) -> tuple[float, float, float]:
     return a, b, c
 
 
-def stationary_covariance(rho: float) -> Array:
-    """P of (z1, z2, z3): the solution of A P + P Aᵀ + B Bᵀ = 0 for unit white noise."""
-    p13, p23 = 1 / (1 + rho), rho / (1 + rho) ** 2
-    return np.array([[0.5, 0.25, p13], [0.25, 0.25, p23], [p13, p23, 0.5 / rho]])
+def stationary_covariance(rho: ArrayLike) -> Array:
+    """P of (z1, z2, z3): the solution of A P + P Aᵀ + B Bᵀ = 0 for unit white noise;
+    (3, 3), or (N, 3, 3) for N values of ρ."""
+    r = np.asarray(rho, dtype=np.float64)
+    p = np.empty((*r.shape, 3, 3))
+    p[..., 0, 0], p[..., 0, 1], p[..., 1, 1] = 0.5, 0.25, 0.25
+    p[..., 1, 0] = 0.25
+    p[..., 0, 2] = p[..., 2, 0] = 1 / (1 + r)
+    p[..., 1, 2] = p[..., 2, 1] = r / (1 + r) ** 2
+    p[..., 2, 2] = 0.5 / r
+    return p
 
 
 def transition(dtau: float, rho: float) -> Array:
@@ -159,17 +166,22 @@ def transition(dtau: float, rho: float) -> Array:
 
 
 def lower_cholesky(q: Array) -> Array:
-    """Lower-triangular G with G Gᵀ = q for a 3×3 covariance, tolerant of rounding: a
-    pivot that rounding made ≤ 0 (a direction with variance ~1e-16) contributes nothing."""
-    g = np.zeros((3, 3))
+    """Lower-triangular G with G Gᵀ = q for a 3×3 covariance (or each of (N, 3, 3)),
+    tolerant of rounding: a pivot that rounding made ≤ 0 (a direction with variance
+    ~1e-16) contributes nothing."""
+    q = np.asarray(q, dtype=np.float64)
+    g = np.zeros(q.shape)
     for j in range(3):
-        pivot = q[j, j] - g[j, :j] @ g[j, :j]
-        g[j, j] = math.sqrt(max(pivot, 0.0))
+        pivot = q[..., j, j] - np.sum(g[..., j, :j] ** 2, axis=-1)
+        g[..., j, j] = np.sqrt(np.maximum(pivot, 0.0))
+        diagonal = g[..., j, j]
         for i in range(j + 1, 3):
-            g[i, j] = (q[i, j] - g[i, :j] @ g[j, :j]) / g[j, j] if g[j, j] > 0 else 0.0
+            below = q[..., i, j] - np.sum(g[..., i, :j] * g[..., j, :j], axis=-1)
+            safe = np.where(diagonal > 0, diagonal, 1.0)
+            value = np.where(diagonal > 0, below / safe, 0.0)
             # Bounded by what row i can still hold, so rounding never adds variance.
-            room = math.sqrt(max(q[i, i] - g[i, :j] @ g[i, :j], 0.0))
-            g[i, j] = min(max(g[i, j], -room), room)
+            room = np.sqrt(np.maximum(q[..., i, i] - np.sum(g[..., i, :j] ** 2, axis=-1), 0.0))
+            g[..., i, j] = np.clip(value, -room, room)
     return g
 
 
@@ -179,10 +191,14 @@ def noise_factor(dtau: float, rho: float) -> Array:
     return lower_cholesky(p - phi @ p @ phi.T)
 
 
-def output_rows(rho: float) -> tuple[Array, Array]:
-    """Rows mapping (z1, z2, z3) to the velocity (× σ) and to the rate gust (× σ/L)."""
-    a, b, c = rate_gains(rho)
-    return np.array([SQRT3, 1 - SQRT3, 0.0]), np.array([a, b, c])
+VELOCITY_ROW = np.array([SQRT3, 1 - SQRT3, 0.0])  # (z1, z2, z3) -> the velocity (× σ)
+
+
+def output_rows(rho: ArrayLike) -> tuple[Array, Array]:
+    """Rows mapping (z1, z2, z3) to the velocity (× σ) and to the rate gust (× σ/L);
+    for N values of ρ, the second is (N, 3)."""
+    a, b, c = rate_gains(rho)  # type: ignore[arg-type]
+    return VELOCITY_ROW, np.stack(np.broadcast_arrays(a, b, c), axis=-1)
 
 
 def rate_sigma(rho: float) -> float:

@@ -253,19 +253,20 @@ def air_outputs(wind_state: Array, wind_params: Array, state: Array, params: Arr
     lu, lw, rho_r, rho_q = _channel_lengths(height, wind_params)
     sp = D.roll_rate_sigma(height, sigma_w, wind_params[:, L.W_SPAN])
     z = wind_state[:, L.WS_TURBULENCE]
-    turb = np.zeros((len(state), 6))  # (u, v, w, p, q, r), turbulence frame
-    for n in range(len(state)):
-        row, gain_r = D.output_rows(rho_r[n])
-        _, gain_q = D.output_rows(rho_q[n])
-        zv, zw = z[n, L.WS_V1 : L.WS_R + 1], z[n, L.WS_W1 : L.WS_Q + 1]
-        turb[n] = (
-            su[n] * z[n, L.WS_U],
-            su[n] * (row @ zv),
-            sigma_w[n] * (row @ zw),
-            sp[n] * z[n, L.WS_P],
-            sigma_w[n] / lw[n] * (gain_q @ zw),
-            -su[n] / lu[n] * (gain_r @ zv),  # r = −dv/dξ: see docs/physics.md
-        )
+    zv, zw = z[:, L.WS_V1 : L.WS_R + 1], z[:, L.WS_W1 : L.WS_Q + 1]
+    row, gain_r = D.output_rows(rho_r)
+    _, gain_q = D.output_rows(rho_q)
+    turb = np.stack(  # (u, v, w, p, q, r), turbulence frame
+        [
+            su * z[:, L.WS_U],
+            su * (zv @ row),
+            sigma_w * (zw @ row),
+            sp * z[:, L.WS_P],
+            sigma_w / lw * np.sum(gain_q * zw, axis=1),
+            -su / lu * np.sum(gain_r * zv, axis=1),  # r = −dv/dξ: see docs/physics.md
+        ],
+        axis=1,
+    )
     x_axis, y_axis = _turbulence_frame(wind_params)
     z_axis = np.array([0.0, 0.0, 1.0])
     mean = np.zeros((len(state), 3))
@@ -307,10 +308,10 @@ def reset_wind(
     _, _, rho_r, rho_q = _channel_lengths(height, wind_params)
     n = normals(streams, N_NORMALS)
     z = np.zeros((len(state), 8))
-    for k in range(len(state)):
-        z[k, L.WS_U], z[k, L.WS_P] = n[k, 0], n[k, 7]
-        z[k, L.WS_V1 : L.WS_R + 1] = D.lower_cholesky(D.stationary_covariance(rho_r[k])) @ n[k, 1:4]
-        z[k, L.WS_W1 : L.WS_Q + 1] = D.lower_cholesky(D.stationary_covariance(rho_q[k])) @ n[k, 4:7]
+    z[:, L.WS_U], z[:, L.WS_P] = n[:, 0], n[:, 7]
+    for first, rho, noise in ((L.WS_V1, rho_r, n[:, 1:4]), (L.WS_W1, rho_q, n[:, 4:7])):
+        factor = D.lower_cholesky(D.stationary_covariance(rho))  # (N, 3, 3)
+        z[:, first : first + 3] = np.einsum("nij,nj->ni", factor, noise)
     wind_state[:] = 0.0
     wind_state[:, L.WS_TURBULENCE] = z
     air_outputs(wind_state, wind_params, state, params)
