@@ -207,6 +207,13 @@ def test_a_dead_writer_loses_the_recording_not_the_env(tmp_path):
         view.writer.feeder.join(10)
     obs, *_ = env.step(np.zeros(4, np.float32))  # the env flies on
     assert np.isfinite(obs).all()
+    buffers = set()
+    for _ in range(3):  # and its buffers come back: nothing piles up for a dead writer
+        for _ in range(20):
+            env.step(np.zeros(4, np.float32))
+        view.flush()
+        buffers.add(id(view.buffer))
+    assert view.writer.outbox.empty() and len(buffers) <= 2
     env.close()
 
 

@@ -333,6 +333,10 @@ class EpisodeWriter:
         """Hand over ``rows`` and ``events``. With ``sent``, the rows themselves: the
         caller leaves them alone until ``sent()`` is called (from the feeder thread,
         once they are down the pipe, or the writer is gone); without it, a copy."""
+        if self.error is not None:  # the writer died (warned): nothing to send to
+            if sent is not None:
+                sent()
+            return
         detail = {"shape": list(rows.shape), "events": [list(event) for event in events]}
         data = np.ascontiguousarray(rows, np.float64)
         self.outbox.put(("rows", detail, data if sent else data.copy(), sent))
@@ -376,6 +380,18 @@ class EpisodeWriter:
                     RuntimeWarning,
                     stacklevel=1,
                 )
+                self._drop_unsent(sent)
+                return
+
+    def _drop_unsent(self, sent: Callable[[], None] | None) -> None:
+        """After the writer died: give back the rows of the message that failed and of
+        those queued behind it (later ones are not queued: ``rows`` sees the error)."""
+        while True:
+            if sent is not None:
+                sent()
+            try:
+                sent = self.outbox.get_nowait()[3]
+            except queue.Empty:
                 return
 
 
