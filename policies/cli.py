@@ -27,7 +27,12 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         "space (e.g. Pendulum-v1)",
     )
     train.add_argument("--algo", required=True, help=f"one of {', '.join(ALGORITHMS)}")
-    train.add_argument("--preset", default="paper", help="paper (Table I) or fast (default: paper)")
+    train.add_argument(
+        "--preset",
+        default="paper",
+        help="paper (Table I), fast, or robust (fast, in a randomised world: wind, "
+        "turbulence, delay, airframe spread; docs/training.md) (default: paper)",
+    )
     train.add_argument("--seed", type=_count(0), default=0, help="random seed ≥ 0 (default: 0)")
     train.add_argument(
         "--backend",

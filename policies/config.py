@@ -9,6 +9,7 @@ tuned by measurement (docs/results.md).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from dataclasses import dataclass, field
@@ -228,6 +229,26 @@ FAST_TASK_ALGO: dict[tuple[str, str], dict[str, Any]] = {
 }
 # The fast preset's budget that learns each task, by measurement (TaskSpec.train_steps).
 FAST_STEPS = {name: t.train_steps for name, t in TASKS.items()}
+# The robust preset: the fast preset's learner, in a world drawn per episode and env
+# (docs/tasks.md, "Domain randomisation") that covers the robustness ladder's target,
+# moderate turbulence in a 6 m/s mean wind with 20 ms of delay each way: every airframe
+# spread at its default, a mean wind of 0-8 m/s from any direction with no, light or
+# moderate turbulence, and 0-30 ms of observation and of actuation delay.
+ROBUST_WORLD: dict[str, Any] = {
+    "randomize": {
+        "mass": "default",
+        "inertia": "default",
+        "thrust_coeff": "default",
+        "torque_coeff": "default",
+        "motor_rate": "default",
+        "drag_coeff": "default",
+        "aero_moment_coeff": "default",
+        "wind": {"speed": [0.0, 8.0], "turbulence": [None, "light", "moderate"]},
+        "delay": {"observation": [0.0, 0.03], "action": [0.0, 0.03]},
+    }
+}
+ROBUST_STEPS_FACTOR = 2  # the fast budget twice: a world that varies takes longer to learn
+PRESETS = ("paper", "fast", "robust")
 
 
 FOREIGN_STEPS = 1_000_000  # default budget of the fast preset for another Gymnasium env
@@ -262,7 +283,7 @@ def make_config(
         raise ValueError(f"unknown algorithm {algo!r}; choose one of {ALGORITHMS}")
     if preset == "paper":
         values: dict[str, Any] = {**PAPER_COMMON, **PAPER[algo]}
-    elif preset == "fast":
+    elif preset in ("fast", "robust"):
         values = {
             **FAST_COMMON,
             **FAST[algo],
@@ -271,8 +292,13 @@ def make_config(
             "total_steps": FAST_STEPS.get(task, FOREIGN_STEPS),
         }
     else:
-        raise ValueError(f"unknown preset {preset!r}; choose 'paper' or 'fast'")
+        raise ValueError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
     values["task_options"] = dict(STARTS.get(task, {}))
+    if preset == "robust":
+        if not ours:
+            raise ValueError(f"the robust preset needs a quadsitl task, got {task!r}")
+        values["total_steps"] *= ROBUST_STEPS_FACTOR
+        values["task_options"].update(copy.deepcopy(ROBUST_WORLD))
     if not ours:
         values["eval_every"] = 0
     values.update(task=task, algo=algo, preset=preset, seed=seed)

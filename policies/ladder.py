@@ -36,6 +36,16 @@ def _mean_wind(speed: float) -> dict[str, Any]:
     }
 
 
+def _windy(speed: float, turbulence: str) -> dict[str, Any]:
+    """A mean wind of ``speed`` m/s from a direction drawn per episode, with
+    ``turbulence`` (a MIL-F-8785C severity)."""
+    return {
+        "randomize": {
+            "wind": {"speed": (speed, speed), "from_deg": (0.0, 360.0), "turbulence": [turbulence]}
+        }
+    }
+
+
 def _delay(ms: int) -> dict[str, Any]:
     """``ms`` of observation delay and as much actuation delay (whole physics steps)."""
     return {"delay": {"observation": ms / 1000, "action": ms / 1000}} if ms else {}
@@ -83,6 +93,12 @@ LADDER: dict[str, tuple[str, list[Rung]]] = {
     "noise": (
         "sensor noise on the observation",
         [Rung("off"), Rung("default", {"sensor_noise": 1.0}), Rung("3x", {"sensor_noise": 3.0})],
+    ),
+    # The robust policies' target, all at once: what a robust checkpoint must keep 90 %
+    # success in (docs/results.md).
+    "target": (
+        "moderate turbulence in a 6 m/s mean wind, 20 ms delay each way",
+        [Rung("none"), Rung("moderate, 6 m/s, 20 ms", {**_windy(6.0, "moderate"), **_delay(20)})],
     ),
 }
 AXES = tuple(LADDER)

@@ -23,9 +23,10 @@ from policies.algos.ppo import PPO, clipped_surrogate
 from policies.algos.trpo import conjugate_gradient
 from policies.config import make_config
 from policies.evaluate import evaluate
-from policies.rollout import compute_gae
+from policies.rollout import compute_gae, make_vector_env
 from policies.train import train
 from quadsitl.physics import PAPER
+from quadsitl.physics import layout as L
 from tests.conftest import cli, refused_here, run_cli
 
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "policies" / "checkpoints"
@@ -88,6 +89,37 @@ def test_paper_preset_is_table_one():
     assert (trpo.line_search_steps, trpo.line_search_shrink) == (10, 0.5)
     with pytest.raises(ValueError, match="unknown training option"):
         make_config("hover", "ppo", "paper", learning_rat=1e-3)
+
+
+def test_robust_preset_is_fast_in_a_randomised_world(tmp_path):
+    """The robust preset: the fast learner, twice the budget, and a world drawn per
+    episode (airframe, wind up to 8 m/s with up to moderate turbulence, 0-30 ms delays)
+    that a short real run flies and its checkpoint carries."""
+    fast, robust = make_config("land", "ppo", "fast"), make_config("land", "ppo", "robust")
+    assert robust.total_steps == 2 * fast.total_steps
+    assert {**robust.to_dict(), "preset": "fast", "total_steps": fast.total_steps} == {
+        **fast.to_dict(),
+        "task_options": robust.task_options,
+    }
+    drawn = robust.task_options["randomize"]
+    assert drawn["wind"]["turbulence"] == [None, "light", "moderate"]
+    assert set(fast.task_options) < set(robust.task_options)  # the task's start kept
+    with pytest.raises(ValueError, match="choose one of paper, fast, robust"):
+        make_config("hover", "ppo", "sturdy")
+    torch.set_num_threads(1)
+    short = make_config("hover", "ppo", "robust", total_steps=4_096, checkpoint_every=1)
+    train(short, tmp_path, progress=False)
+    net, loaded, _ = checkpoint.load(tmp_path / "checkpoints" / "last.pt")
+    assert loaded == short
+    assert sum(evaluate(net, loaded, episodes=4).outcomes.values()) == 4  # in that world
+    env = make_vector_env("hover", 16, "inprocess", **loaded.task_options)
+    try:
+        env.reset(seed=0)
+        params, winds = env.engine.fleet.params, env.engine.fleet.winds
+        assert len(np.unique(params[:, L.P_MASS])) == 16  # every env its own airframe
+        assert len({w.speed for w in winds}) == 16 and max(w.speed for w in winds) <= 8.0
+    finally:
+        env.close()
 
 
 @pytest.mark.parametrize("algo", ["gae", "ppo", "trpo"])

@@ -69,8 +69,9 @@ def test_every_rung_flies_the_world_it_names(hover):
                 np.testing.assert_allclose(seen["mass"], nominal["mass"] * (1 + percent / 100))
             else:
                 np.testing.assert_array_equal(seen["mass"], nominal["mass"], err_msg=label)
-            if axis == "delay" and rung.label != "0 ms":
-                steps = int(rung.label.split()[0]) // 10  # 10 ms physics steps
+            combined = axis == "target" and rung.label != "none"  # all at once
+            if (axis == "delay" and rung.label != "0 ms") or combined:
+                steps = 2 if combined else int(rung.label.split()[0]) // 10  # 10 ms steps
                 assert all((s == steps).all() for s in seen["delay"]), label
             else:
                 assert seen["delay"] is None, label
@@ -82,8 +83,12 @@ def test_every_rung_flies_the_world_it_names(hover):
                 assert np.all(seen["efficiency"] == 1.0), label
             if axis == "wind" and rung.label != "0 m/s":  # no turbulence: exactly the mean
                 np.testing.assert_allclose(seen["wind"], float(rung.label.split()[0]), atol=1e-9)
-            moving_air = (axis == "wind" and rung.label != "0 m/s") or (
-                axis == "turbulence" and rung.label != "none"
+            if combined:  # 6 m/s of mean wind and moderate turbulence (σ_u ≈ 3 m/s) on it
+                assert 1.0 < seen["wind"].mean() < 11.0 and np.ptp(seen["wind"]) > 0.1, label
+            moving_air = (
+                (axis == "wind" and rung.label != "0 m/s")
+                or (axis == "turbulence" and rung.label != "none")
+                or combined
             )
             assert seen["stirred"].all() == moving_air and seen["stirred"].any() == moving_air
             want_noise = {"default": 1.0, "3x": 3.0}.get(rung.label) if axis == "noise" else None
