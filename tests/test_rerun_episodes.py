@@ -231,8 +231,8 @@ def test_ctrl_c_in_the_terminal_leaves_the_recording_whole(tmp_path):
         "env.reset(seed=0)\n"
         "for _ in range(200): env.step(np.zeros(4, np.float32))\n"
         "env.unwrapped.view.flush()\n"
-        "print('stepped', flush=True)\n"
-        "try:\n"
+        "try:\n"  # (before the print: a Ctrl-C that follows it at once lands in here)
+        "    print('stepped', flush=True)\n"
         "    time.sleep(120)\n"
         "except KeyboardInterrupt:\n"
         "    sys.exit(130)\n"
