@@ -18,6 +18,7 @@ from typing import Any
 from policies.algos import ALGORITHMS
 from quadsitl.envs.mavlink_backend import fleet_sizes
 from quadsitl.tasks import TASKS
+from quadsitl.tasks.randomization import DEFAULT_AIRFRAME_SPREAD
 
 BACKENDS = ("inprocess", "mavlink")
 TASK_NAMES = tuple(TASKS)  # the tasks' registry, in its order
@@ -236,13 +237,7 @@ FAST_STEPS = {name: t.train_steps for name, t in TASKS.items()}
 # moderate turbulence, and 0-30 ms of observation and of actuation delay.
 ROBUST_WORLD: dict[str, Any] = {
     "randomize": {
-        "mass": "default",
-        "inertia": "default",
-        "thrust_coeff": "default",
-        "torque_coeff": "default",
-        "motor_rate": "default",
-        "drag_coeff": "default",
-        "aero_moment_coeff": "default",
+        **dict.fromkeys(DEFAULT_AIRFRAME_SPREAD, "default"),
         "wind": {"speed": [0.0, 8.0], "turbulence": [None, "light", "moderate"]},
         "delay": {"observation": [0.0, 0.03], "action": [0.0, 0.03]},
     }

@@ -23,27 +23,15 @@ class Rung:
     options: dict[str, Any] = field(default_factory=dict)  # {} is the nominal world
 
 
-def _mean_wind(speed: float) -> dict[str, Any]:
-    """A mean wind of ``speed`` m/s, no turbulence, from a direction drawn per episode
-    uniformly over 0–360° (from each env's seeded generator): a waypoint task meets
-    head, tail and cross winds, not one direction."""
-    if speed == 0:
+def _mean_wind(speed: float, turbulence: str | None = None) -> dict[str, Any]:
+    """A mean wind of ``speed`` m/s, with ``turbulence`` (a MIL-F-8785C severity) or
+    none, from a direction drawn per episode uniformly over 0–360° (from each env's
+    seeded generator): a waypoint task meets head, tail and cross winds, not one
+    direction."""
+    if speed == 0 and turbulence is None:
         return {}
-    return {
-        "randomize": {
-            "wind": {"speed": (speed, speed), "from_deg": (0.0, 360.0), "turbulence": [None]}
-        }
-    }
-
-
-def _windy(speed: float, turbulence: str) -> dict[str, Any]:
-    """A mean wind of ``speed`` m/s from a direction drawn per episode, with
-    ``turbulence`` (a MIL-F-8785C severity)."""
-    return {
-        "randomize": {
-            "wind": {"speed": (speed, speed), "from_deg": (0.0, 360.0), "turbulence": [turbulence]}
-        }
-    }
+    draw = {"speed": (speed, speed), "from_deg": (0.0, 360.0), "turbulence": [turbulence]}
+    return {"randomize": {"wind": draw}}
 
 
 def _delay(ms: int) -> dict[str, Any]:
@@ -98,7 +86,10 @@ LADDER: dict[str, tuple[str, list[Rung]]] = {
     # success in (docs/results.md).
     "target": (
         "moderate turbulence in a 6 m/s mean wind, 20 ms delay each way",
-        [Rung("none"), Rung("moderate, 6 m/s, 20 ms", {**_windy(6.0, "moderate"), **_delay(20)})],
+        [
+            Rung("none"),
+            Rung("moderate, 6 m/s, 20 ms", {**_mean_wind(6.0, "moderate"), **_delay(20)}),
+        ],
     ),
 }
 AXES = tuple(LADDER)
