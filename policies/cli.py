@@ -101,6 +101,14 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         "written by quadsitl export)",
     )
     evaluate.add_argument(
+        "--start",
+        default="trained",
+        choices=("trained", "task"),
+        help="trained: the randomised starts the policy was trained on (the evaluation "
+        "standard, docs/training.md); task: the task's own start, with no start noise (the "
+        "paper's) (default: trained)",
+    )
+    evaluate.add_argument(
         "--backend",
         default="inprocess",
         choices=("inprocess", "mavlink"),

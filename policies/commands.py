@@ -179,12 +179,28 @@ def _eval(args: argparse.Namespace) -> int:
             view.reset(engine, outcome) if reward is None else view.step(engine)
 
     try:
-        result = evaluate(net, config, args.task, args.episodes, args.backend, on_step=on_step)
+        result = evaluate(
+            net,
+            config,
+            args.task,
+            args.episodes,
+            args.backend,
+            on_step=on_step,
+            env_options=start_options(config.task_options, args.start),
+        )
     finally:
         if view is not None:
             view.close(wait=True)  # the recording is complete when eval says it is done
     print("\n".join(result.lines()))
     return 0
+
+
+def start_options(trained: dict, start: str) -> dict:  # type: ignore[type-arg]
+    """Task options over the trained ones for ``quadsitl eval --start``: none for
+    ``trained``; for ``task``, every start noise (``init_*``) at zero."""
+    if start == "trained":
+        return {}
+    return {name: 0.0 for name in trained if name.startswith("init_")}
 
 
 def _robustness(args: argparse.Namespace) -> int:

@@ -203,6 +203,28 @@ def test_target_moves_at_about_one_metre_per_second():
     np.testing.assert_allclose(obs[37], np.linalg.norm(obs[34:37]), rtol=1e-5)
 
 
+
+
+def test_random_waypoint_goal_is_drawn_from_wherever_the_episode_starts():
+    """1 to 2.5 m from the start in every direction, for starts spread over a 3 m box:
+    the goal moves with the start (drawn around the origin it would be up to 5 m away)."""
+    env = gym.make("QuadSITL/RandomWaypoint-v0", init_position_noise=1.5)
+    starts, offsets = [], []
+    for seed in range(200):
+        env.reset(seed=seed)
+        engine = env.unwrapped.engine
+        start = engine.fleet.state[0, L.POS].copy()
+        starts.append(start)
+        offsets.append(engine.goal[0, 0:3] - start)
+    starts, offsets = np.array(starts), np.array(offsets)
+    assert np.abs(starts).max() <= 1.5 and np.abs(starts).max(axis=0).min() > 1.2
+    distances = np.linalg.norm(offsets, axis=1)
+    assert distances.min() >= 1.0 - 1e-9 and distances.max() <= 2.5 + 1e-9
+    assert (offsets[:, 2] > 0).mean() == pytest.approx(0.5, abs=0.1)  # up as often as down
+    # Without start noise the task is the paper's: from the origin.
+    env = gym.make("QuadSITL/RandomWaypoint-v0")
+    env.reset(seed=0)
+    np.testing.assert_array_equal(env.unwrapped.engine.fleet.state[0, L.POS], 0.0)
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
 def test_non_finite_actions_raise(bad):
     env = gym.make("QuadSITL/Hover-v0")

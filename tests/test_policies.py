@@ -524,3 +524,18 @@ def test_plot_refuses_to_replace_existing_pngs_without_force(tmp_path):
     replaced = run_cli("plot", str(run), "-o", str(out), "--force")
     assert replaced.returncode == 0, replaced.stderr
     assert png.read_bytes().startswith(b"\x89PNG")
+
+
+def test_eval_from_the_tasks_own_start_or_the_trained_spread():
+    from policies.commands import start_options
+
+    net, config, _ = checkpoint.load(CHECKPOINTS / "hover.pt")
+    assert start_options(config.task_options, "trained") == {}
+    paper = start_options(config.task_options, "task")
+    assert paper == {"init_position_noise": 0.0, "init_attitude_noise": 0.0}
+    spread = evaluate(net, config, episodes=4, keep_trajectories=4)
+    own = evaluate(net, config, episodes=4, keep_trajectories=4, env_options=paper)
+    assert all(np.abs(track[0]).max() > 0.01 for track in spread.trajectories)
+    assert all(np.abs(track[0]).max() < 1e-9 for track in own.trajectories)  # the origin
+    shown = run_cli("eval", str(CHECKPOINTS / "hover.pt"), "--episodes", "2", "--start", "task")
+    assert shown.returncode == 0 and "success_rate: 1.0000" in shown.stdout, shown.stderr

@@ -196,7 +196,6 @@ class TaskEngine:
             draws.append(rng.random(12))
             if callable(goal):
                 goals[k] = goal(rng)
-        self.goal[rows] = goals
         if randomization is not None and randomization.airframe:
             rngs = [self.rngs[i] for i in rows]
             self.fleet.params[rows] = randomization.draw_airframes(rngs, self.base_params)
@@ -211,6 +210,9 @@ class TaskEngine:
         noise = -spread + (spread - -spread) * np.array(draws)
         states = np.zeros((rows.size, L.STATE_SIZE))
         states[:, L.POS] = starts + noise[:, 0:3]
+        if self.task.goal_from_start:
+            goals[:, 0:3] += states[:, L.POS]
+        self.goal[rows] = goals
         states[:, L.QUAT] = quat_from_euler(noise[:, 3], noise[:, 4], noise[:, 5])
         states[:, L.VEL] = noise[:, 6:9]
         states[:, L.RATES] = noise[:, 9:12]

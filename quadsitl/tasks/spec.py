@@ -128,6 +128,9 @@ class TaskSpec:
     # values, or a function of the env's generator that draws them each episode.
     start: tuple[float, ...] | Callable[[np.random.Generator], np.ndarray] = (0.0, 0.0, 0.0)
     goal: tuple[float, ...] | Callable[[np.random.Generator], np.ndarray] = (0.0,) * 6
+    # True: the goal's position is an offset from where the episode starts (after the
+    # start noise), so a randomised start moves the goal with it.
+    goal_from_start: bool = False
     # For tasks whose goal moves or that keep more than a goal per env (target following).
     new_state: Callable[[int], Any] | None = None  # the task's own per-env state, for N envs
     on_reset: Callable[[EngineView, np.ndarray], None] | None = None
