@@ -288,6 +288,39 @@ def test_options_change_the_episode():
     assert abs(roll) < 1e-3 and pitch < -0.05
 
 
+@pytest.mark.parametrize("delay", [None, {"observation": 0.02, "action": 0.0}])
+def test_observe_position_false_zeroes_the_position_slots_and_nothing_else(delay):
+    """The same flight, step for step; only the absolute position is hidden (also in a
+    delayed observation, and in the last observation of an episode and the first of the
+    next)."""
+    common = {"init_position_noise": 1.5, "delay": delay}
+    shown = gym.make_vec(
+        "QuadSITL/RandomWaypoint-v0", num_envs=3, vectorization_mode="vector_entry_point", **common
+    )
+    hidden = gym.make_vec(
+        "QuadSITL/RandomWaypoint-v0",
+        num_envs=3,
+        vectorization_mode="vector_entry_point",
+        observe_position=False,
+        **common,
+    )
+    a, _ = shown.reset(seed=4)
+    b, _ = hidden.reset(seed=4)
+    rng = np.random.default_rng(0)
+    ended = False
+    for _ in range(80):  # past the 3.5 s (70-step) episodes
+        assert np.abs(a[:, F.OBS_POS]).max() > 0.05 and not b[:, F.OBS_POS].any()
+        np.testing.assert_array_equal(b[:, 3:], a[:, 3:])
+        action = rng.normal(0.0, 0.1, (3, 4))
+        a, ra, *_ = shown.step(action)
+        b, rb, terminated, truncated, _ = hidden.step(action)
+        np.testing.assert_array_equal(rb, ra)  # rewards read the truth
+        ended |= bool((terminated | truncated).any())  # its last observation is checked next
+    assert ended
+    with pytest.raises(ValueError, match="observe_position must be True or False"):
+        gym.make("QuadSITL/RandomWaypoint-v0", observe_position="no")
+
+
 def test_sb3_adapter_semantics_and_ppo_trains():
     from stable_baselines3 import PPO
 

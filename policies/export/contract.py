@@ -52,6 +52,13 @@ def layout_text(task_name: str) -> str:
     return "; ".join(f"[{s.start}:{s.stop}] {meaning} ({unit})" for s, meaning, unit in blocks)
 
 
+def _hidden(columns: slice, options: TaskOptions) -> str:
+    """What to feed in the position slots of a policy trained without them."""
+    if columns == F.OBS_POS and not options.observe_position:
+        return ": NOT USED by this policy (trained with observe_position false): feed 0"
+    return ""
+
+
 def build_contract(config: TrainConfig, checkpoint: Path, act_size: int) -> dict[str, Any]:
     """The contract of the policy in ``checkpoint`` (trained with ``config``)."""
     task = TASKS[config.task]
@@ -95,7 +102,11 @@ def build_contract(config: TrainConfig, checkpoint: Path, act_size: int) -> dict
                 )
             ),
             "layout": [
-                {"columns": [s.start, s.stop], "meaning": meaning, "frame_unit": unit}
+                {
+                    "columns": [s.start, s.stop],
+                    "meaning": meaning + _hidden(s, options),
+                    "frame_unit": unit,
+                }
                 for s, meaning, unit in observation_layout(task)
             ],
         },

@@ -81,6 +81,9 @@ class TaskOptions:
             (position and velocity as the GPS, rates as the gyroscope, attitude as an
             estimator: :mod:`quadsitl.physics.sensors.observation`); 0: the exact state.
             Rewards and episode ends keep reading the truth.
+        observe_position: False: the observation's position slots (0-2) read 0, so a
+            policy sees where it is only through its offsets to the goal (the same
+            flight wherever it starts). True: the paper's observation.
     """
 
     airframe: object = "paper"
@@ -100,6 +103,7 @@ class TaskOptions:
     sensor_noise: float = 0.0
     ground_effect: bool = False
     faults: Any = None
+    observe_position: bool = True
 
     @classmethod
     def from_kwargs(cls, **options: object) -> TaskOptions:
@@ -145,6 +149,10 @@ class TaskOptions:
         object.__setattr__(self, "wind", self._weather())
         if not isinstance(self.ground_effect, bool):
             raise ValueError(f"ground_effect must be True or False, got {self.ground_effect!r}")
+        if not isinstance(self.observe_position, bool):
+            raise ValueError(
+                f"observe_position must be True or False, got {self.observe_position!r}"
+            )
         object.__setattr__(self, "faults", FT.parse_faults(self.faults))
         object.__setattr__(self, "delay", Delay.parse(self.delay))
         object.__setattr__(self, "randomize", self._randomization())
