@@ -146,6 +146,16 @@ def test_contract_states_the_codes_layout_frames_motors_and_normalisation(tmp_pa
     assert json.loads(written[1].read_text()) == contract
 
 
+def test_contract_tells_to_feed_zero_position_to_a_policy_trained_without_it(tmp_path):
+    """The waypoint policy was trained with observe_position false: its contract says the
+    position slots are not used, and the hover policy's says nothing of the kind."""
+    for task, hidden in (("random_waypoint", True), ("hover", False)):
+        contract = json.loads(export(CHECKPOINTS / f"{task}.pt", "onnx", tmp_path)[1].read_text())
+        position = contract["observation"]["layout"][0]
+        assert position["columns"] == [F.OBS_POS.start, F.OBS_POS.stop]
+        assert ("NOT USED by this policy" in position["meaning"]) is hidden, position
+
+
 def test_contract_layout_describes_what_the_env_observes():
     """A vehicle pitched 30° nose down, flying 2 m/s east, 1 m north of the origin: each
     block of the observation is what its contract line says."""
