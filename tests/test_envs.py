@@ -203,8 +203,6 @@ def test_target_moves_at_about_one_metre_per_second():
     np.testing.assert_allclose(obs[37], np.linalg.norm(obs[34:37]), rtol=1e-5)
 
 
-
-
 def test_random_waypoint_goal_is_drawn_from_wherever_the_episode_starts():
     """1 to 2.5 m from the start in every direction, for starts spread over a 3 m box:
     the goal moves with the start (drawn around the origin it would be up to 5 m away)."""
@@ -225,6 +223,8 @@ def test_random_waypoint_goal_is_drawn_from_wherever_the_episode_starts():
     env = gym.make("QuadSITL/RandomWaypoint-v0")
     env.reset(seed=0)
     np.testing.assert_array_equal(env.unwrapped.engine.fleet.state[0, L.POS], 0.0)
+
+
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
 def test_non_finite_actions_raise(bad):
     env = gym.make("QuadSITL/Hover-v0")
