@@ -107,8 +107,7 @@ class PolicyAutopilot:
         local[0, L.POS] -= origin
         self.goal[0, F.GOAL_POS] = goal - origin
         F.observe(local, self.params, self.goal, self.obs, self.dist, self.tilt)
-        if not self.observe_position:
-            self.obs[0, F.OBS_POS] = 0.0
+        F.hide_position(self.obs, self.observe_position)
         action = self.net.mean_action(self.obs)[0].astype(np.float64)  # as the envs step it
         omega = commanded_rotor_speed(self.airframe.hover_rotor_speed, self.beta, action)
         self.command = np.clip(omega, 0.0, self.airframe.max_rotor_speed)

@@ -253,12 +253,7 @@ class TaskEngine:
             self.obs[rows], self.dist[rows], self.tilt[rows] = obs, dist, tilt
         if self.observation_noise is not None:
             self._observe_noisy(np.arange(self.n) if rows is None else rows, 0.0)
-        self._hide_position()
-
-    def _hide_position(self) -> None:
-        """With ``observe_position=False``, the position slots of every observation read 0."""
-        if not self.options.observe_position:
-            self.obs[:, F.OBS_POS] = 0.0
+        F.hide_position(self.obs, self.options.observe_position)
 
     def _observe_noisy(self, rows: NDArray[np.int64], elapsed: float) -> None:
         """Overwrite the observation of ``rows`` with that of their sensed state, the
@@ -337,7 +332,7 @@ class TaskEngine:
             self._observe_noisy(np.arange(self.n), self.control_period)
         if self.delay is not None:
             self.delay.delay_observations(self.obs, self.steps)
-        self._hide_position()
+        F.hide_position(self.obs, self.options.observe_position)
         self.recorded = close_step(self._end)
         return self.reward, self.terminated, self.truncated
 

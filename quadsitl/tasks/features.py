@@ -158,6 +158,13 @@ def observe(state, params, goal, obs, dist, tilt):  # pragma: no cover - compile
         dist[n, D_RATE] = math.sqrt(rate_err)
 
 
+def hide_position(obs: np.ndarray, observe_position: bool) -> None:
+    """The task option ``observe_position=False``: the position slots of every row of
+    ``obs`` read 0 (the env's observations and the policy autopilot's alike)."""
+    if not observe_position:
+        obs[:, OBS_POS] = 0.0
+
+
 def empty_buffers(n: int, obs_size: int = OBS_SIZE) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Preallocated (obs, dist, tilt) arrays for ``n`` envs."""
     return np.zeros((n, obs_size), np.float32), np.zeros((n, N_DIST)), np.zeros(n)
