@@ -97,8 +97,10 @@ class MotorSim:
 
     def client(self, **kwargs: object) -> MotorClient:
         client = MotorClient("127.0.0.1", self.hil_port, **kwargs)  # type: ignore[arg-type]
-        deadline = time.monotonic() + 20
-        while True:  # the process needs a moment to start
+        # The process needs a moment to start: on a fresh checkout of a loaded machine it
+        # compiles the physics first (over 20 s seen with one core kept busy).
+        deadline = time.monotonic() + 60
+        while True:
             try:
                 client.connect()
                 return client
