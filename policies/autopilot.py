@@ -15,12 +15,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from policies.export.contract import layout_text
+from policies.export.contract import layout_text, observation_size, trained_options
 from policies.export.runtimes import load_policy
 from policies.networks import DeterministicPolicy
 from quadsitl.physics import Airframe
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS, TaskOptions
+from quadsitl.tasks import error_integral as EI
 from quadsitl.tasks import features as F
 from quadsitl.tasks.step_kernels import commanded_rotor_speed
 from quadsitl.vehicle.controller import CascadedController, Setpoint
@@ -40,10 +41,12 @@ class PolicyAutopilot:
         carrot: float = 2.0,
         goal_at_origin: bool = False,
     ) -> None:
-        if net.obs_size != F.OBS_SIZE:
+        expected = observation_size(TASKS["hover"], options)  # the waypoint tasks' too
+        if net.obs_size != expected:
             raise ValueError(
                 f"this policy needs {net.obs_size} observations; only the hover and waypoint "
-                f"policies ({F.OBS_SIZE}: {layout_text('hover')}) can fly as the autopilot"
+                f"policies ({expected}: {layout_text('hover', options)}) can fly as the "
+                "autopilot"
             )
         self.net = net
         self.carrot = carrot
@@ -52,8 +55,12 @@ class PolicyAutopilot:
         self.period = options.control_period
         self.beta = options.beta
         self.observe_position = options.observe_position  # as the policy was trained
+        self.observe_integral = options.observe_integral
+        # Kept across setpoints, as a PID's integral term is (it holds what the wind and
+        # the airframe need); zero again at reset and while idle.
+        self.integral = EI.ErrorIntegral(1, options.control_period)
         self.params = airframe.to_params(-np.inf)[None, :]
-        self.obs, self.dist, self.tilt = F.empty_buffers(1)
+        self.obs, self.dist, self.tilt = F.empty_buffers(1, expected)
         self.goal = np.zeros((1, 6))
         self.command = np.zeros(L.N_ROTORS)
         self.landing = CascadedController(airframe)  # flies the final descent
@@ -65,17 +72,17 @@ class PolicyAutopilot:
         net, config = load_policy(path)
         if config.task not in CARROT:
             raise ValueError(f"a {config.task} policy cannot fly goto and mission legs")
-        options = {k: v for k, v in config.task_options.items() if not k.startswith("init_")}
         return cls(
             net,
             airframe,
-            TaskOptions.from_kwargs(**options),
+            trained_options(config),
             CARROT[config.task],
             goal_at_origin=TASKS[config.task].goal_at_origin,
         )
 
     def reset(self) -> None:
         self.landing.reset()
+        self.integral.reset()
         self.elapsed = np.inf
         self.origin: np.ndarray | None = None
         self.target: np.ndarray | None = None
@@ -89,6 +96,7 @@ class PolicyAutopilot:
             return self.command
         self.elapsed = 0.0
         if setpoint.idle:
+            self.integral.reset()
             self.command = np.zeros(L.N_ROTORS)
             return self.command
         position = state[L.POS]
@@ -108,6 +116,8 @@ class PolicyAutopilot:
         self.goal[0, F.GOAL_POS] = goal - origin
         F.observe(local, self.params, self.goal, self.obs, self.dist, self.tilt)
         F.hide_position(self.obs, self.observe_position)
+        if self.observe_integral:
+            self.integral.accumulate(self.obs)
         action = self.net.mean_action(self.obs)[0].astype(np.float64)  # as the envs step it
         omega = commanded_rotor_speed(self.airframe.hover_rotor_speed, self.beta, action)
         self.command = np.clip(omega, 0.0, self.airframe.max_rotor_speed)

@@ -144,9 +144,9 @@ def check_fits(net: DeterministicPolicy, config: TrainConfig, task: str, obs_siz
     if config.task != task:
         raise ValueError(f"checkpoint was trained for task {config.task!r}, not {task!r}")
     if net.obs_size != obs_size:
-        from policies.export.contract import layout_text
+        from policies.export.contract import layout_text, trained_options
 
         raise ValueError(
             f"the policy expects {net.obs_size} observations, the {task} task gives "
-            f"{obs_size}: {layout_text(task)}"
+            f"{obs_size}: {layout_text(task, trained_options(config))}"
         )

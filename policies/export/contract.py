@@ -20,6 +20,7 @@ from quadsitl.frames import __doc__ as FRAMES_DOC
 from quadsitl.physics import get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS, TaskOptions
+from quadsitl.tasks import error_integral as EI
 from quadsitl.tasks import features as F
 from quadsitl.tasks.spec import TaskSpec
 
@@ -40,15 +41,32 @@ def sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def observation_layout(task: TaskSpec) -> tuple[tuple[slice, str, str], ...]:
-    """(columns, meaning, frame and unit) of each block of ``task``'s observation."""
-    return F.OBS_LAYOUT + task.extra_obs_layout
+def observation_layout(
+    task: TaskSpec, options: TaskOptions | None = None
+) -> tuple[tuple[slice, str, str], ...]:
+    """(columns, meaning, frame and unit) of each block of ``task``'s observation, with
+    the blocks its ``options`` append (observe_integral)."""
+    blocks = F.OBS_LAYOUT + task.extra_obs_layout
+    if options is not None and options.observe_integral:
+        blocks += EI.layout(F.OBS_SIZE + task.extra_obs)
+    return blocks
 
 
-def layout_text(task_name: str) -> str:
+def observation_size(task: TaskSpec, options: TaskOptions | None = None) -> int:
+    """How many values ``task``'s observation has under ``options``."""
+    return observation_layout(task, options)[-1][0].stop
+
+
+def trained_options(config: TrainConfig) -> TaskOptions:
+    """The task options a policy was trained with, less its start noise (init_*)."""
+    return TaskOptions.from_kwargs(
+        **{k: v for k, v in config.task_options.items() if not k.startswith("init_")}
+    )
+
+
+def layout_text(task_name: str, options: TaskOptions | None = None) -> str:
     """One line: ``[0:3] position ... (world ENU, m); ...`` (for error messages)."""
-    task = TASKS[task_name]
-    blocks = observation_layout(task)
+    blocks = observation_layout(TASKS[task_name], options)
     return "; ".join(f"[{s.start}:{s.stop}] {meaning} ({unit})" for s, meaning, unit in blocks)
 
 
@@ -62,12 +80,10 @@ def _hidden(columns: slice, options: TaskOptions) -> str:
 def build_contract(config: TrainConfig, checkpoint: Path, act_size: int) -> dict[str, Any]:
     """The contract of the policy in ``checkpoint`` (trained with ``config``)."""
     task = TASKS[config.task]
-    options = TaskOptions.from_kwargs(
-        **{k: v for k, v in config.task_options.items() if not k.startswith("init_")}
-    )
+    options = trained_options(config)
     airframe = get_airframe(options.airframe)  # type: ignore[arg-type]
     hover, top = airframe.hover_rotor_speed, airframe.max_rotor_speed
-    obs_size = F.OBS_SIZE + task.extra_obs
+    obs_size = observation_size(task, options)
     return {
         "format": FORMAT,
         "task": {
@@ -107,7 +123,7 @@ def build_contract(config: TrainConfig, checkpoint: Path, act_size: int) -> dict
                     "meaning": meaning + _hidden(s, options),
                     "frame_unit": unit,
                 }
-                for s, meaning, unit in observation_layout(task)
+                for s, meaning, unit in observation_layout(task, options)
             ],
         },
         "action": {

@@ -20,13 +20,18 @@ import numpy as np
 
 from policies import checkpoint
 from policies.config import STARTS, TrainConfig
-from policies.export.contract import FORMAT, contract_path, layout_text
+from policies.export.contract import (
+    FORMAT,
+    contract_path,
+    layout_text,
+    observation_size,
+    trained_options,
+)
 from policies.export.to_c import parse_weights, render
 from policies.export.to_onnx import METADATA_KEY
 from policies.networks import DeterministicPolicy
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS
-from quadsitl.tasks import features as F
 
 # The shared library's entry points around the header's policy_forward.
 C_DRIVER = """#include "policy.h"
@@ -183,11 +188,12 @@ def load_policy(
     )
     if config.task not in TASKS:
         raise ValueError(f"{path} flies {config.task!r}, not a quadsitl task")
-    expected = F.OBS_SIZE + TASKS[config.task].extra_obs
+    options = trained_options(config)
+    expected = observation_size(TASKS[config.task], options)
     if policy.obs_size != expected:
         raise ValueError(
             f"{path} takes {policy.obs_size} observations; the {config.task} task gives "
-            f"{expected}: {layout_text(config.task)}"
+            f"{expected}: {layout_text(config.task, options)}"
         )
     if policy.act_size != L.N_ROTORS:
         raise ValueError(f"{path} gives {policy.act_size} actions; the vehicle takes {L.N_ROTORS}")

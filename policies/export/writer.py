@@ -12,12 +12,17 @@ import json
 from pathlib import Path
 
 from policies import checkpoint
-from policies.export.contract import build_contract, contract_path
+from policies.export.contract import (
+    build_contract,
+    contract_path,
+    layout_text,
+    observation_size,
+    trained_options,
+)
 from policies.export.to_c import c_header
 from policies.export.to_onnx import onnx_bytes
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS
-from quadsitl.tasks import features as F
 
 SUFFIXES = {"onnx": ".onnx", "c": ".h"}  # format: the exported file's suffix
 FORMATS = tuple(SUFFIXES)
@@ -37,11 +42,13 @@ def export(source: str | Path, fmt: str, output: str | Path | None = None) -> li
             f"{source} was trained on {config.task}, not a quadsitl task: its observation "
             "and action have no quadsitl contract to export"
         )
-    expected = F.OBS_SIZE + TASKS[config.task].extra_obs
+    options = trained_options(config)
+    expected = observation_size(TASKS[config.task], options)
     if net.obs_size != expected or net.act_size != L.N_ROTORS:
         raise ValueError(
             f"{source} maps {net.obs_size} observations to {net.act_size} actions; the "
-            f"{config.task} task has {expected} and {L.N_ROTORS}"
+            f"{config.task} task has {expected} and {L.N_ROTORS} "
+            f"({layout_text(config.task, options)})"
         )
     contract = build_contract(config, source, net.act_size)
     if fmt == "onnx":

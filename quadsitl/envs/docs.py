@@ -44,9 +44,11 @@ or (low, high) drawn per episode), ``randomize`` (True: airframe, wind and delay
 episode; docs/tasks.md), ``airframe_scale`` (``{{"mass": 1.3}}``: exact scales),
 ``wind`` (a Wind or ``{{"speed": 6, "from_deg": 270, "turbulence": "moderate"}}``),
 ``sensor_noise`` (0: exact observations; 1: as the sensors measure them),
-``ground_effect`` (True: rotor thrust grows near the ground) and ``faults``
+``ground_effect`` (True: rotor thrust grows near the ground), ``faults``
 (``{{"motor": 2, "efficiency": 0.6, "at": 1.0}}``: a motor that loses thrust during every
-episode). ``render_mode``: None, or "rerun" to log every episode to a
+episode), ``observe_position`` (False: columns 0–2 read 0) and ``observe_integral``
+(True: three more columns, the clamped integral of columns 19–21 over the episode,
+m·s; docs/tasks.md). ``render_mode``: None, or "rerun" to log every episode to a
 Rerun viewer (or to the .rrd file ``rerun_save``).
 
 Episode-end ``info`` keys: ``outcome`` (timed_out, out_of_bounds, flipped, landed,

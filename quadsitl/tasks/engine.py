@@ -21,6 +21,7 @@ from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.sensors.observation import ObservationNoise
 from quadsitl.physics.wind import Wind
+from quadsitl.tasks import error_integral as EI
 from quadsitl.tasks import faults as FT
 from quadsitl.tasks import features as F
 from quadsitl.tasks import recording as R
@@ -86,7 +87,9 @@ class TaskEngine:
         self.hover_speed = self.airframe.hover_rotor_speed
         self.action_low = -self.hover_speed / options.beta
         self.action_high = (self.airframe.max_rotor_speed - self.hover_speed) / options.beta
-        self.obs_size = F.OBS_SIZE + task.extra_obs
+        self.obs_size = F.OBS_SIZE + task.extra_obs + (EI.SIZE if options.observe_integral else 0)
+        # The option observe_integral's last observation values (error_integral.py).
+        self.integral = EI.ErrorIntegral(num_envs, options.control_period)
         self.obs, self.dist, self.tilt = F.empty_buffers(num_envs, self.obs_size)
         self.prev_dist = np.zeros_like(self.dist)
         self.goal = np.zeros((num_envs, 6))
@@ -228,6 +231,7 @@ class TaskEngine:
         self.time_within[rows] = 0.0
         self.reach_time[rows] = math.nan
         self.episode_return[rows] = 0.0
+        self.integral.reset(rows)
         if self.observation_noise is not None:
             self.observation_noise.reset(rows, [self.rngs[i] for i in rows])
         if self.sensor_faults is not None:
@@ -254,6 +258,8 @@ class TaskEngine:
         if self.observation_noise is not None:
             self._observe_noisy(np.arange(self.n) if rows is None else rows, 0.0)
         F.hide_position(self.obs, self.options.observe_position)
+        if self.options.observe_integral:
+            self.integral.write(self.obs, rows)
 
     def _observe_noisy(self, rows: NDArray[np.int64], elapsed: float) -> None:
         """Overwrite the observation of ``rows`` with that of their sensed state, the
@@ -333,6 +339,8 @@ class TaskEngine:
         if self.delay is not None:
             self.delay.delay_observations(self.obs, self.steps)
         F.hide_position(self.obs, self.options.observe_position)
+        if self.options.observe_integral:
+            self.integral.accumulate(self.obs)
         self.recorded = close_step(self._end)
         return self.reward, self.terminated, self.truncated
 

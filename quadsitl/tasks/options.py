@@ -84,6 +84,11 @@ class TaskOptions:
         observe_position: False: the observation's position slots (0-2) read 0, so a
             policy sees where it is only through its offsets to the goal (the same
             flight wherever it starts). True: the paper's observation.
+        observe_integral: True: three more observation values at the end, the integral
+            of the observed goal offset over the episode (m·s, world ENU, clamped;
+            :mod:`quadsitl.tasks.error_integral`): integral action, so that a steady
+            wind or a heavier airframe leaves no steady position error. False: the
+            paper's observation.
     """
 
     airframe: object = "paper"
@@ -104,6 +109,7 @@ class TaskOptions:
     ground_effect: bool = False
     faults: Any = None
     observe_position: bool = True
+    observe_integral: bool = False
 
     @classmethod
     def from_kwargs(cls, **options: object) -> TaskOptions:
@@ -149,10 +155,9 @@ class TaskOptions:
         object.__setattr__(self, "wind", self._weather())
         if not isinstance(self.ground_effect, bool):
             raise ValueError(f"ground_effect must be True or False, got {self.ground_effect!r}")
-        if not isinstance(self.observe_position, bool):
-            raise ValueError(
-                f"observe_position must be True or False, got {self.observe_position!r}"
-            )
+        for name in ("observe_position", "observe_integral"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         object.__setattr__(self, "faults", FT.parse_faults(self.faults))
         object.__setattr__(self, "delay", Delay.parse(self.delay))
         object.__setattr__(self, "randomize", self._randomization())
