@@ -85,7 +85,7 @@ class TaskOptions:
             policy sees where it is only through its offsets to the goal (the same
             flight wherever it starts). True: the paper's observation.
         observe_integral: True: three more observation values at the end, the integral
-            of the observed goal offset over the episode (m·s, world ENU, clamped;
+            of the observed goal offset near the goal (m·s, world ENU, clamped;
             :mod:`quadsitl.tasks.error_integral`): integral action, so that a steady
             wind or a heavier airframe leaves no steady position error. False: the
             paper's observation.
