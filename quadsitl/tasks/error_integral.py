@@ -7,16 +7,17 @@ cures this with its integral term; this gives a policy the same term as three mo
 observation values, appended after the task's own:
 
     I_0 = 0 at the episode's first observation,
-    I_k = clip(I_{k-1} + e_k · T, −LIMIT, +LIMIT)   per axis, if ‖e_k‖ ≤ WITHIN,
+    I_k = clip(I_{k-1} + e_k · T, −LIMIT, +LIMIT)   if |e_k| ≤ WITHIN,
     I_k = I_{k-1}                                   otherwise,
 
-at every env step k, where e_k is the observation's own goal offset (columns 19–21,
+per axis, at every env step k, where e_k is the observation's own goal offset (columns 19–21,
 goal − position, world ENU, m: noisy and delayed when the observation is) and T the
 control period. It is a function of the observations alone, so a flight controller can
 compute it from what it feeds the policy (the exported contract says how). Integrating
 only near the goal ("conditional integration") and the clamp keep it from winding up
 on the way to a far goal: what it holds on arrival is what the weather and the airframe
-asked for near the goal, not the length of the flight.
+asked for near the goal, not the length of the flight. Each axis is its own: a landing
+integrates the sideways drift while it is above the pad and still high.
 """
 
 from __future__ import annotations
@@ -28,12 +29,12 @@ from quadsitl.tasks import features as F
 
 SIZE = 3  # one value per axis
 LIMIT = 2.0  # m·s, per axis
-WITHIN = 0.5  # m: integrate only while the observed goal offset is at most this long
+WITHIN = 0.5  # m: an axis integrates only while its observed goal offset is within this
 MEANING = (
     "∫ (goal − position) dt over the episode: 0 at its first observation, then the "
     f"running sum of columns {F.OBS_GOAL_POS.start}–{F.OBS_GOAL_POS.stop - 1} × the control "
-    f"period, added only while their length is ≤ {WITHIN:g} m, each axis clamped to "
-    f"±{LIMIT:g}"
+    f"period, per axis, added only while that axis's offset is within ±{WITHIN:g} m, "
+    f"clamped to ±{LIMIT:g}"
 )
 FRAME_UNIT = "world ENU, m·s"
 
@@ -66,10 +67,9 @@ class ErrorIntegral:
             obs[rows, -SIZE:] = self.value[rows]
 
     def accumulate(self, obs: NDArray[np.float32]) -> None:
-        """One env step: add each observation's goal offset × T where it is at most
-        WITHIN long, clamp, write back."""
+        """One env step: add each observation's goal offset × T on the axes where it
+        is within ±WITHIN, clamp, write back."""
         offset = obs[:, F.OBS_GOAL_POS].astype(np.float64)
-        near = np.einsum("ij,ij->i", offset, offset) <= WITHIN * WITHIN
-        self.value += offset * (self.period * near)[:, None]
+        self.value += np.where(np.abs(offset) <= WITHIN, offset * self.period, 0.0)
         np.clip(self.value, -LIMIT, LIMIT, out=self.value)
         obs[:, -SIZE:] = self.value
