@@ -51,6 +51,7 @@ bench: venv
 	$(BIN)/python benchmarks/replay.py
 	$(BIN)/python benchmarks/export.py
 	$(BIN)/python benchmarks/robustness.py
+	$(BIN)/python benchmarks/reference_hover.py
 
 bench-training: venv
 	$(BIN)/python benchmarks/training.py
