@@ -92,9 +92,10 @@ def test_paper_preset_is_table_one():
 
 
 def test_robust_preset_is_fast_in_a_randomised_world(tmp_path):
-    """The robust preset: the fast learner, twice the budget, and a world drawn per
-    episode (airframe, wind up to 8 m/s with up to moderate turbulence, 0-30 ms delays)
-    that a short real run flies and its checkpoint carries."""
+    """The robust preset: the fast learner, twice the budget, a world drawn per episode
+    (airframe, wind up to 8 m/s with up to moderate turbulence, 0-30 ms delays) and the
+    goal offset's integral observed, which a short real run flies and its checkpoint
+    carries."""
     fast, robust = make_config("land", "ppo", "fast"), make_config("land", "ppo", "robust")
     assert robust.total_steps == 2 * fast.total_steps
     assert {**robust.to_dict(), "preset": "fast", "total_steps": fast.total_steps} == {
@@ -104,13 +105,14 @@ def test_robust_preset_is_fast_in_a_randomised_world(tmp_path):
     drawn = robust.task_options["randomize"]
     assert drawn["wind"]["turbulence"] == [None, "light", "moderate"]
     assert set(fast.task_options) < set(robust.task_options)  # the task's start kept
+    assert robust.task_options["observe_integral"] is True  # integral action
     with pytest.raises(ValueError, match="choose one of paper, fast, robust"):
         make_config("hover", "ppo", "sturdy")
     torch.set_num_threads(1)
     short = make_config("hover", "ppo", "robust", total_steps=4_096, checkpoint_every=1)
     train(short, tmp_path, progress=False)
     net, loaded, _ = checkpoint.load(tmp_path / "checkpoints" / "last.pt")
-    assert loaded == short
+    assert loaded == short and net.obs_size == 34 + 3  # the integral observed
     assert sum(evaluate(net, loaded, episodes=4).outcomes.values()) == 4  # in that world
     env = make_vector_env("hover", 16, "inprocess", **loaded.task_options)
     try:
