@@ -9,6 +9,8 @@ the policy learned), re-anchored as each carrot is reached. The policy always fa
 task's heading (east, yaw 0); setpoint yaw is ignored. Without a position setpoint
 (velocity or attitude control) it holds the position where that began. Landing (the
 final descent of LAND, RTL and mission land items) is flown by the cascaded controller.
+A policy trained with ``observe_integral`` gets its integral from the autopilot, kept
+as the env keeps it (quadsitl/tasks/error_integral.py).
 """
 
 from __future__ import annotations
@@ -57,7 +59,9 @@ class PolicyAutopilot:
         self.observe_position = options.observe_position  # as the policy was trained
         self.observe_integral = options.observe_integral
         # Kept across setpoints, as a PID's integral term is (it holds what the wind and
-        # the airframe need); zero again at reset and while idle.
+        # the airframe need); summed only while the goal shown is the target itself (a
+        # carrot on the way would wind it up, always within reach); zero again at reset
+        # and while idle.
         self.integral = EI.ErrorIntegral(1, options.control_period)
         self.params = airframe.to_params(-np.inf)[None, :]
         self.obs, self.dist, self.tilt = F.empty_buffers(1, expected)
@@ -116,8 +120,11 @@ class PolicyAutopilot:
         self.goal[0, F.GOAL_POS] = goal - origin
         F.observe(local, self.params, self.goal, self.obs, self.dist, self.tilt)
         F.hide_position(self.obs, self.observe_position)
-        if self.observe_integral:
-            self.integral.accumulate(self.obs)
+        if self.observe_integral:  # summed at the target itself, held towards carrots
+            if np.array_equal(goal, self.target):
+                self.integral.accumulate(self.obs)
+            else:
+                self.integral.write(self.obs)
         action = self.net.mean_action(self.obs)[0].astype(np.float64)  # as the envs step it
         omega = commanded_rotor_speed(self.airframe.hover_rotor_speed, self.beta, action)
         self.command = np.clip(omega, 0.0, self.airframe.max_rotor_speed)

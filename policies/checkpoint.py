@@ -34,6 +34,15 @@ def shipped_checkpoints() -> dict[str, Path]:
     return {task: SHIPPED / f"{task}.pt" for task in TASKS if (SHIPPED / f"{task}.pt").is_file()}
 
 
+def shipped_robust_checkpoints() -> dict[str, Path]:
+    """Task name -> its shipped robust policy (``policies/checkpoints/robust/TASK.pt``,
+    the robust preset's), for the tasks that have one."""
+    from quadsitl.tasks import TASKS
+
+    folder = SHIPPED / "robust"
+    return {task: folder / f"{task}.pt" for task in TASKS if (folder / f"{task}.pt").is_file()}
+
+
 def save(path: str | Path, net: ActorCritic, config: TrainConfig, **extra: Any) -> None:
     """Write atomically (a crash mid-write never leaves a broken checkpoint). ``extra``:
     plain data only (numbers, strings, tensors, lists and dicts of them)."""

@@ -167,3 +167,31 @@ def test_autopilot_keeps_the_integral_as_the_env_does(tmp_path):
     assert not pilot.integral.value.any()
     with pytest.raises(ValueError, match=r"37: .*∫ \(goal − position\) dt"):
         PolicyAutopilot(ActorCritic(F.OBS_SIZE, 4), PAPER, TaskOptions(observe_integral=True))
+
+
+def test_robust_hover_autopilot_takes_off_and_holds_in_a_steady_wind_the_still_air_one_cannot():
+    """The shipped hover policies as the simulator's autopilot, taking off to 1 m in a
+    steady 6 m/s wind (SIM_WIND_SPD): the still-air policy is held downwind and low,
+    short of its first carrot; the robust one, whose integral the autopilot keeps,
+    climbs and holds the setpoint."""
+    from quadsitl.vehicle.vehicle import Vehicle
+
+    torch.set_num_threads(1)
+    setpoint = np.array([0.0, 0.0, 1.0 + PAPER.gear_height])
+    offsets = {}
+    for name in ("hover.pt", "robust/hover.pt"):
+        path = checkpoint.SHIPPED / name
+        vehicle = Vehicle(autopilot=PolicyAutopilot.from_checkpoint(str(path), PAPER))
+        vehicle.set_param("SIM_WIND_SPD", 6.0)
+        vehicle.set_param("SIM_WIND_DIR", 270.0)  # from the west: pushes east
+        assert vehicle.arm().ok and vehicle.takeoff(1.0).ok
+        for _ in range(5_000):  # 20 s at the vehicle's 4 ms control period
+            vehicle.step()
+        track = []
+        for _ in range(1_250):  # 5 s more: where it holds
+            vehicle.step()
+            track.append(vehicle.position.copy())
+        assert not vehicle.crashed
+        offsets[name] = np.abs(np.array(track) - setpoint).max(axis=0)  # per axis, m
+    assert offsets["robust/hover.pt"].max() < 0.1, offsets
+    assert offsets["hover.pt"][0] > 0.2 and offsets["hover.pt"][2] > 0.5, offsets

@@ -51,6 +51,16 @@ def test_pytorch_onnxruntime_and_c_agree_on_10000_recorded_observations(task, tm
     assert_three_forms_agree(CHECKPOINTS / f"{task}.pt", tmp_path)
 
 
+@pytest.mark.parametrize("task", list(checkpoint.shipped_robust_checkpoints()))
+def test_robust_policies_exports_agree_in_their_randomised_world(task, tmp_path):
+    """The robust checkpoints observe the integral of their goal offset (37 values) and
+    are recorded flying the world they were trained in: wind, delay, spread airframes."""
+    source = checkpoint.shipped_robust_checkpoints()[task]
+    net, config, _ = checkpoint.load(source)
+    assert net.obs_size == F.OBS_SIZE + 3 and config.task_options["observe_integral"]
+    assert_three_forms_agree(source, tmp_path)
+
+
 @pytest.mark.parametrize("algo, preset", [("gae", "fast"), ("trpo", "fast"), ("ppo", "paper")])
 def test_every_algorithm_and_preset_exports_the_same_function(algo, preset, tmp_path):
     """TRPO's separate critic, and the paper preset without observation normalisation."""
