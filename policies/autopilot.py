@@ -58,10 +58,9 @@ class PolicyAutopilot:
         self.beta = options.beta
         self.observe_position = options.observe_position  # as the policy was trained
         self.observe_integral = options.observe_integral
-        # Kept across setpoints, as a PID's integral term is (it holds what the wind and
-        # the airframe need); summed only while the goal shown is the target itself (a
-        # carrot on the way would wind it up, always within reach); zero again at reset
-        # and while idle.
+        # Kept across setpoints and carrots, as a PID's integral term is (it holds what
+        # the wind and the airframe need: held while climbing to a carrot, a steady wind
+        # would push the vehicle off the line); zero again at reset and while idle.
         self.integral = EI.ErrorIntegral(1, options.control_period)
         self.params = airframe.to_params(-np.inf)[None, :]
         self.obs, self.dist, self.tilt = F.empty_buffers(1, expected)
@@ -120,11 +119,8 @@ class PolicyAutopilot:
         self.goal[0, F.GOAL_POS] = goal - origin
         F.observe(local, self.params, self.goal, self.obs, self.dist, self.tilt)
         F.hide_position(self.obs, self.observe_position)
-        if self.observe_integral:  # summed at the target itself, held towards carrots
-            if np.array_equal(goal, self.target):
-                self.integral.accumulate(self.obs)
-            else:
-                self.integral.write(self.obs)
+        if self.observe_integral:
+            self.integral.accumulate(self.obs)
         action = self.net.mean_action(self.obs)[0].astype(np.float64)  # as the envs step it
         omega = commanded_rotor_speed(self.airframe.hover_rotor_speed, self.beta, action)
         self.command = np.clip(omega, 0.0, self.airframe.max_rotor_speed)

@@ -106,6 +106,10 @@ def test_robust_preset_is_fast_in_a_randomised_world(tmp_path):
     assert drawn["wind"]["turbulence"] == [None, "light", "moderate"]
     assert set(fast.task_options) < set(robust.task_options)  # the task's start kept
     assert robust.task_options["observe_integral"] is True  # integral action
+    hover = make_config("hover", "ppo", "robust")  # its own learner and weather
+    assert (hover.hidden, hover.entropy_coef, hover.total_steps) == (256, 0.003, 6_000_000)
+    assert hover.task_options["randomize"]["wind"]["speed"] == [2.0, 8.0]
+    assert "wind" not in make_config("hover", "ppo", "fast").task_options  # untouched
     with pytest.raises(ValueError, match="choose one of paper, fast, robust"):
         make_config("hover", "ppo", "sturdy")
     torch.set_num_threads(1)
