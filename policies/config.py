@@ -236,7 +236,7 @@ FAST_STEPS = {name: t.train_steps for name, t in TASKS.items()}
 # spread at its default, a mean wind of 0-8 m/s from any direction with no, light or
 # moderate turbulence, and 0-30 ms of observation and of actuation delay. Its policies
 # also observe the integral of their goal offset (observe_integral): integral action,
-# by measurement worth 46 % → 58 % on hover's target rung (docs/results.md).
+# by measurement worth 46 % → 69 % on hover's target rung (docs/results.md).
 ROBUST_WORLD: dict[str, Any] = {
     "randomize": {
         **dict.fromkeys(DEFAULT_AIRFRAME_SPREAD, "default"),
