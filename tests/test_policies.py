@@ -96,7 +96,8 @@ def test_robust_preset_is_fast_in_a_randomised_world(tmp_path):
     (airframe, wind up to 8 m/s with up to moderate turbulence, 0-30 ms delays) and the
     goal offset's integral observed, which a short real run flies and its checkpoint
     carries."""
-    fast, robust = make_config("land", "ppo", "fast"), make_config("land", "ppo", "robust")
+    fast = make_config("static_waypoint", "ppo", "fast")
+    robust = make_config("static_waypoint", "ppo", "robust")
     assert robust.total_steps == 2 * fast.total_steps
     assert {**robust.to_dict(), "preset": "fast", "total_steps": fast.total_steps} == {
         **fast.to_dict(),
@@ -109,6 +110,11 @@ def test_robust_preset_is_fast_in_a_randomised_world(tmp_path):
     hover = make_config("hover", "ppo", "robust")  # its own learner and weather
     assert (hover.hidden, hover.entropy_coef, hover.total_steps) == (256, 0.003, 6_000_000)
     assert hover.task_options["randomize"]["wind"]["speed"] == [2.0, 8.0]
+    land = make_config("land", "ppo", "robust")  # the same recipe, its own budget
+    assert (land.hidden, land.entropy_coef, land.total_steps) == (256, 0.003, 12_000_000)
+    harder = ["light", "moderate", "moderate"]
+    assert land.task_options["randomize"]["wind"]["turbulence"] == harder
+    assert make_config("static_waypoint", "ppo", "robust").hidden == 128  # untouched
     assert "wind" not in make_config("hover", "ppo", "fast").task_options  # untouched
     with pytest.raises(ValueError, match="choose one of paper, fast, robust"):
         make_config("hover", "ppo", "sturdy")
