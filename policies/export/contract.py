@@ -20,9 +20,8 @@ from quadsitl.frames import __doc__ as FRAMES_DOC
 from quadsitl.physics import get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS, TaskOptions
-from quadsitl.tasks import error_integral as EI
 from quadsitl.tasks import features as F
-from quadsitl.tasks.spec import TaskSpec
+from quadsitl.tasks.observation_layout import observation_layout, observation_size
 
 FORMAT = "quadsitl-policy-contract-1"
 ONNX_INPUT, ONNX_OUTPUT = "obs", "action"  # tensor names of the ONNX graph
@@ -39,22 +38,6 @@ def contract_path(exported: Path) -> Path:
 
 def sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-def observation_layout(
-    task: TaskSpec, options: TaskOptions | None = None
-) -> tuple[tuple[slice, str, str], ...]:
-    """(columns, meaning, frame and unit) of each block of ``task``'s observation, with
-    the blocks its ``options`` append (observe_integral)."""
-    blocks = F.OBS_LAYOUT + task.extra_obs_layout
-    if options is not None and options.observe_integral:
-        blocks += EI.layout(F.OBS_SIZE + task.extra_obs)
-    return blocks
-
-
-def observation_size(task: TaskSpec, options: TaskOptions | None = None) -> int:
-    """How many values ``task``'s observation has under ``options``."""
-    return observation_layout(task, options)[-1][0].stop
 
 
 def trained_options(config: TrainConfig) -> TaskOptions:

@@ -29,6 +29,7 @@ from quadsitl.tasks import spec as S
 from quadsitl.tasks.batch import StepBatch
 from quadsitl.tasks.delay import Delay, DelayLine
 from quadsitl.tasks.fleet_like import FleetLike
+from quadsitl.tasks.observation_layout import observation_size
 from quadsitl.tasks.options import TaskOptions
 from quadsitl.tasks.randomization import Randomization, airframe_scale_row
 from quadsitl.tasks.sensor_faults import SensorFaults
@@ -87,9 +88,11 @@ class TaskEngine:
         self.hover_speed = self.airframe.hover_rotor_speed
         self.action_low = -self.hover_speed / options.beta
         self.action_high = (self.airframe.max_rotor_speed - self.hover_speed) / options.beta
-        self.obs_size = F.OBS_SIZE + task.extra_obs + (EI.SIZE if options.observe_integral else 0)
+        self.obs_size = observation_size(task, options)
         # The option observe_integral's last observation values (error_integral.py).
-        self.integral = EI.ErrorIntegral(num_envs, options.control_period)
+        self.integral = (
+            EI.ErrorIntegral(num_envs, options.control_period) if options.observe_integral else None
+        )
         self.obs, self.dist, self.tilt = F.empty_buffers(num_envs, self.obs_size)
         self.prev_dist = np.zeros_like(self.dist)
         self.goal = np.zeros((num_envs, 6))
@@ -231,7 +234,8 @@ class TaskEngine:
         self.time_within[rows] = 0.0
         self.reach_time[rows] = math.nan
         self.episode_return[rows] = 0.0
-        self.integral.reset(rows)
+        if self.integral is not None:
+            self.integral.reset(rows)
         if self.observation_noise is not None:
             self.observation_noise.reset(rows, [self.rngs[i] for i in rows])
         if self.sensor_faults is not None:
@@ -258,7 +262,7 @@ class TaskEngine:
         if self.observation_noise is not None:
             self._observe_noisy(np.arange(self.n) if rows is None else rows, 0.0)
         F.hide_position(self.obs, self.options.observe_position)
-        if self.options.observe_integral:
+        if self.integral is not None:
             self.integral.write(self.obs, rows)
 
     def _observe_noisy(self, rows: NDArray[np.int64], elapsed: float) -> None:
@@ -339,7 +343,7 @@ class TaskEngine:
         if self.delay is not None:
             self.delay.delay_observations(self.obs, self.steps)
         F.hide_position(self.obs, self.options.observe_position)
-        if self.options.observe_integral:
+        if self.integral is not None:
             self.integral.accumulate(self.obs)
         self.recorded = close_step(self._end)
         return self.reward, self.terminated, self.truncated
