@@ -51,7 +51,7 @@ bench: venv
 	$(BIN)/python benchmarks/replay.py
 	$(BIN)/python benchmarks/export.py
 	$(BIN)/python benchmarks/robustness.py
-	$(BIN)/python benchmarks/reference_hover.py
+	$(BIN)/python benchmarks/reference_pid.py
 
 bench-training: venv
 	$(BIN)/python benchmarks/training.py

@@ -1,12 +1,15 @@
 """What a classical controller achieves where the robust policies are measured: the
 built-in cascaded PID controller (quadsitl/vehicle/controller.py, the simulator's own
-flight software) flying the hover task on the robustness ladder's rungs.
+flight software) flying the hover and random waypoint tasks on the robustness ladder's
+rungs, its setpoint the task's goal.
 
 It is given every advantage a policy lacks: the true state (no observation delay, no
 noise), at 100 Hz instead of the policies' 20 Hz, with its position, velocity and
 attitude loops and their integral terms. Actuation delay, where a rung has it, is
-applied as the env applies it. Each rung: 100 episodes from hover's evaluation starts
-(±0.3 m, ±0.2 rad), seeds 0-99; success as the task's: within 0.1 m at the end of 5 s.
+applied as the env applies it. Each rung: 100 episodes from the task's evaluation starts
+(hover: ±0.3 m, ±0.2 rad; random waypoint: anywhere in a 3 m box, the goal 1-2.5 m away
+from there), seeds 0-99; success as the task's: within 0.1 m at the end (hover 5 s,
+random waypoint 3.5 s).
 
 Prints one line per rung: success, median and 90th-percentile final position error.
 """
@@ -29,12 +32,19 @@ from quadsitl.vehicle.controller import CascadedController, Setpoint
 
 EPISODES = 100
 RATE_PERIOD = 0.01  # s: the controller's period (the physics step)
-RUNGS = (("turbulence", "moderate"), ("wind", "6 m/s"), ("delay", "20 ms"), ("target", None))
+RUNGS = (
+    ("hover", "turbulence", "moderate"),
+    ("hover", "wind", "6 m/s"),
+    ("hover", "delay", "20 ms"),
+    ("hover", "target", None),
+    ("random_waypoint", "target", "none"),
+    ("random_waypoint", "target", None),
+)
 
 
-def fly(options: dict, episodes: int = EPISODES) -> tuple[float, float, float]:
+def fly(task: str, options: dict, episodes: int = EPISODES) -> tuple[float, float, float]:
     """Success rate, median and 90th-percentile final error of ``episodes`` episodes."""
-    env = gym.make(task_env_id("hover"), control_period=RATE_PERIOD, **STARTS["hover"], **options)
+    env = gym.make(task_env_id(task), control_period=RATE_PERIOD, **STARTS[task], **options)
     engine = env.unwrapped.engine  # type: ignore[attr-defined]
     controller = CascadedController(PAPER)
     beta = engine.options.beta
@@ -58,15 +68,15 @@ def fly(options: dict, episodes: int = EPISODES) -> tuple[float, float, float]:
 
 def main() -> None:
     pin_to_one_core()
-    for axis, label in RUNGS:
+    for task, axis, label in RUNGS:
         rung = (
             LADDER[axis][1][-1]
             if label is None
             else next(r for r in LADDER[axis][1] if r.label == label)
         )
-        rate, median, p90 = fly(rung.options)
+        rate, median, p90 = fly(task, rung.options)
         print(
-            f"cascaded PID, hover, {axis} {rung.label}: success {rate:.0%}, final error "
+            f"cascaded PID, {task}, {axis} {rung.label}: success {rate:.0%}, final error "
             f"median {median:.3f} m, 90th percentile {p90:.3f} m",
             flush=True,
         )
