@@ -62,6 +62,13 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
     )
     train.add_argument("--num-envs", type=_count(1), help="parallel envs (default: the preset's)")
     train.add_argument("--runs", default="runs", help="folder of run folders (default: runs)")
+    train.add_argument(
+        "--init",
+        metavar="CHECKPOINT",
+        help="start from CHECKPOINT's weights instead of random ones (fine-tuning, e.g. a "
+        "still-air policy in the robust preset's weather): same task, algorithm family and "
+        "hidden size; the run may observe more (observe_integral); see docs/training.md",
+    )
     existing = train.add_mutually_exclusive_group()
     existing.add_argument(
         "--resume",

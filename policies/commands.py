@@ -110,10 +110,15 @@ def _train(args: argparse.Namespace) -> int:
         ray=args.ray,
         total_steps=args.steps,
         num_envs=args.num_envs,
+        init_from=args.init,
     )
     run_dir = Path(args.runs) / config.run_name
     mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
     check_writable(run_dir)  # before anything starts (train checks too, for other callers)
+    if config.init_from:  # a missing or foreign file, before the first line (train checks the fit)
+        from policies import checkpoint
+
+        checkpoint.load(config.init_from)
     if config.ray:
         from quadsitl.envs.ray_simulators import ray_target
 

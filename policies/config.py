@@ -68,6 +68,7 @@ class TrainConfig:
     eval_every: int = 0  # iterations between deterministic evaluations (0: none)
     eval_episodes: int = 50  # episodes of each such evaluation (fixed starts)
     task_options: dict[str, Any] = field(default_factory=dict)  # e.g. init_position_noise
+    init_from: str = ""  # a checkpoint whose weights the run starts from (policies/fine_tune.py)
 
     def __post_init__(self) -> None:
         _check(self)
@@ -143,7 +144,7 @@ _BOOLS = ("anneal_lr", "normalize_obs", "normalize_advantages")
 def _check(config: TrainConfig) -> None:
     """A clear ValueError for any value a run cannot use (types included: a checkpoint's
     config comes from a file)."""
-    for name in ("task", "algo", "preset", "backend", "ray"):
+    for name in ("task", "algo", "preset", "backend", "ray", "init_from"):
         if not isinstance(getattr(config, name), str):
             raise ValueError(f"{name} must be a string, got {getattr(config, name)!r}")
     check_task(config.task)

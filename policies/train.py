@@ -35,6 +35,7 @@ from policies import checkpoint
 from policies.algos.base import Algorithm, algorithm_class
 from policies.config import TrainConfig
 from policies.evaluate import VALIDATION_SEED, evaluate
+from policies.fine_tune import start_from
 from policies.rollout import SEED_SPACING, explained_variance, make_vector_env
 
 COLUMNS = (
@@ -135,6 +136,8 @@ def train(
         obs_size = int(np.prod(env.single_observation_space.shape or (1,)))
         act_size = int(np.prod(env.single_action_space.shape or (1,)))
         algo = algorithm_class(config.algo)(config, obs_size, act_size)
+        if config.init_from and start.net_state is None:  # a new run, not a resumed one
+            start_from(algo.net, config.init_from, config)
         algo.start(env, seed * SEED_SPACING)
         _restore(algo, start)
         if mode == "overwrite":
