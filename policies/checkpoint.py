@@ -18,12 +18,12 @@ from typing import Any
 
 import torch
 
-from policies.config import TrainConfig
+from policies.config import SHIPPED_CHECKPOINTS, TrainConfig
 from policies.networks import ActorCritic, DeterministicPolicy
 
 FORMAT = "quadsitl-policy-1"
 MAX_SIZE = 1_000_000  # observations, actions: anything larger is not one of ours
-SHIPPED = Path(__file__).resolve().parent / "checkpoints"  # the trained policies, TASK.pt
+SHIPPED = SHIPPED_CHECKPOINTS  # the trained policies, TASK.pt
 
 
 def shipped_checkpoints() -> dict[str, Path]:

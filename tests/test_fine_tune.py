@@ -102,8 +102,16 @@ def test_training_from_a_checkpoint_starts_from_its_weights_and_records_it(tmp_p
     path, old = _saved(tmp_path, task="hover")
     # A learning rate too small to move anything: what the run saves is where it began.
     config = make_config(
-        "hover", "ppo", "fast", hidden=32, total_steps=2048, num_envs=8, steps_per_env=256,
-        learning_rate=1e-12, eval_every=0, init_from=str(path),
+        "hover",
+        "ppo",
+        "fast",
+        hidden=32,
+        total_steps=2048,
+        num_envs=8,
+        steps_per_env=256,
+        learning_rate=1e-12,
+        eval_every=0,
+        init_from=str(path),
     )
     train(config, tmp_path / "run", progress=False)
     net, saved, _ = checkpoint.load(tmp_path / "run" / "checkpoints" / "last.pt")
@@ -117,10 +125,35 @@ def test_training_from_a_checkpoint_starts_from_its_weights_and_records_it(tmp_p
 def test_train_init_from_a_missing_checkpoint_is_one_line_and_writes_nothing(tmp_path):
     runs = tmp_path / "runs"
     result = refused_here(
-        "train", "--task", "hover", "--algo", "ppo", "--preset", "fast", "--quiet",
-        "--steps", "8192", "--runs", str(runs), "--init", str(tmp_path / "missing.pt"),
+        "train",
+        "--task",
+        "hover",
+        "--algo",
+        "ppo",
+        "--preset",
+        "fast",
+        "--quiet",
+        "--steps",
+        "8192",
+        "--runs",
+        str(runs),
+        "--init",
+        str(tmp_path / "missing.pt"),
     )
     assert result.returncode == 2, result.stderr
     assert f"no checkpoint at {tmp_path / 'missing.pt'}" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
     assert not runs.exists() or not any(runs.iterdir())
+
+
+def test_robust_landing_starts_flying_as_the_shipped_still_air_landing_policy():
+    config = make_config("land", "ppo", "robust")
+    still_air, _, _ = checkpoint.load(config.init_from)
+    net = _fresh(config, OBS_SIZE + EI.SIZE)  # the robust preset observes the integral
+    start_from(net, config.init_from, config)
+    obs = torch.as_tensor(np.random.default_rng(3).normal(size=(16, OBS_SIZE)), dtype=torch.float32)
+    wider = torch.cat([obs, torch.ones(16, EI.SIZE)], 1)
+    with torch.no_grad():
+        assert np.allclose(
+            net.mean_action(wider.numpy()), still_air.mean_action(obs.numpy()), atol=1e-6
+        )
