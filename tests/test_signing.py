@@ -18,13 +18,16 @@ from tests.conftest import MotorSim
 
 mav = mavutil.mavlink
 PASSPHRASE = "correct horse battery staple"
+STARTUP_SECONDS = 90  # the longest a simulator may take to answer its first heartbeat
 
 
 def _connection(port: int, system: int, key: bytes | None, wait: bool = True) -> mavutil.mavfile:
     conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=system)
     if key is not None:
         conn.setup_signing(key, sign_outgoing=True)
-    deadline = time.monotonic() + 30
+    # A fresh checkout compiles the physics first: with a core kept busy and the other
+    # tests' processes beside it, the first heartbeat took over 30 s (CI, 2026-11-27).
+    deadline = time.monotonic() + STARTUP_SECONDS
     while time.monotonic() < deadline:  # until the vehicle (starting up) has heard us
         conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
         if not wait or conn.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5):
