@@ -257,7 +257,7 @@ ROBUST_STEPS_FACTOR = 2  # the fast budget twice: a world that varies takes long
 # Landing starts from the shipped still-air landing policy (policies/fine_tune.py), so
 # it keeps the fast preset's 128 units: from random weights (hover's recipe) robust
 # landing found the touchdown late (seeds 0 and 2, after 5.5 M and 4 M steps; then 94 %)
-# or not at all (seed 1: 0 % validation after 8 M steps; until then the policy hovers
+# or too late (seed 1: after 9.8 M of 12 M steps, 76 %; until then the policy hovers
 # about a metre above the pad until the episode times out, and a weather curriculum did
 # not change that). From the still-air policy it lands on every seed: 92 %, 83 %, 91 %,
 # 88 %, 88 % on the target rung for seeds 0-4 (docs/results.md).
