@@ -26,6 +26,7 @@ import torch
 
 from policies import checkpoint
 from policies.config import TrainConfig
+from policies.export.contract import trained_options
 from policies.networks import ActorCritic
 from quadsitl.tasks import TASKS
 from quadsitl.tasks.observation_layout import observation_layout
@@ -74,7 +75,7 @@ def _mismatch(
         return f"it has {old.act_size} actions, this run {net.act_size}"
     if config.task not in TASKS:  # another Gymnasium env: its observation as it is
         return "" if old.obs_size == net.obs_size else "its observation has another size"
-    old_options, options = _options(old_config), _options(config)
+    old_options, options = trained_options(old_config), trained_options(config)
     if old_options.observe_position != options.observe_position:
         return "one of the two observes its position and the other does not"
     old_blocks, new_blocks = _blocks(old_config.task, old_options), _blocks(config.task, options)
@@ -84,13 +85,6 @@ def _mismatch(
             "what the observation holds, not only what it appends)"
         )
     return ""
-
-
-def _options(config: TrainConfig) -> TaskOptions:
-    """The options that shape the observation (the start noise does not)."""
-    return TaskOptions.from_kwargs(
-        **{k: v for k, v in config.task_options.items() if not k.startswith("init_")}
-    )
 
 
 def _blocks(task: str, options: TaskOptions) -> list[tuple[int, int, str]]:
