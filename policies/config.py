@@ -267,6 +267,13 @@ ROBUST_TASK: dict[str, dict[str, Any]] = {
     "land": {"entropy_coef": 0.003},
 }
 ROBUST_TASK_WIND: dict[str, dict[str, Any]] = {"hover": HARDER_WIND, "land": HARDER_WIND}
+# Task options per task on top of ROBUST_WORLD. Hover is rewarded for precision
+# (quadsitl/tasks/proximity.py, docs/tasks.md "Rewarding precision"): Eq. 18 alone left
+# the robust hover policy 4 cm off the goal in still air and at 77 % on the ladder's
+# target rung after 13 runs of other changes; with the proximity reward, PROXIMITY_RESULT.
+ROBUST_TASK_OPTIONS: dict[str, dict[str, Any]] = {
+    "hover": {"proximity_reward": {"weight": 15.0, "radius": 0.5}},
+}
 SHIPPED_CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"  # TASK.pt: still air
 ROBUST_INIT: dict[tuple[str, str], Path] = {("land", "ppo"): SHIPPED_CHECKPOINTS / "land.pt"}
 PRESETS = ("paper", "fast", "robust")
@@ -323,6 +330,7 @@ def make_config(
         values.update(ROBUST_TASK.get(task, {}))
         if task in ROBUST_TASK_WIND:
             values["task_options"]["randomize"]["wind"] = dict(ROBUST_TASK_WIND[task])
+        values["task_options"].update(copy.deepcopy(ROBUST_TASK_OPTIONS.get(task, {})))
         if (task, algo) in ROBUST_INIT:
             values["init_from"] = str(ROBUST_INIT[task, algo])
     if not ours:

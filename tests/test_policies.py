@@ -110,9 +110,11 @@ def test_robust_preset_is_fast_in_a_randomised_world(tmp_path):
     hover = make_config("hover", "ppo", "robust")  # its own learner and weather
     assert (hover.hidden, hover.entropy_coef, hover.total_steps) == (256, 0.003, 6_000_000)
     assert hover.task_options["randomize"]["wind"]["speed"] == [2.0, 8.0]
+    assert hover.task_options["proximity_reward"] == {"weight": 15.0, "radius": 0.5}
     land = make_config("land", "ppo", "robust")  # from the still-air policy, its budget
     assert (land.hidden, land.entropy_coef, land.total_steps) == (128, 0.003, 12_000_000)
     assert land.init_from == str(checkpoint.shipped_checkpoints()["land"])
+    assert "proximity_reward" not in land.task_options  # Eq. 18 alone lands 94 %
     assert make_config("land", "trpo", "robust").init_from == ""  # no TRPO policy shipped
     harder = ["light", "moderate", "moderate"]
     assert land.task_options["randomize"]["wind"]["turbulence"] == harder

@@ -46,10 +46,11 @@ episode; docs/tasks.md), ``airframe_scale`` (``{{"mass": 1.3}}``: exact scales),
 ``sensor_noise`` (0: exact observations; 1: as the sensors measure them),
 ``ground_effect`` (True: rotor thrust grows near the ground), ``faults``
 (``{{"motor": 2, "efficiency": 0.6, "at": 1.0}}``: a motor that loses thrust during every
-episode), ``observe_position`` (False: columns 0–2 read 0) and ``observe_integral``
+episode), ``observe_position`` (False: columns 0–2 read 0), ``observe_integral``
 (True: three more columns, the clamped integral of columns 19–21 over the episode,
-m·s; docs/tasks.md). ``render_mode``: None, or "rerun" to log every episode to a
-Rerun viewer (or to the .rrd file ``rerun_save``).
+m·s; docs/tasks.md) and ``proximity_reward`` (``{{"weight": 15, "radius": 0.5}}``: every
+step also earns w·max(0, 1 − d/r) for the distance d to the goal). ``render_mode``:
+None, or "rerun" to log every episode to a Rerun viewer (or to the .rrd file ``rerun_save``).
 
 Episode-end ``info`` keys: ``outcome`` (timed_out, out_of_bounds, flipped, landed,
 landed_off_pad, crashed), ``success``, ``final_distance`` (m), ``time_within_threshold``

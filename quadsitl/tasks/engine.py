@@ -24,6 +24,7 @@ from quadsitl.physics.wind import Wind
 from quadsitl.tasks import error_integral as EI
 from quadsitl.tasks import faults as FT
 from quadsitl.tasks import features as F
+from quadsitl.tasks import proximity
 from quadsitl.tasks import recording as R
 from quadsitl.tasks import spec as S
 from quadsitl.tasks.batch import StepBatch
@@ -338,6 +339,8 @@ class TaskEngine:
         if self.task.advance_goal is not None:
             self.task.advance_goal(self, active)
         self.task.evaluate(self._batch)
+        if self.options.proximity_reward is not None:
+            proximity.add(self.reward, self.dist[:, F.D_POS], self.options.proximity_reward)
         if self.observation_noise is not None or self.sensor_faults is not None:
             self._observe_noisy(np.arange(self.n), self.control_period)
         if self.delay is not None:

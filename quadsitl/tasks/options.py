@@ -12,6 +12,7 @@ import numpy as np
 from quadsitl.physics import get_airframe
 from quadsitl.physics.wind import Wind
 from quadsitl.tasks import faults as FT
+from quadsitl.tasks import proximity
 from quadsitl.tasks.delay import Delay
 from quadsitl.tasks.randomization import (
     AIRFRAME_COLUMNS,
@@ -89,6 +90,10 @@ class TaskOptions:
             :mod:`quadsitl.tasks.error_integral`): integral action, so that a steady
             wind or a heavier airframe leaves no steady position error. False: the
             paper's observation.
+        proximity_reward: ``{"weight": w, "radius": r}``: every step also earns
+            w·max(0, 1 − d/r) for a distance d (m) to the goal, on top of the task's
+            reward, so that precision pays (:mod:`quadsitl.tasks.proximity`); None: the
+            paper's reward alone.
     """
 
     airframe: object = "paper"
@@ -110,6 +115,7 @@ class TaskOptions:
     faults: Any = None
     observe_position: bool = True
     observe_integral: bool = False
+    proximity_reward: dict[str, float] | None = None
 
     @classmethod
     def from_kwargs(cls, **options: object) -> TaskOptions:
@@ -159,6 +165,7 @@ class TaskOptions:
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         object.__setattr__(self, "faults", FT.parse_faults(self.faults))
+        object.__setattr__(self, "proximity_reward", proximity.parse(self.proximity_reward))
         object.__setattr__(self, "delay", Delay.parse(self.delay))
         object.__setattr__(self, "randomize", self._randomization())
         airframe_scale_row(self.airframe_scale)
