@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import textwrap
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -160,16 +161,24 @@ def ladder_plot(ladders: list[Any], path: Path) -> Path:
                 label=lad.policy,
             )
         ax.set_xticks(range(len(points)), [p[0] for p in points])
-        ax.set_title(f"{axis}: {LADDER[axis][0]}", fontsize=9)
+        ax.set_title(textwrap.fill(f"{axis}: {LADDER[axis][0]}", 50), fontsize=9)
         ax.set_ylim(-5, 105)
         ax.grid(alpha=0.3)
         if k % columns == 0:
             ax.set_ylabel("success (%)")
-    for k in range(len(axes_names), rows * columns):
-        panels[k // columns, k % columns].axis("off")
+    spare = [panels[k // columns, k % columns] for k in range(len(axes_names), rows * columns)]
+    for ax in spare:
+        ax.axis("off")
     handles, labels = panels[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=min(5, len(labels)), fontsize=9)
-    fig.tight_layout(rect=(0, 0.07 if rows > 1 else 0.12, 1, 1))
+    if spare:  # the legend in the grid's empty corner, one policy a line
+        spare[0].legend(handles, labels, loc="center left", fontsize=9, frameon=False)
+        fig.tight_layout()
+    else:  # below the grid, as many lines as the policies need
+        ncol = min(len(labels), columns)
+        legend_lines = -(-len(labels) // ncol)
+        fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=9)
+        bottom = (0.25 * legend_lines + 0.15) / (3.4 * rows)  # inches over the height
+        fig.tight_layout(rect=(0, bottom, 1, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)

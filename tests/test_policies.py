@@ -111,6 +111,10 @@ def test_robust_preset_is_fast_in_a_randomised_world(tmp_path):
     assert (hover.hidden, hover.entropy_coef, hover.total_steps) == (256, 0.003, 6_000_000)
     assert hover.task_options["randomize"]["wind"]["speed"] == [2.0, 8.0]
     assert hover.task_options["proximity_reward"] == {"weight": 15.0, "radius": 0.5}
+    waypoint = make_config("random_waypoint", "ppo", "robust")
+    assert (waypoint.hidden, waypoint.total_steps) == (256, 16_000_000)
+    assert waypoint.task_options["proximity_reward"] == {"weight": 120.0, "radius": 0.5}
+    assert waypoint.task_options["observe_position"] is False  # the task's start kept
     land = make_config("land", "ppo", "robust")  # from the still-air policy, its budget
     assert (land.hidden, land.entropy_coef, land.total_steps) == (128, 0.003, 12_000_000)
     assert land.init_from == str(checkpoint.shipped_checkpoints()["land"])
