@@ -18,6 +18,7 @@ from pymavlink import mavutil
 
 from quadsitl.mavlink.param_protocol import decode_value as decode_param
 from quadsitl.mavlink.param_protocol import encode_raw as encode_param
+from quadsitl.mavlink.signing import keep_signing_clock
 from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.modes import Mode
 from quadsitl.wire.lockstep import FORCE_MAGIC
@@ -73,7 +74,8 @@ class VehicleClient:
         self.conn = mavutil.mavlink_connection(
             url, source_system=source_system, source_component=190, autoreconnect=False
         )
-        if signing_key is not None:  # MAVLink 2 signing: sign all we send
+        self.signing = signing_key is not None
+        if self.signing:  # MAVLink 2 signing: sign all we send
             self.conn.setup_signing(signing_key, sign_outgoing=True)
         self.target = target
         self.latest: dict[str, Any] = {}
@@ -94,6 +96,8 @@ class VehicleClient:
         now = time.monotonic()
         if now - self.last_heartbeat >= 1.0:
             self.last_heartbeat = now
+            if self.signing:  # a vehicle that starts later refuses a stream a minute behind
+                keep_signing_clock(self.conn.mav)
             self.conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
         msg = self.conn.recv_match(blocking=True, timeout=timeout)
         if msg is None or msg.get_srcSystem() != self.target:

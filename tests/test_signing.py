@@ -10,6 +10,7 @@ from pymavlink import mavutil
 from quadsitl.client.motor_client import MotorClient, SimulatorError
 from quadsitl.mavlink.signing import (
     SignatureCheck,
+    keep_signing_clock,
     key_from_file,
     key_from_passphrase,
     now_timestamp,
@@ -29,6 +30,8 @@ def _connection(port: int, system: int, key: bytes | None, wait: bool = True) ->
     # tests' processes beside it, the first heartbeat took over 30 s (CI, 2026-11-27).
     deadline = time.monotonic() + STARTUP_SECONDS
     while time.monotonic() < deadline:  # until the vehicle (starting up) has heard us
+        if key is not None:  # on the clock, as a station does: pymavlink only adds 1 a frame,
+            keep_signing_clock(conn.mav)  # and a stream a minute behind is refused as new
         conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
         if not wait or conn.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5):
             return conn
@@ -266,3 +269,30 @@ def test_a_signed_arm_replayed_into_a_restarted_simulator_is_refused(tmp_path, m
         listener.close()
     finally:
         second.stop()
+
+
+def test_a_ground_station_started_long_before_the_vehicle_signs_on_the_clock():
+    """pymavlink stamps a signed stream from the moment signing was set up, one tick a
+    frame after that; a vehicle that comes up more than a minute later would refuse the
+    stream as a replay. The ground-station client's heartbeats follow the wall clock."""
+    import socket
+
+    from gcs_tools.client import VehicleClient
+
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    receiver.settimeout(10)
+    client = VehicleClient(
+        f"udpout:127.0.0.1:{receiver.getsockname()[1]}",
+        signing_key=key_from_passphrase(PASSPHRASE),
+    )
+    try:
+        client.conn.mav.signing.timestamp -= 120 * 100_000  # set up two minutes ago
+        client.pump(timeout=0.01)  # its first heartbeat
+        frame = receiver.recv(512)
+        assert frame[0] == 0xFD and frame[2] & 1  # MAVLink 2, signed
+        stamp = int.from_bytes(frame[-12:-6], "little")  # link id, 6-byte stamp, signature
+        assert abs(stamp - now_timestamp()) < 5 * 100_000  # within 5 s of the clock
+    finally:
+        client.close()
+        receiver.close()
