@@ -16,6 +16,8 @@ reward units: ``weight`` at the goal, falling linearly to 0 at ``radius`` metres
 never negative, so it never pays a vehicle to end its episode early, as a penalty on d
 would where a task's other step rewards are small (tested: a distance penalty of 30 per
 metre kept hover's robust training at 0 % success after 2 M steps from random weights).
+It suits tasks that run to their time limit: where success ends the episode (landing),
+it pays a policy for not finishing, and one learned to hover over the pad instead.
 """
 
 from __future__ import annotations
