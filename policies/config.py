@@ -277,10 +277,11 @@ ROBUST_TASK_WIND: dict[str, dict[str, Any]] = {
 # the robust hover policy 4 cm off the goal in still air and at 77-80 % on the ladder's
 # target rung through 13 runs of other changes; with the proximity reward it holds
 # 1.2 cm in still air and 92 % on the target rung (seed 0; seeds 0-4 91-95 %,
-# docs/results.md). Random
-# waypoint, by measurement on the target rung (seed 0, last.pt): 10 % without it (12 M
-# steps from the still-air policy), 23 % with weight 15 within 0.5 m (10 M steps), and
-# in 16 M steps 46 % with 30 within 1 m, 66 % with 60 and 72 % with 120 within 0.5 m.
+# docs/results.md). Random waypoint, by measurement on the target rung (seed 0,
+# last.pt): 10 % without it (12 M steps from the still-air policy), 23 % with weight 15
+# within 0.5 m (10 M steps), and in 16 M steps 46 % with 30 within 1 m, 66 % with 60
+# and 72 % with 120 within 0.5 m. Not for landing, whose success ends the episode: it
+# pays for not touching down (docs/tasks.md).
 ROBUST_TASK_OPTIONS: dict[str, dict[str, Any]] = {
     "hover": {"proximity_reward": {"weight": 15.0, "radius": 0.5}},
     "random_waypoint": {"proximity_reward": {"weight": 120.0, "radius": 0.5}},

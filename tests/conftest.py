@@ -12,8 +12,10 @@ import tempfile
 import time
 from collections.abc import Iterator
 
+import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.vector import AutoresetMode
 
 from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
@@ -116,6 +118,18 @@ class MotorSim:
             self.process.kill()
             out, _ = self.process.communicate()
         return out
+
+
+def vector_env(task: str, **options):  # type: ignore[no-untyped-def]
+    """Three envs of ``task`` (e.g. "Hover") stepped as training steps them: an episode
+    that ends is reset in the same step."""
+    return gym.make_vec(
+        f"QuadSITL/{task}-v0",
+        num_envs=3,
+        vectorization_mode="vector_entry_point",
+        autoreset_mode=AutoresetMode.SAME_STEP,
+        **options,
+    )
 
 
 def cli(words: str, *args: object) -> list[str]:

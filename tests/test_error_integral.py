@@ -10,7 +10,6 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from gymnasium.vector import AutoresetMode
 
 from policies import checkpoint
 from policies.autopilot import PolicyAutopilot
@@ -25,19 +24,9 @@ from quadsitl.tasks import TASKS, TaskOptions
 from quadsitl.tasks import error_integral as EI
 from quadsitl.tasks import features as F
 from quadsitl.vehicle.controller import Setpoint
+from tests.conftest import vector_env
 
 PERIOD = TaskOptions().control_period
-
-
-def vector_env(task: str, **options):  # type: ignore[no-untyped-def]
-    """As training steps it: an episode that ends is reset in the same step."""
-    return gym.make_vec(
-        f"QuadSITL/{task}-v0",
-        num_envs=3,
-        vectorization_mode="vector_entry_point",
-        autoreset_mode=AutoresetMode.SAME_STEP,
-        **options,
-    )
 
 
 @pytest.mark.parametrize(

@@ -9,21 +9,11 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.vector import AutoresetMode
+
+from tests.conftest import vector_env
 
 # Radii that a random flight from each task's start both enters and stays out of.
 RADIUS = {"Hover": 0.3, "RandomWaypoint": 2.0, "Land": 3.0}
-
-
-def vector_env(task: str, **options):  # type: ignore[no-untyped-def]
-    """As training steps it: an episode that ends is reset in the same step."""
-    return gym.make_vec(
-        f"QuadSITL/{task}-v0",
-        num_envs=3,
-        vectorization_mode="vector_entry_point",
-        autoreset_mode=AutoresetMode.SAME_STEP,
-        **options,
-    )
 
 
 @pytest.mark.parametrize("task", ["Hover", "RandomWaypoint", "Land"])
