@@ -117,6 +117,7 @@ def _build(payload: dict[str, Any]) -> tuple[ActorCritic, TrainConfig]:
         two_headed=payload["two_headed"],
         normalize_obs=config.normalize_obs,
         init_log_std=config.init_log_std,
+        fine_offset_scale=config.fine_offset_scale,
     )
     _check_state_dict(payload["state_dict"], net.state_dict())
     net.load_state_dict(payload["state_dict"])

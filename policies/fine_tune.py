@@ -12,7 +12,8 @@ What may differ between the two runs: everything but the network's shape and the
 observation's meaning. The task, the algorithm's network (one shared hidden layer, or
 TRPO's two), its width, and whether it normalises observations must be the same. The
 new run may observe more: blocks its task options append after the checkpoint's
-observation (observe_integral). Their first-layer weights start at 0, so the network
+observation (observe_integral), and a fine view of the goal offset (``fine_offset_scale``)
+where the checkpoint had none. Their first-layer weights start at 0, so the network
 computes at the start exactly what the checkpoint computed, and learns what the new
 values are worth; the normaliser keeps the checkpoint's statistics for the old columns
 and starts the new ones at mean 0, variance 1. The optimiser starts afresh.
@@ -46,9 +47,12 @@ def start_from(net: ActorCritic, source: str | Path, config: TrainConfig) -> Non
     state = net.state_dict()
     for name, value in old.state_dict().items():
         target = state[name]
-        if name in FIRST_LAYERS:
+        if name in FIRST_LAYERS:  # columns: observation, then the fine view (if any)
             target = torch.zeros_like(target)
-            target[:, : value.shape[1]] = value
+            target[:, : old.obs_size] = value[:, : old.obs_size]
+            target[:, net.obs_size : net.obs_size + value.shape[1] - old.obs_size] = value[
+                :, old.obs_size :
+            ]
         elif name in NORM_STATS:
             target = target.clone()
             target[: value.shape[0]] = value
@@ -71,6 +75,11 @@ def _mismatch(
         return f"its hidden layer has {old_config.hidden} units, this run's {config.hidden}"
     if old_config.normalize_obs != config.normalize_obs:
         return "one of the two normalises its observations and the other does not"
+    if old_config.fine_offset_scale and old_config.fine_offset_scale != config.fine_offset_scale:
+        return (
+            f"its fine view of the goal offset has scale {old_config.fine_offset_scale:g} m, "
+            f"this run's {config.fine_offset_scale:g} m"
+        )
     if old.act_size != net.act_size:
         return f"it has {old.act_size} actions, this run {net.act_size}"
     if config.task not in TASKS:  # another Gymnasium env: its observation as it is

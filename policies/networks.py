@@ -1,6 +1,13 @@
 """The paper's networks: one tanh hidden layer of 128 units, a Gaussian policy with a
 state-dependent mean and log-variance, and a value estimate.
 
+Optionally (``fine_offset_scale`` s > 0) the hidden layer also sees a fine view of the
+goal offset, tanh((goal − position) / s) per axis, read from the raw observation
+(columns 19–21): a normalised offset is measured against the spread of the whole
+flight (about 0.6 m for a random waypoint), so the last centimetres that decide
+success move the inputs very little; the fine view moves by 1/s per metre there and
+saturates far away (docs/training.md, "A fine view of the goal").
+
 PPO and GAE use one two-headed network (shared hidden layer; mean, log-variance and
 value heads); TRPO keeps actor and critic apart, so its natural-gradient step never
 moves the critic. Observations are normalised inside the module (running statistics,
@@ -15,6 +22,8 @@ import numpy as np
 import torch
 from torch import nn
 from torch.distributions import Normal
+
+from quadsitl.tasks.features import OBS_GOAL_POS
 
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 
@@ -86,8 +95,23 @@ def _hidden(obs_size: int, hidden: int) -> nn.Sequential:
     return nn.Sequential(layer, nn.Tanh())
 
 
+class FineOffset(nn.Module):
+    """tanh(goal offset / scale) per axis, of raw observations (columns OBS_GOAL_POS)."""
+
+    SIZE = OBS_GOAL_POS.stop - OBS_GOAL_POS.start
+
+    def __init__(self, scale: float) -> None:
+        super().__init__()
+        self.scale = scale
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return torch.tanh(obs[..., OBS_GOAL_POS] / self.scale)
+
+
 class ActorCritic(nn.Module):
-    """``two_headed``: one hidden layer feeds both heads (PPO, GAE); else two (TRPO)."""
+    """``two_headed``: one hidden layer feeds both heads (PPO, GAE); else two (TRPO).
+    ``fine_offset_scale`` > 0: the hidden layers also see :class:`FineOffset`, after the
+    normalised observation."""
 
     def __init__(
         self,
@@ -97,20 +121,34 @@ class ActorCritic(nn.Module):
         two_headed: bool = True,
         normalize_obs: bool = False,
         init_log_std: float = 0.0,
+        fine_offset_scale: float = 0.0,
     ) -> None:
         super().__init__()
         self.obs_size, self.act_size, self.two_headed = obs_size, act_size, two_headed
         self.norm = RunningNorm(obs_size, normalize_obs)
-        self.actor_body = _hidden(obs_size, hidden)
-        self.critic_body = self.actor_body if two_headed else _hidden(obs_size, hidden)
+        self.fine = FineOffset(fine_offset_scale) if fine_offset_scale > 0 else None
+        if self.fine is not None and obs_size < OBS_GOAL_POS.stop:
+            raise ValueError(
+                f"fine_offset_scale reads the goal offset (columns {OBS_GOAL_POS.start}–"
+                f"{OBS_GOAL_POS.stop - 1}) of a quadsitl task; this observation has "
+                f"{obs_size} values"
+            )
+        self.input_size = obs_size + (FineOffset.SIZE if self.fine is not None else 0)
+        self.actor_body = _hidden(self.input_size, hidden)
+        self.critic_body = self.actor_body if two_headed else _hidden(self.input_size, hidden)
         self.policy_head = GaussianHead(hidden, act_size, init_log_std)
         self.value_head = nn.Linear(hidden, 1)
 
+    def inputs(self, obs: torch.Tensor) -> torch.Tensor:
+        """What the hidden layers see of raw observations: normalised, and the fine view."""
+        z = self.norm(obs)
+        return z if self.fine is None else torch.cat([z, self.fine(obs)], dim=-1)
+
     def distribution(self, obs: torch.Tensor) -> Normal:
-        return self.policy_head(self.actor_body(self.norm(obs)))
+        return self.policy_head(self.actor_body(self.inputs(obs)))
 
     def value(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.value_head(self.critic_body(self.norm(obs))).squeeze(-1)
+        return self.value_head(self.critic_body(self.inputs(obs))).squeeze(-1)
 
     def actor_parameters(self) -> list[nn.Parameter]:
         return [*self.actor_body.parameters(), *self.policy_head.parameters()]

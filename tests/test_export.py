@@ -74,6 +74,28 @@ def test_every_algorithm_and_preset_exports_the_same_function(algo, preset, tmp_
     assert_three_forms_agree(tmp_path / "net.pt", tmp_path)
 
 
+def test_a_network_with_a_fine_view_of_the_goal_exports_the_same_function(tmp_path):
+    """fine_offset_scale: the exports compute tanh(goal offset / scale) inside, from the
+    raw observation, as the network does (weighted here so that it moves the action)."""
+    config = make_config("random_waypoint", "ppo", "fast", fine_offset_scale=0.25)
+    torch.manual_seed(2)
+    net = ActorCritic(34, 4, config.hidden, True, True, -0.5, fine_offset_scale=0.25)
+    net.norm.update(torch.randn(500, 34) * 0.5)
+    with torch.no_grad():
+        net.actor_body[0].weight[:, 34:].normal_(0.0, 2.0)
+        net.policy_head.mean.weight.normal_(0.0, 0.3)
+    obs = torch.zeros(2, 34)
+    obs[1, F.OBS_GOAL_POS] = torch.tensor([0.05, -0.05, 0.02])  # within the fine view's reach
+    action = net.mean_action(obs.numpy())
+    assert np.abs(action[1] - action[0]).max() > 0.05  # the fine view moves the action
+    checkpoint.save(tmp_path / "net.pt", net, config)
+    assert_three_forms_agree(tmp_path / "net.pt", tmp_path)
+    header = (tmp_path / "net.h").read_text()
+    assert "#define POLICY_OBS_SIZE 34" in header and "#define POLICY_INPUT_SIZE 37" in header
+    contract = json.loads(contract_path(tmp_path / "net.h").read_text())
+    assert "tanh(obs[19:22] / 0.25 m)" in contract["observation"]["normalisation"]
+
+
 # --- the C header ---------------------------------------------------------------------------
 def test_c_header_is_c99_needs_only_tanhf_and_maps_actions_by_eq_19(tmp_path):
     header = export(CHECKPOINTS / "hover.pt", "c", tmp_path / "hover.h")[0]

@@ -19,12 +19,12 @@ from tests.conftest import refused_here
 OBS_SIZE = 34  # hover's observation without option blocks
 
 
-def _saved(tmp_path, task="land", algo="ppo", hidden=32, obs_size=OBS_SIZE, **options):
+def _saved(tmp_path, task="land", algo="ppo", hidden=32, obs_size=OBS_SIZE, fine=0.0, **options):
     """A checkpoint of a random network (running observation statistics not at 0/1)."""
-    config = make_config(task, algo, "fast", hidden=hidden)
+    config = make_config(task, algo, "fast", hidden=hidden, fine_offset_scale=fine)
     config.task_options.update(options)
     torch.manual_seed(1)
-    net = ActorCritic(obs_size, 4, hidden, algo != "trpo", config.normalize_obs)
+    net = ActorCritic(obs_size, 4, hidden, algo != "trpo", config.normalize_obs, 0.0, fine)
     with torch.no_grad():
         net.norm.mean.uniform_(-1, 1)
         net.norm.var.uniform_(0.5, 2)
@@ -36,7 +36,14 @@ def _saved(tmp_path, task="land", algo="ppo", hidden=32, obs_size=OBS_SIZE, **op
 
 def _fresh(config, obs_size):
     torch.manual_seed(2)
-    return ActorCritic(obs_size, 4, config.hidden, config.algo != "trpo", config.normalize_obs)
+    return ActorCritic(
+        obs_size,
+        4,
+        config.hidden,
+        config.algo != "trpo",
+        config.normalize_obs,
+        fine_offset_scale=config.fine_offset_scale,
+    )
 
 
 def test_a_run_that_observes_the_integral_starts_computing_what_the_checkpoint_computed(tmp_path):
@@ -83,6 +90,36 @@ def test_a_checkpoint_that_does_not_fit_is_refused_and_changes_nothing(tmp_path,
     with pytest.raises(ValueError, match=f"cannot start from {path}: .*{_escaped(message)}"):
         start_from(net, path, config)
     assert all(torch.equal(before[k], v) for k, v in net.state_dict().items())
+
+
+@pytest.mark.parametrize("old_fine", [0.0, 0.25])
+def test_a_run_with_a_fine_view_of_the_goal_starts_computing_what_the_checkpoint_computed(
+    tmp_path, old_fine
+):
+    """The fine view's columns follow the observation's: new ones start at 0 weight,
+    a checkpoint's own move past the blocks the run appends (here the integral)."""
+    path, old = _saved(tmp_path, fine=old_fine)
+    config = make_config("land", "ppo", "fast", hidden=32, fine_offset_scale=0.25)
+    config.task_options["observe_integral"] = True
+    net = _fresh(config, OBS_SIZE + EI.SIZE)
+    start_from(net, path, config)
+    rng = np.random.default_rng(0)
+    obs = torch.as_tensor(rng.normal(scale=0.3, size=(64, OBS_SIZE)), dtype=torch.float32)
+    integral = torch.as_tensor(rng.uniform(-2, 2, size=(64, EI.SIZE)), dtype=torch.float32)
+    wider = torch.cat([obs, integral], 1)
+    with torch.no_grad():
+        assert torch.allclose(net.distribution(wider).mean, old.distribution(obs).mean, atol=1e-6)
+        assert torch.allclose(net.value(wider), old.value(obs), atol=1e-5)
+        fine_weights = net.actor_body[0].weight[:, OBS_SIZE + EI.SIZE :]
+        assert fine_weights.shape[1] == 3 and bool(fine_weights.any()) == bool(old_fine)
+
+
+def test_a_checkpoint_with_another_fine_view_is_refused(tmp_path):
+    path, _ = _saved(tmp_path, fine=0.25)
+    for scale in (0.0, 0.5):
+        config = make_config("land", "ppo", "fast", hidden=32, fine_offset_scale=scale)
+        with pytest.raises(ValueError, match=f"scale 0.25 m, this run's {scale:g} m"):
+            start_from(_fresh(config, OBS_SIZE), path, config)
 
 
 def test_a_checkpoint_that_observes_more_than_the_run_is_refused(tmp_path):

@@ -89,6 +89,8 @@ def test_paper_preset_is_table_one():
     assert (trpo.line_search_steps, trpo.line_search_shrink) == (10, 0.5)
     with pytest.raises(ValueError, match="unknown training option"):
         make_config("hover", "ppo", "paper", learning_rat=1e-3)
+    with pytest.raises(ValueError, match="fine_offset_scale reads a quadsitl task's goal offset"):
+        make_config("Pendulum-v1", "ppo", "fast", fine_offset_scale=0.25)
 
 
 def test_robust_preset_is_fast_in_a_randomised_world(tmp_path):
@@ -112,7 +114,9 @@ def test_robust_preset_is_fast_in_a_randomised_world(tmp_path):
     assert hover.task_options["randomize"]["wind"]["speed"] == [2.0, 8.0]
     assert hover.task_options["proximity_reward"] == {"weight": 15.0, "radius": 0.5}
     waypoint = make_config("random_waypoint", "ppo", "robust")
-    assert (waypoint.hidden, waypoint.total_steps) == (256, 16_000_000)
+    assert (waypoint.hidden, waypoint.total_steps) == (256, 24_000_000)
+    assert waypoint.fine_offset_scale == 0.25  # a fine view of the goal (policies/networks.py)
+    assert hover.fine_offset_scale == 0.0
     assert waypoint.task_options["proximity_reward"] == {"weight": 120.0, "radius": 0.5}
     assert waypoint.task_options["observe_position"] is False  # the task's start kept
     land = make_config("land", "ppo", "robust")  # from the still-air policy, its budget

@@ -68,6 +68,14 @@ def test_a_checkpoint_that_would_run_code_is_refused_and_runs_nothing(tmp_path):
         (lambda p: p["state_dict"].pop("value_head.bias"), r"missing \['value_head.bias'\]"),
         (lambda p: p["state_dict"]["value_head.bias"].fill_(float("nan")), "NaN or infinite"),
         (lambda p: p.update(two_headed="yes"), "two_headed must be true or false"),
+        (
+            lambda p: p["config"].update(fine_offset_scale=-0.25),
+            r"fine_offset_scale must be a number in \[0, 100\]",
+        ),
+        (  # a fine view the weights were not trained with
+            lambda p: p["config"].update(fine_offset_scale=0.25),
+            r"\['actor_body.0.weight'\] has shape \(128, 34\), the network needs \(128, 37\)",
+        ),
     ],
 )
 def test_checkpoint_schema_errors_name_the_problem(tmp_path, change, message):

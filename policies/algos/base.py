@@ -32,6 +32,7 @@ class Algorithm(abc.ABC):
             self.two_headed,
             config.normalize_obs,
             config.init_log_std,
+            config.fine_offset_scale,
         )
         self._obs: np.ndarray | None = None
 

@@ -53,6 +53,18 @@ def layout_text(task_name: str, options: TaskOptions | None = None) -> str:
     return "; ".join(f"[{s.start}:{s.stop}] {meaning} ({unit})" for s, meaning, unit in blocks)
 
 
+def fine_offset_scale(contract: dict[str, Any]) -> float:
+    """The scale (m) of the policy's fine view of the goal offset, 0 for none
+    (policies/networks.py); a ValueError for a contract that gives something else."""
+    try:
+        value = contract["checkpoint"]["config"].get("fine_offset_scale", 0.0)
+    except (KeyError, TypeError, AttributeError):
+        raise ValueError("the contract has no checkpoint config") from None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 100:
+        raise ValueError(f"the contract's fine_offset_scale must be 0-100 m, got {value!r}")
+    return float(value)
+
+
 def _hidden(columns: slice, options: TaskOptions) -> str:
     """What to feed in the position slots of a policy trained without them."""
     if columns == F.OBS_POS and not options.observe_position:
@@ -98,6 +110,13 @@ def build_contract(config: TrainConfig, checkpoint: Path, act_size: int) -> dict
                     f"variance, clipped to ±{NORM_CLIP:g}"
                     if config.normalize_obs
                     else "none (trained on raw observations)"
+                )
+                + (
+                    f"; the network also sees tanh(obs[{F.OBS_GOAL_POS.start}:"
+                    f"{F.OBS_GOAL_POS.stop}] / {config.fine_offset_scale:g} m), computed "
+                    "inside from the raw goal offset"
+                    if config.fine_offset_scale
+                    else ""
                 )
             ),
             "layout": [

@@ -2,7 +2,8 @@
 
 The header holds the weights as ``static const`` arrays and two functions:
 ``policy_forward(obs, action)``, the network's mean action of a raw observation (the
-training's observation normalisation included), and ``policy_rotor_speeds(action,
+training's observation normalisation, and the fine view of the goal offset if the
+network has one, included), and ``policy_rotor_speeds(action,
 rotor_speed)``, the paper's Eq. 19 with its clip. No allocation; libm's ``tanhf`` only.
 The normalisation is computed in double, as the network computes it, so that the C
 output matches PyTorch's to float32 rounding.
@@ -17,8 +18,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from policies.export.contract import C_FORWARD, C_ROTOR_SPEEDS, NORM_CLIP
-from policies.networks import ActorCritic
+from policies.export.contract import C_FORWARD, C_ROTOR_SPEEDS, NORM_CLIP, fine_offset_scale
+from policies.networks import ActorCritic, FineOffset
+from quadsitl.tasks.features import OBS_GOAL_POS
 
 PER_LINE = 6  # numbers per line of an array initialiser
 ARRAY = re.compile(r"static const (float|double) (\w+)\[[^\]]*\] = \{([^}]*)\};")
@@ -57,7 +59,9 @@ def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -
     """The header of these arrays (sizes read from them) and this contract."""
     w1, b1, w2, b2 = (arrays[k] for k in ("policy_w1", "policy_b1", "policy_w2", "policy_b2"))
     hidden_size, act_size = b1.size, b2.size
-    obs_size = w1.size // max(hidden_size, 1)
+    input_size = w1.size // max(hidden_size, 1)
+    fine = fine_offset_scale(contract)  # 0: none
+    obs_size = input_size - (FineOffset.SIZE if fine else 0)
     normalised = "policy_obs_mean" in arrays
     action = contract["action"]
     guard = "QUADSITL_" + re.sub(r"\W", "_", name, flags=re.ASCII).upper() + "_INCLUDED"
@@ -91,6 +95,7 @@ def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -
         "#include <math.h>",
         "",
         f"#define POLICY_OBS_SIZE {obs_size}",
+        f"#define POLICY_INPUT_SIZE {input_size} /* what the hidden layer sees */",
         f"#define POLICY_ACT_SIZE {act_size}",
         f"#define POLICY_HIDDEN {hidden_size}",
         f"#define POLICY_CONTROL_RATE_HZ {_float(contract['control']['rate_hz'])}",
@@ -107,14 +112,14 @@ def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -
             _array("static const double policy_obs_std[POLICY_OBS_SIZE]", std, _double),
         ]
     lines += [
-        _array("static const float policy_w1[POLICY_HIDDEN * POLICY_OBS_SIZE]", w1, _float),
+        _array("static const float policy_w1[POLICY_HIDDEN * POLICY_INPUT_SIZE]", w1, _float),
         _array("static const float policy_b1[POLICY_HIDDEN]", b1, _float),
         _array("static const float policy_w2[POLICY_ACT_SIZE * POLICY_HIDDEN]", w2, _float),
         _array("static const float policy_b2[POLICY_ACT_SIZE]", b2, _float),
         "",
         f"static inline {C_FORWARD}",
         "{",
-        "    float z[POLICY_OBS_SIZE];",
+        "    float z[POLICY_INPUT_SIZE];",
         "    float h[POLICY_HIDDEN];",
         "    int i, j;",
         "    for (i = 0; i < POLICY_OBS_SIZE; ++i) {",
@@ -128,12 +133,19 @@ def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -
         ]
     else:
         lines.append("        z[i] = obs[i];")
+    lines.append("    }")
+    if fine:
+        lines += [
+            f"    /* Fine view of the goal offset: tanh(obs[{OBS_GOAL_POS.start}..."
+            f"{OBS_GOAL_POS.stop - 1}] / {fine:g} m). */",
+            f"    for (i = 0; i < {FineOffset.SIZE}; ++i) "
+            f"z[POLICY_OBS_SIZE + i] = tanhf(obs[{OBS_GOAL_POS.start} + i] / {_float(fine)});",
+        ]
     lines += [
-        "    }",
         "    for (j = 0; j < POLICY_HIDDEN; ++j) {",
         "        float s = policy_b1[j];",
-        "        const float *w = policy_w1 + j * POLICY_OBS_SIZE;",
-        "        for (i = 0; i < POLICY_OBS_SIZE; ++i) s += w[i] * z[i];",
+        "        const float *w = policy_w1 + j * POLICY_INPUT_SIZE;",
+        "        for (i = 0; i < POLICY_INPUT_SIZE; ++i) s += w[i] * z[i];",
         "        h[j] = tanhf(s);",
         "    }",
         "    for (i = 0; i < POLICY_ACT_SIZE; ++i) {",

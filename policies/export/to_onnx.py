@@ -3,9 +3,10 @@
 that the file alone can be evaluated and flown.
 
 The graph is the network's mean action of the raw observation: the observation
-normalisation of training (float64, as the network computes it), the tanh hidden layer
-and the mean head. The legacy TorchScript exporter is used: the newer one needs the
-extra package ``onnxscript`` and gives the same graph for this network.
+normalisation of training (float64, as the network computes it), the fine view of the
+goal offset if the network has one, the tanh hidden layer and the mean head. The legacy
+TorchScript exporter is used: the newer one needs the extra package ``onnxscript`` and
+gives the same graph for this network.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ class MeanAction(nn.Module):
         self.net = net
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.net.policy_head.mean(self.net.actor_body(self.net.norm(obs)))
+        return self.net.policy_head.mean(self.net.actor_body(self.net.inputs(obs)))
 
 
 def onnx_bytes(net: ActorCritic, contract: dict[str, Any]) -> bytes:
