@@ -86,6 +86,8 @@ def test_a_network_with_a_fine_view_of_the_goal_exports_the_same_function(tmp_pa
         net.policy_head.mean.weight.normal_(0.0, 0.3)
     obs = torch.zeros(2, 34)
     obs[1, F.OBS_GOAL_POS] = torch.tensor([0.05, -0.05, 0.02])  # within the fine view's reach
+    with torch.no_grad():
+        assert torch.equal(net.inputs(obs)[:, 34:], torch.tanh(obs[:, F.OBS_GOAL_POS] / 0.25))
     action = net.mean_action(obs.numpy())
     assert np.abs(action[1] - action[0]).max() > 0.05  # the fine view moves the action
     checkpoint.save(tmp_path / "net.pt", net, config)
