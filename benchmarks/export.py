@@ -1,12 +1,13 @@
 """Exported policies: the inference time of one call (one observation, the flight
 controller's case) in each form, and how far each form's actions are from PyTorch's.
 
-For every shipped checkpoint (policies/checkpoints/TASK.pt): the PyTorch network
+For every shipped checkpoint (policies/checkpoints/TASK.pt, 128 units, and
+robust/TASK.pt, up to 256 units and a fine view of the goal): the PyTorch network
 (``mean_action``, one thread), onnxruntime (one thread, ``session.run``), and the C
 header compiled with ``cc -O2`` (``policy_forward`` called in a C loop, so the figure is
 the C function's alone; the Python → ctypes call adds about a microsecond, printed too).
 Then the largest action difference of each form from PyTorch's on 10,000 observations
-of real episodes. Prints ``policy_c_call_us`` (the slowest task's C call; target ≤ 20
+of real episodes. Prints ``policy_c_call_us`` (the slowest checkpoint's C call; target ≤ 20
 µs), and ``policy_torch_call_us`` and ``policy_onnxruntime_call_us`` for comparison.
 """
 
@@ -44,9 +45,8 @@ def best_us(run: Callable[[], None], calls: int, repeats: int = 5) -> float:
     return best
 
 
-def time_forms(task: str, folder: Path) -> tuple[dict[str, float], dict[str, float]]:
+def time_forms(source: Path, folder: Path) -> tuple[dict[str, float], dict[str, float]]:
     """(µs per call of each form, max abs difference of each form from PyTorch)."""
-    source = checkpoint.SHIPPED / f"{task}.pt"
     net, config, _ = checkpoint.load(source)
     onnx_file = export(source, "onnx", folder)[0]
     header = export(source, "c", folder)[0]
@@ -90,23 +90,29 @@ def main() -> None:
     print("Inference time per call (one observation), best of 5; max |action − PyTorch's| on")
     print(f"{PARITY_OBS:,} observations of real episodes:")
     print(
-        f"{'task':<16} {'torch µs':>9} {'onnxrt µs':>10} {'C µs':>7} {'C+ctypes µs':>12}"
+        f"{'checkpoint':<22} {'torch µs':>9} {'onnxrt µs':>10} {'C µs':>7} {'C+ctypes µs':>12}"
         f" {'|onnx−torch|':>13} {'|C−torch|':>10}"
     )
     worst = {"torch": 0.0, "onnxruntime": 0.0, "c": 0.0}
     with tempfile.TemporaryDirectory(prefix="quadsitl-bench-export-") as folder:
-        for task in checkpoint.shipped_checkpoints():
-            times, diff = time_forms(task, Path(folder))
+        shipped = {
+            **checkpoint.shipped_checkpoints(),
+            **{f"robust/{t}": p for t, p in checkpoint.shipped_robust_checkpoints().items()},
+        }
+        for task, source in shipped.items():
+            out = Path(folder) / task.replace("/", "_")
+            out.mkdir()
+            times, diff = time_forms(source, out)
             for form in worst:
                 worst[form] = max(worst[form], times[form])
             print(
-                f"{task:<16} {times['torch']:9.1f} {times['onnxruntime']:10.1f} "
+                f"{task:<22} {times['torch']:9.1f} {times['onnxruntime']:10.1f} "
                 f"{times['c']:7.2f} {times['c_through_ctypes']:12.2f} "
                 f"{diff['onnxruntime']:13.1e} {diff['c']:10.1e}"
             )
     verdict = "meets" if worst["c"] <= C_CALL_TARGET_US else "ABOVE"
     print(
-        f"policy_c_call_us: {worst['c']:.2f} µs (target ≤ {C_CALL_TARGET_US:g}, slowest task, "
+        f"policy_c_call_us: {worst['c']:.2f} µs (target ≤ {C_CALL_TARGET_US:g}, slowest checkpoint, "
         f"{verdict})"
     )
     print(f"policy_c_call_us: {worst['c']:.2f}")
