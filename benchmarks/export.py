@@ -112,8 +112,8 @@ def main() -> None:
             )
     verdict = "meets" if worst["c"] <= C_CALL_TARGET_US else "ABOVE"
     print(
-        f"policy_c_call_us: {worst['c']:.2f} µs (target ≤ {C_CALL_TARGET_US:g}, slowest checkpoint, "
-        f"{verdict})"
+        f"policy_c_call_us: {worst['c']:.2f} µs (target ≤ {C_CALL_TARGET_US:g}, "
+        f"slowest checkpoint, {verdict})"
     )
     print(f"policy_c_call_us: {worst['c']:.2f}")
     print(f"policy_torch_call_us: {worst['torch']:.1f}")
