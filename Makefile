@@ -69,7 +69,7 @@ images: venv
 lint: venv
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/mypy quadsitl policies --ignore-missing-imports
+	$(BIN)/mypy quadsitl policies gcs_tools --ignore-missing-imports
 
 format: venv
 	$(BIN)/ruff format .

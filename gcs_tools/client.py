@@ -332,9 +332,14 @@ class VehicleClient:
         items = []
         for seq in range(count):
             self.conn.mav.mission_request_int_send(self.target, 1, seq, 0)
-            items.append(self.wait_message("MISSION_ITEM_INT", 3.0, lambda m, s=seq: m.seq == s))
+            items.append(self.wait_message("MISSION_ITEM_INT", 3.0, _item_number(seq)))
         self.conn.mav.mission_ack_send(self.target, 1, mav.MAV_MISSION_ACCEPTED, 0)
         return items
+
+
+def _item_number(seq: int) -> Callable[[Any], bool]:
+    """A filter for the mission item numbered ``seq``."""
+    return lambda message: bool(message.seq == seq)
 
 
 def _degrees_e7(degrees: float) -> int:
