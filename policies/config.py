@@ -270,7 +270,7 @@ ROBUST_STEPS_FACTOR = 2  # the fast budget twice: a world that varies takes long
 # Random waypoint also sees its goal offset through a fine view (fine_offset_scale,
 # policies/networks.py): normalised over goals 1-2.5 m away, the last 10 cm barely moved
 # its inputs. On the target rung (16 M steps, last.pt) seed 0 went 72 % -> 84 % and seed 1
-# 64 % -> 88 %; with 24 M steps seeds 0-3 keep 90-93 % (docs/training.md, "A fine view of
+# 64 % -> 88 %; with 24 M steps seeds 0-4 keep 90-93 % (docs/training.md, "A fine view of
 # the goal").
 HARDER_WIND: dict[str, Any] = {"speed": [2.0, 8.0], "turbulence": ["light", "moderate", "moderate"]}
 ROBUST_TASK: dict[str, dict[str, Any]] = {
