@@ -96,8 +96,12 @@ def test_an_env_made_in_a_worker_thread_keeps_its_simulator():
     import numpy as np
 
     made = {}
+    # A generous timeout: this is about the thread, and a loaded machine's freshly started
+    # simulator has missed the default 2 s for its first reset answer.
     worker = threading.Thread(
-        target=lambda: made.update(env=gym.make("QuadSITL/Hover-v0", backend="mavlink"))
+        target=lambda: made.update(
+            env=gym.make("QuadSITL/Hover-v0", backend="mavlink", timeout=10.0)
+        )
     )
     worker.start()
     worker.join()

@@ -47,7 +47,8 @@ def test_simulators_on_the_second_node_fly_as_in_process_and_survive_a_lost_acto
     local = gym.make_vec(env_id, 4, "vector_entry_point", **kwargs)
     # A short timeout, so that a lost actor is found out quickly; not so short that a
     # loaded machine's first answers (the simulators' first calls) miss it.
-    wire = {"backend": "mavlink", "vehicles_per_sim": 2, "ray": True, "timeout": 3.0}
+    # (3 s was missed once with one core kept busy.)
+    wire = {"backend": "mavlink", "vehicles_per_sim": 2, "ray": True, "timeout": 5.0}
     remote = gym.make_vec(env_id, 4, "vector_entry_point", **wire, **kwargs)
     backend = remote.unwrapped.backend
     addresses = []
