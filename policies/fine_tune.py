@@ -49,10 +49,9 @@ def start_from(net: ActorCritic, source: str | Path, config: TrainConfig) -> Non
         target = state[name]
         if name in FIRST_LAYERS:  # columns: observation, then the fine view (if any)
             target = torch.zeros_like(target)
+            fine = value[:, old.obs_size :]  # no columns when the checkpoint has no view
             target[:, : old.obs_size] = value[:, : old.obs_size]
-            target[:, net.obs_size : net.obs_size + value.shape[1] - old.obs_size] = value[
-                :, old.obs_size :
-            ]
+            target[:, net.obs_size : net.obs_size + fine.shape[1]] = fine
         elif name in NORM_STATS:
             target = target.clone()
             target[: value.shape[0]] = value

@@ -55,14 +55,8 @@ def layout_text(task_name: str, options: TaskOptions | None = None) -> str:
 
 def fine_offset_scale(contract: dict[str, Any]) -> float:
     """The scale (m) of the policy's fine view of the goal offset, 0 for none
-    (policies/networks.py); a ValueError for a contract that gives something else."""
-    try:
-        value = contract["checkpoint"]["config"].get("fine_offset_scale", 0.0)
-    except (KeyError, TypeError, AttributeError):
-        raise ValueError("the contract has no checkpoint config") from None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 100:
-        raise ValueError(f"the contract's fine_offset_scale must be 0-100 m, got {value!r}")
-    return float(value)
+    (policies/networks.py), as its training config (checked by TrainConfig) gives it."""
+    return float(TrainConfig.from_dict(contract["checkpoint"]["config"]).fine_offset_scale)
 
 
 def _hidden(columns: slice, options: TaskOptions) -> str:
