@@ -36,6 +36,21 @@ _inline = numba.njit(inline="always", **_OPTIONS)
 
 
 @_inline
+def _rotor(rotor, cmd, thrust_factor, yaw_factor, rate, omega_max):  # pragma: no cover
+    """One rotor's thrust, reaction-torque term and motor lag dΩ/dt, from scalars only.
+
+    The rotors are written out one by one in :func:`derivative`, not looped over: an
+    inner loop over them added into the rotor sums in memory (read-modify-write rows of
+    ``sums`` next to the rows the world reads), which the compiler could not prove
+    apart, and the world build's derivative ran unvectorised (+20 ns a vehicle step,
+    measured). Scalars only: an inlined call that takes arrays costs reference counts
+    per vehicle, and the loop around it is not vectorised either."""
+    rotor_sq = rotor * rotor
+    command = min(max(cmd, 0.0), omega_max)
+    return thrust_factor * rotor_sq, yaw_factor * rotor_sq, rate * (command - rotor)
+
+
+@_inline
 def derivative(s, p, cmd, out, m, sums, B, WIND):  # pragma: no cover - compiled
     """ṡ of the first m vehicles of a block: s, p and cmd hold rows of B values; ``sums``
     (SUMS_ROWS rows) is scratch for the rotor sums. The compile-time flag WIND builds the
@@ -43,25 +58,39 @@ def derivative(s, p, cmd, out, m, sums, B, WIND):  # pragma: no cover - compiled
     efficiency and ground effect (the factors of :func:`rotor_factors`); without it, the
     still-air arithmetic of the paper, unchanged. Each loop runs over vehicles,
     innermost, so that it is vectorised."""
-    for j in range(m):
-        for k in range(4):
-            sums[k * B + j] = 0.0
-    for i in range(L.N_ROTORS):  # rotor i: thrust, its moments, and its motor lag
-        for j in range(m):
-            rotor = s[(L.I_ROTOR0 + i) * B + j]
-            rotor_sq = rotor * rotor
-            if WIND:  # the world: k_T η_i G_i and ±η_i of the step (rotor_factors)
-                thrust = sums[(THRUST_FACTOR0 + i) * B + j] * rotor_sq
-                yaw = sums[(YAW_FACTOR0 + i) * B + j] * rotor_sq
-            else:
-                thrust = p[L.P_KT * B + j] * rotor_sq
-                yaw = p[(L.P_ROTOR_YAW_SIGN0 + i) * B + j] * rotor_sq
-            sums[THRUST * B + j] += thrust
-            sums[ROLL_MOMENT * B + j] += p[(L.P_ROTOR_Y0 + i) * B + j] * thrust
-            sums[PITCH_MOMENT * B + j] += p[(L.P_ROTOR_X0 + i) * B + j] * thrust
-            sums[YAW_SUM * B + j] += yaw
-            c = min(max(cmd[i * B + j], 0.0), p[L.P_OMEGA_MAX * B + j])
-            out[(L.I_ROTOR0 + i) * B + j] = p[L.P_MOTOR_RATE * B + j] * (c - rotor)
+    for j in range(m):  # the four rotors, written out: see _rotor
+        rate, omega_max = p[L.P_MOTOR_RATE * B + j], p[L.P_OMEGA_MAX * B + j]
+        r0, r1 = s[L.I_ROTOR0 * B + j], s[(L.I_ROTOR0 + 1) * B + j]
+        r2, r3 = s[(L.I_ROTOR0 + 2) * B + j], s[(L.I_ROTOR0 + 3) * B + j]
+        if WIND:  # the world: k_T η_i G_i and ±η_i of the step (rotor_factors)
+            k0, k1 = sums[THRUST_FACTOR0 * B + j], sums[(THRUST_FACTOR0 + 1) * B + j]
+            k2, k3 = sums[(THRUST_FACTOR0 + 2) * B + j], sums[(THRUST_FACTOR0 + 3) * B + j]
+            e0, e1 = sums[YAW_FACTOR0 * B + j], sums[(YAW_FACTOR0 + 1) * B + j]
+            e2, e3 = sums[(YAW_FACTOR0 + 2) * B + j], sums[(YAW_FACTOR0 + 3) * B + j]
+        else:
+            k0 = k1 = k2 = k3 = p[L.P_KT * B + j]
+            e0, e1 = p[L.P_ROTOR_YAW_SIGN0 * B + j], p[(L.P_ROTOR_YAW_SIGN0 + 1) * B + j]
+            e2, e3 = p[(L.P_ROTOR_YAW_SIGN0 + 2) * B + j], p[(L.P_ROTOR_YAW_SIGN0 + 3) * B + j]
+        t0, y0, lag0 = _rotor(r0, cmd[j], k0, e0, rate, omega_max)
+        t1, y1, lag1 = _rotor(r1, cmd[B + j], k1, e1, rate, omega_max)
+        t2, y2, lag2 = _rotor(r2, cmd[2 * B + j], k2, e2, rate, omega_max)
+        t3, y3, lag3 = _rotor(r3, cmd[3 * B + j], k3, e3, rate, omega_max)
+        out[L.I_ROTOR0 * B + j], out[(L.I_ROTOR0 + 1) * B + j] = lag0, lag1
+        out[(L.I_ROTOR0 + 2) * B + j], out[(L.I_ROTOR0 + 3) * B + j] = lag2, lag3
+        sums[THRUST * B + j] = t0 + t1 + t2 + t3
+        sums[ROLL_MOMENT * B + j] = (
+            p[L.P_ROTOR_Y0 * B + j] * t0
+            + p[(L.P_ROTOR_Y0 + 1) * B + j] * t1
+            + p[(L.P_ROTOR_Y0 + 2) * B + j] * t2
+            + p[(L.P_ROTOR_Y0 + 3) * B + j] * t3
+        )
+        sums[PITCH_MOMENT * B + j] = (
+            p[L.P_ROTOR_X0 * B + j] * t0
+            + p[(L.P_ROTOR_X0 + 1) * B + j] * t1
+            + p[(L.P_ROTOR_X0 + 2) * B + j] * t2
+            + p[(L.P_ROTOR_X0 + 3) * B + j] * t3
+        )
+        sums[YAW_SUM * B + j] = y0 + y1 + y2 + y3
     for j in range(m):
         vx, vy, vz = s[L.I_VX * B + j], s[L.I_VY * B + j], s[L.I_VZ * B + j]
         qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
