@@ -225,10 +225,10 @@ class VehicleStates:
         winds = [weather] * len(index) if isinstance(weather, Wind) else list(weather)
         if len(winds) != len(index) or not all(isinstance(w, Wind) for w in winds):
             raise ValueError(f"need one Wind for each of the {len(index)} selected vehicles")
-        for i, w in zip(index, winds, strict=True):
-            self.wind_params[i] = w.to_params(_span(self.airframes[i]))
+        self.wind_params[index] = wind.params_rows(winds, [_span(self.airframes[i]) for i in index])
+        for i, w in zip(index.tolist(), winds, strict=True):
             self.winds[i] = w
-            self.stirred[i] = not w.calm
+        self.stirred[index] = [not w.calm for w in winds]
         if seed is not None:
             one = not isinstance(seed, (list, tuple, np.ndarray))
             seeds: list[Any] = [seed] if one else list(seed)  # type: ignore[arg-type]
@@ -237,8 +237,7 @@ class VehicleStates:
             if one:
                 self.wind_streams[index] = wind.seed_streams(int(seeds[0]), self.n)[index]
             elif len(seeds) == len(index):
-                own = [wind.seed_streams(int(s), 1)[0] for s in seeds]
-                self.wind_streams[index] = np.array(own, dtype=np.uint64)
+                self.wind_streams[index] = wind.seed_stream_each(seeds)
             else:
                 raise ValueError(f"need one wind seed for each of the {len(index)} vehicles")
         if restart:

@@ -150,28 +150,40 @@ class Wind:
     def to_params(self, span: float) -> Array:
         """The row of the (N, N_WIND_PARAMS) wind parameters; ``span`` (m) is the airframe's
         rotor-tip to rotor-tip span b, used by the angular-rate gust filters."""
-        if self.sigma_w > 0 and D.RATE_LENGTH_P * span >= 0.9 * D.H_MIN_FT * D.FT:
-            raise ValueError(
-                f"airframe span {span:.3g} m is too large for the low-altitude rate gusts "
-                f"(4b/π must stay below the smallest scale length, {D.H_MIN_FT * D.FT:.2f} m)"
-            )
-        row = np.zeros(L.N_WIND_PARAMS)
-        theta = math.radians(self.from_deg)
-        toward = (-math.sin(theta), -math.cos(theta))  # (E, N), unit
-        row[L.W_MEAN_E], row[L.W_MEAN_N] = self.speed * toward[0], self.speed * toward[1]
-        row[L.W_LOG_PROFILE] = self.profile == "log"
-        row[L.W_TOWARD_E], row[L.W_TOWARD_N] = toward
-        row[L.W_SIGMA_W] = self.sigma_w
-        row[L.W_SPAN] = span
-        row[L.W_ROLL_GAIN] = D.roll_rate_gain(span)
-        gust = self.gust
-        if gust is None:
-            row[L.W_GUST_LENGTH] = math.inf
-        else:
+        return params_rows([self], [span])[0]
+
+
+def params_rows(winds: Sequence[Wind], spans: Sequence[float]) -> Array:
+    """(len(winds), N_WIND_PARAMS): the parameter row of each Wind for its airframe's span
+    b (m, rotor tip to rotor tip, used by the angular-rate gust filters), at once (a vector
+    env's resets set many a step)."""
+    span = np.asarray(spans, dtype=np.float64).reshape(len(winds))
+    sigma_w = np.array([w.sigma_w for w in winds])
+    too_wide = (sigma_w > 0) & (D.RATE_LENGTH_P * span >= 0.9 * D.H_MIN_FT * D.FT)
+    if too_wide.any():
+        raise ValueError(
+            f"airframe span {span[too_wide][0]:.3g} m is too large for the low-altitude rate "
+            f"gusts (4b/π must stay below the smallest scale length, {D.H_MIN_FT * D.FT:.2f} m)"
+        )
+    rows = np.zeros((len(winds), L.N_WIND_PARAMS))
+    theta = [math.radians(w.from_deg) for w in winds]
+    toward_e = np.array([-math.sin(t) for t in theta])  # (E, N), unit
+    toward_n = np.array([-math.cos(t) for t in theta])
+    speed = np.array([w.speed for w in winds])
+    rows[:, L.W_MEAN_E], rows[:, L.W_MEAN_N] = speed * toward_e, speed * toward_n
+    rows[:, L.W_LOG_PROFILE] = [w.profile == "log" for w in winds]
+    rows[:, L.W_TOWARD_E], rows[:, L.W_TOWARD_N] = toward_e, toward_n
+    rows[:, L.W_SIGMA_W] = sigma_w
+    rows[:, L.W_SPAN] = span
+    rows[:, L.W_ROLL_GAIN] = [D.roll_rate_gain(b) for b in span.tolist()]
+    rows[:, L.W_GUST_LENGTH] = math.inf
+    for row, w in zip(rows, winds, strict=True):
+        gust = w.gust
+        if gust is not None:
             row[L.W_GUST_E : L.W_GUST_U + 1] = gust.amplitude
             row[L.W_GUST_LENGTH], row[L.W_GUST_START] = gust.length, gust.start
             row[L.W_GUST_HOLD] = gust.hold
-        return row
+    return rows
 
 
 CALM = Wind()
@@ -192,10 +204,18 @@ def height_above_ground(state: Array, params: Array) -> Array:
 # --- random numbers: one splitmix64 stream per vehicle ---------------------------------
 
 
+_SEED_MIX = 0xD1B54A32D192ED03  # odd: a seed's streams start at seed·_SEED_MIX mod 2⁶⁴
+
+
 def seed_streams(seed: int, n: int) -> NDArray[np.uint64]:
     """(n,) stream states for vehicles 0..n−1 of a fleet seeded with ``seed``."""
-    base = _U64(seed * 0xD1B54A32D192ED03 % 2**64)
+    base = _U64(seed * _SEED_MIX % 2**64)
     return base + np.arange(n, dtype=np.uint64) * _U64(0x9E3779B97F4A7C15 * 0x632BE5AB % 2**64)
+
+
+def seed_stream_each(seeds: Sequence[int]) -> NDArray[np.uint64]:
+    """(len(seeds),) the first stream of each seed: ``seed_streams(s, 1)[0]`` for each s."""
+    return np.array([int(s) * _SEED_MIX % 2**64 for s in seeds], dtype=np.uint64)
 
 
 def splitmix64(streams: NDArray[np.uint64]) -> NDArray[np.uint64]:
