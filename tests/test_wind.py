@@ -206,6 +206,58 @@ def test_batched_wind_equals_the_numpy_reference_and_single_vehicles():
     assert np.abs(compiled.air_velocity).max() > 1.0  # the weather did blow
 
 
+def test_a_block_without_turbulence_skips_its_filters_in_step_with_the_reference():
+    """A mean wind (uniform or log profile, with a gust or not) on a whole block of 32
+    vehicles takes the kernel's calm path: the same air as the reference, the filter
+    states left as they were, the random streams moved past the draws skipped, so that
+    turbulence given later starts from the same draws in both."""
+    n = 40  # vehicles 0-31: one block without turbulence; 32-39: a mixed block
+    gust = Gust(amplitude=(1.5, 0.5, -1.0), length=2.0, start=0.02, hold=0.5)
+    calm = [
+        Wind(
+            speed=5,
+            from_deg=270,
+            profile="log" if i % 2 else "uniform",
+            gust=gust if i % 3 else None,
+        )
+        for i in range(32)
+    ]
+    states = _random_states(n, 8)
+    commands = np.random.default_rng(9).uniform(150, 320, (n, 4))
+    fleets = {b: Fleet(n, dt=0.005, ground_z=-np.inf, backend=b) for b in ("compiled", "reference")}
+    single = Fleet(1, dt=0.005, ground_z=-np.inf)  # a block of one, calm too
+    for fleet in fleets.values():
+        fleet.reset(states)
+        fleet.set_wind(calm + _weathers(8), seed=21)
+    single.reset(states[:1])
+    single.set_wind(calm[0], seed=0)
+    single.wind_streams[:] = fleets["compiled"].wind_streams[0]
+    before = fleets["compiled"].wind_state[:32, L.WS_TURBULENCE].copy()
+    for _ in range(30):
+        for fleet in fleets.values():
+            fleet.step(commands, n_substeps=2)
+        single.step(commands[0], n_substeps=2)
+    compiled, reference = fleets["compiled"], fleets["reference"]
+    air = slice(L.WS_AIR_VELOCITY.start, L.WS_AIR_RATES.stop)
+    np.testing.assert_allclose(
+        compiled.wind_state[:32, air], reference.wind_state[:32, air], atol=1e-9
+    )
+    np.testing.assert_array_equal(compiled.wind_state[:32, L.WS_TURBULENCE], before)
+    np.testing.assert_array_equal(reference.wind_state[:32, L.WS_TURBULENCE], before)
+    np.testing.assert_array_equal(compiled.wind_streams, reference.wind_streams)
+    np.testing.assert_allclose(compiled.state[:32], reference.state[:32], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(single.state[0], compiled.state[0], rtol=0, atol=1e-12)
+    assert np.ptp(compiled.air_velocity[:32, 2]) > 0.5  # the gusts blew (up and down)
+    # Turbulence given later starts from the same draws in both implementations.
+    stirred = np.arange(n) < 32
+    for fleet in fleets.values():
+        fleet.set_wind(Wind(speed=5, from_deg=270, turbulence="moderate"), mask=stirred)
+        for _ in range(10):
+            fleet.step(commands, n_substeps=2)
+    np.testing.assert_allclose(compiled.wind_state[:, air], reference.wind_state[:, air], atol=1e-4)
+    assert np.abs(compiled.wind_state[:32, L.WS_AIR_RATES]).max() > 0.01  # rate gusts now
+
+
 def test_still_air_is_the_windless_physics_bit_for_bit():
     n = 33
     states = _random_states(n, 5)

@@ -151,13 +151,16 @@ def compile_step(B: int, release_gil: bool, wind: bool = False):
                 for k in range(L.N_WIND_STATE):
                     ws[k * B + j] = ws[k * B]
                 rng[j] = rng[0]
+            calm = True  # no turbulence in the whole block: its weather skips the filters
+            for j in range(B):
+                calm = calm and not wp[L.W_SIGMA_W * B + j] > 0.0
             for _ in range(n_substeps):
                 for j in range(m):  # a crashed vehicle keeps its pose: remember it
                     if contact[first + j] == L.CRASHED:
                         for k in range(size):
                             prev[k * B + j] = s[k * B + j]
                 if weather:
-                    wind_kernel.advance_block(s, p, wp, ws, rng, wscratch, sums, B, B, dt)
+                    wind_kernel.advance_block(s, p, wp, ws, rng, wscratch, sums, B, B, dt, calm)
                 rotor_factors(s, p, sums, m, B)
                 derivative(s, p, cmd, k1, m, sums, B, WIND)
                 _axpy(tmp, s, 0.5 * dt, k1, m, B)

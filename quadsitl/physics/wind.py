@@ -347,7 +347,10 @@ def advance(
 ) -> None:
     """One physics step of the weather, in place: the shaping filters move on by the
     distance flown through the air, V·dt, exactly; the gust by the same distance once it
-    has started; then the air outputs for this step are written (held over the step)."""
+    has started; then the air outputs for this step are written (held over the step).
+    Every vehicle's stream moves past the step's draws; a vehicle without turbulence
+    (σ_w = 0) does not step its filter states (they restart whenever it gets some), so
+    the compiled kernel skips the filters' work for blocks of such vehicles."""
     height = height_above_ground(state, params)
     step = airspeed(state, params, wind_params) * dt  # m flown through the air
     lu, lw, rho_r, rho_q = _channel_lengths(height, wind_params)
@@ -355,6 +358,8 @@ def advance(
     n = normals(streams, N_NORMALS)
     z = wind_state[:, L.WS_TURBULENCE]
     for k in range(len(state)):
+        if not wind_params[k, L.W_SIGMA_W] > 0:  # no turbulence: its states stay as they are
+            continue
         e_u = math.exp(-step[k] / lu[k])
         z[k, L.WS_U] = e_u * z[k, L.WS_U] + math.sqrt(1 - e_u * e_u) * n[k, 0]
         for first, length, rho, noise in (

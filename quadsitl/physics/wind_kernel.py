@@ -31,6 +31,8 @@ LN_20_OVER_Z0 = math.log(20.0 / Z0_FT)
 _U64, _I64, _F32 = np.uint64, np.int64, np.float32
 GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 MIX1, MIX2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+# What a step's N_NORMALS // 2 draws add to a splitmix64 stream (mod 2⁶⁴): a calm step's.
+SKIPPED_DRAWS = np.uint64(0x9E3779B97F4A7C15 * (N_NORMALS // 2) % 2**64)
 # float32 constants of the normals (a float64 literal would promote the arithmetic).
 F0, F1, F2, F_HALF = _F32(0.0), _F32(1.0), _F32(2.0), _F32(0.5)
 F_2POW_M32, F_QUARTER_PI = _F32(2.0**-32), _F32(math.pi / 2)
@@ -251,15 +253,20 @@ def _map_exp_neg(x, first, rows, B):  # pragma: no cover - compiled
 
 
 @_inline
-def advance_block(s, p, wp, ws, rng, scratch, sums, m, B, dt):  # pragma: no cover - compiled
+def advance_block(s, p, wp, ws, rng, scratch, sums, m, B, dt, calm):  # pragma: no cover
     """One physics step of the first m vehicles' weather (wind.advance), then the air
     the derivative holds over the step, into the kernel's ``sums`` rows AIR0..AIR0+5:
     the air velocity, world ENU, then the air's angular velocity in body axes at the
-    step's start attitude.
+    step's start attitude. ``calm``: no vehicle of the block has turbulence (σ_w = 0),
+    so none of the filters' work is done: a mean wind (and a gust) costs a fraction of it.
     Many short loops: each is simple enough for the compiler to vectorise."""
     x = scratch
     x[_LN_PROFILE * B : (_E_R + 1) * B] = 1.0  # columns past m: finite for ln and exp
-    fill_normals(rng, x, m, B)
+    if calm:  # the streams move past the draws skipped, as wind.advance's draws move them
+        for j in range(m):
+            rng[j] += SKIPPED_DRAWS
+    else:
+        fill_normals(rng, x, m, B)
     for j in range(m):  # heights: the arguments of the logarithms
         ground = p[L.P_GROUND_Z * B + j]
         height = s[L.I_PZ * B + j] - (ground if ground > -math.inf else 0.0)
@@ -267,7 +274,7 @@ def advance_block(s, p, wp, ws, rng, scratch, sums, m, B, dt):  # pragma: no cov
         h_ft = min(max(height / D.FT, D.H_MIN_FT), D.H_MAX_FT)
         x[_LN_D * B + j] = 0.177 + 0.000823 * h_ft
         x[_LW * B + j] = x[_LN_LW * B + j] = h_ft * D.FT  # L_w = h
-    _map_ln(x, _LN_PROFILE, 3, B)  # _LN_PROFILE, _LN_D, _LN_LW
+    _map_ln(x, _LN_PROFILE, 1 if calm else 3, B)  # _LN_PROFILE, _LN_D, _LN_LW
     for j in range(m):  # mean wind at this height, airspeed, distance flown
         log_factor = x[_LN_PROFILE * B + j] / LN_20_OVER_Z0
         factor = log_factor if wp[L.W_LOG_PROFILE * B + j] > 0.0 else 1.0
@@ -280,59 +287,70 @@ def advance_block(s, p, wp, ws, rng, scratch, sums, m, B, dt):  # pragma: no cov
         x[_MEAN_E * B + j], x[_MEAN_N * B + j] = mean_e, mean_n
         x[_LN_D * B + j] *= -0.4  # exp(−(−0.4 ln D)) = D^0.4
         x[_LN_LW * B + j] *= 1.0 / 3.0  # exp(−ln(L_w)/3) = L_w^(−1/3)
-    _map_exp_neg(x, _LN_D, 2, B)  # _LN_D, _LN_LW
-    for j in range(m):  # scale lengths, and the arguments of the filters' decays
-        d04 = x[_LN_D * B + j]
-        lu = x[_LW * B + j] / (d04 * d04 * d04)
-        span, step = wp[L.W_SPAN * B + j], x[_STEP * B + j]
-        x[_LU * B + j] = lu
-        x[_E_U * B + j] = step / lu
-        x[_E_W * B + j] = step / x[_LW * B + j]
-        x[_E_P * B + j] = step / (D.RATE_LENGTH_P * span)  # also the q filter's
-        x[_E_R * B + j] = step / (D.RATE_LENGTH_R * span)
-    _map_exp_neg(x, _E_U, 4, B)  # _E_U, _E_W, _E_P, _E_R
-    for j in range(m):  # the first-order channels u and p
-        e_u, e_p = x[_E_U * B + j], x[_E_P * B + j]
-        z_u = e_u * ws[L.WS_U * B + j] + math.sqrt(max(1.0 - e_u * e_u, 0.0)) * x[0 * B + j]
-        z_p = e_p * ws[L.WS_P * B + j] + math.sqrt(max(1.0 - e_p * e_p, 0.0)) * x[7 * B + j]
-        ws[L.WS_U * B + j], ws[L.WS_P * B + j] = z_u, z_p
-    k, n = L.WS_V1, 1  # lateral v with the yaw-rate filter: states k.., normals n..
-    for j in range(m):
-        lu, step = x[_LU * B + j], x[_STEP * B + j]
-        rho = D.RATE_LENGTH_R * wp[L.W_SPAN * B + j] / lu
-        z1, z2, z3 = _channel_step(
-            ws[k * B + j], ws[(k + 1) * B + j], ws[(k + 2) * B + j],
-            x[n * B + j], x[(n + 1) * B + j], x[(n + 2) * B + j],
-            step / lu, rho, x[_E_U * B + j], x[_E_R * B + j],
-        )  # fmt: skip
-        ws[k * B + j], ws[(k + 1) * B + j], ws[(k + 2) * B + j] = z1, z2, z3
-    k, n = L.WS_W1, 4  # vertical w with the pitch-rate filter
-    for j in range(m):
-        lw, step = x[_LW * B + j], x[_STEP * B + j]
-        rho = D.RATE_LENGTH_P * wp[L.W_SPAN * B + j] / lw
-        z1, z2, z3 = _channel_step(
-            ws[k * B + j], ws[(k + 1) * B + j], ws[(k + 2) * B + j],
-            x[n * B + j], x[(n + 1) * B + j], x[(n + 2) * B + j],
-            step / lw, rho, x[_E_W * B + j], x[_E_P * B + j],
-        )  # fmt: skip
-        ws[k * B + j], ws[(k + 1) * B + j], ws[(k + 2) * B + j] = z1, z2, z3
-    for j in range(m):  # outputs, turbulence frame: σ times the filters' rows
-        sigma_w = wp[L.W_SIGMA_W * B + j]
-        d04, lu, lw = x[_LN_D * B + j], x[_LU * B + j], x[_LW * B + j]
-        sigma_u = sigma_w / d04
-        span = wp[L.W_SPAN * B + j]
-        row_v = D.SQRT3 * ws[L.WS_V1 * B + j] + (1.0 - D.SQRT3) * ws[L.WS_V2 * B + j]
-        row_w = D.SQRT3 * ws[L.WS_W1 * B + j] + (1.0 - D.SQRT3) * ws[L.WS_W2 * B + j]
-        x[_U * B + j] = sigma_u * ws[L.WS_U * B + j]
-        x[_V * B + j] = sigma_u * row_v
-        x[_W * B + j] = sigma_w * row_w
-        roll = sigma_w * wp[L.W_ROLL_GAIN * B + j] * x[_LN_LW * B + j]  # σ_p
-        x[_P * B + j] = roll * ws[L.WS_P * B + j]
-        rho_q, rho_r = D.RATE_LENGTH_P * span / lw, D.RATE_LENGTH_R * span / lu
-        w1, w2, w3 = ws[L.WS_W1 * B + j], ws[(L.WS_W1 + 1) * B + j], ws[(L.WS_W1 + 2) * B + j]
-        v1, v2, v3 = ws[L.WS_V1 * B + j], ws[(L.WS_V1 + 1) * B + j], ws[(L.WS_V1 + 2) * B + j]
-        x[_Q * B + j] = sigma_w / lw * _rate_output(w1, w2, w3, rho_q)
-        x[_R * B + j] = -sigma_u / lu * _rate_output(v1, v2, v3, rho_r)
+    if calm:
+        x[_U * B : (_R + 1) * B] = 0.0  # rows _U.._R: no turbulence
+    else:
+        _map_exp_neg(x, _LN_D, 2, B)  # _LN_D, _LN_LW
+        for j in range(m):  # scale lengths, and the arguments of the filters' decays
+            d04 = x[_LN_D * B + j]
+            lu = x[_LW * B + j] / (d04 * d04 * d04)
+            span, step = wp[L.W_SPAN * B + j], x[_STEP * B + j]
+            x[_LU * B + j] = lu
+            x[_E_U * B + j] = step / lu
+            x[_E_W * B + j] = step / x[_LW * B + j]
+            x[_E_P * B + j] = step / (D.RATE_LENGTH_P * span)  # also the q filter's
+            x[_E_R * B + j] = step / (D.RATE_LENGTH_R * span)
+        _map_exp_neg(x, _E_U, 4, B)  # _E_U, _E_W, _E_P, _E_R
+        for j in range(m):  # the first-order channels u and p
+            e_u, e_p = x[_E_U * B + j], x[_E_P * B + j]
+            z_u = e_u * ws[L.WS_U * B + j] + math.sqrt(max(1.0 - e_u * e_u, 0.0)) * x[0 * B + j]
+            z_p = e_p * ws[L.WS_P * B + j] + math.sqrt(max(1.0 - e_p * e_p, 0.0)) * x[7 * B + j]
+            live = wp[L.W_SIGMA_W * B + j] > 0.0  # a vehicle in still air keeps its states
+            ws[L.WS_U * B + j] = z_u if live else ws[L.WS_U * B + j]
+            ws[L.WS_P * B + j] = z_p if live else ws[L.WS_P * B + j]
+        k, n = L.WS_V1, 1  # lateral v with the yaw-rate filter: states k.., normals n..
+        for j in range(m):
+            lu, step = x[_LU * B + j], x[_STEP * B + j]
+            rho = D.RATE_LENGTH_R * wp[L.W_SPAN * B + j] / lu
+            z1, z2, z3 = _channel_step(
+                ws[k * B + j], ws[(k + 1) * B + j], ws[(k + 2) * B + j],
+                x[n * B + j], x[(n + 1) * B + j], x[(n + 2) * B + j],
+                step / lu, rho, x[_E_U * B + j], x[_E_R * B + j],
+            )  # fmt: skip
+            live = wp[L.W_SIGMA_W * B + j] > 0.0
+            ws[k * B + j] = z1 if live else ws[k * B + j]
+            ws[(k + 1) * B + j] = z2 if live else ws[(k + 1) * B + j]
+            ws[(k + 2) * B + j] = z3 if live else ws[(k + 2) * B + j]
+        k, n = L.WS_W1, 4  # vertical w with the pitch-rate filter
+        for j in range(m):
+            lw, step = x[_LW * B + j], x[_STEP * B + j]
+            rho = D.RATE_LENGTH_P * wp[L.W_SPAN * B + j] / lw
+            z1, z2, z3 = _channel_step(
+                ws[k * B + j], ws[(k + 1) * B + j], ws[(k + 2) * B + j],
+                x[n * B + j], x[(n + 1) * B + j], x[(n + 2) * B + j],
+                step / lw, rho, x[_E_W * B + j], x[_E_P * B + j],
+            )  # fmt: skip
+            live = wp[L.W_SIGMA_W * B + j] > 0.0
+            ws[k * B + j] = z1 if live else ws[k * B + j]
+            ws[(k + 1) * B + j] = z2 if live else ws[(k + 1) * B + j]
+            ws[(k + 2) * B + j] = z3 if live else ws[(k + 2) * B + j]
+        for j in range(m):  # outputs, turbulence frame: σ times the filters' rows
+            sigma_w = wp[L.W_SIGMA_W * B + j]
+            d04, lu, lw = x[_LN_D * B + j], x[_LU * B + j], x[_LW * B + j]
+            sigma_u = sigma_w / d04
+            span = wp[L.W_SPAN * B + j]
+            row_v = D.SQRT3 * ws[L.WS_V1 * B + j] + (1.0 - D.SQRT3) * ws[L.WS_V2 * B + j]
+            row_w = D.SQRT3 * ws[L.WS_W1 * B + j] + (1.0 - D.SQRT3) * ws[L.WS_W2 * B + j]
+            x[_U * B + j] = sigma_u * ws[L.WS_U * B + j]
+            x[_V * B + j] = sigma_u * row_v
+            x[_W * B + j] = sigma_w * row_w
+            roll = sigma_w * wp[L.W_ROLL_GAIN * B + j] * x[_LN_LW * B + j]  # σ_p
+            x[_P * B + j] = roll * ws[L.WS_P * B + j]
+            rho_q, rho_r = D.RATE_LENGTH_P * span / lw, D.RATE_LENGTH_R * span / lu
+            w1, w2, w3 = ws[L.WS_W1 * B + j], ws[(L.WS_W1 + 1) * B + j], ws[(L.WS_W1 + 2) * B + j]
+            v1, v2, v3 = ws[L.WS_V1 * B + j], ws[(L.WS_V1 + 1) * B + j], ws[(L.WS_V1 + 2) * B + j]
+            x[_Q * B + j] = sigma_w / lw * _rate_output(w1, w2, w3, rho_q)
+            x[_R * B + j] = -sigma_u / lu * _rate_output(v1, v2, v3, rho_r)
     for j in range(m):  # the gust: its shape at the distance flown into it, then onward
         length = wp[L.W_GUST_LENGTH * B + j]  # +inf: no gust
         started = ws[L.WS_TIME * B + j] >= wp[L.W_GUST_START * B + j]
