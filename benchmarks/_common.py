@@ -30,3 +30,9 @@ def report(name: str, value: float, target: float, unit: str) -> None:
         f"{name}: {value:,.0f} {unit} (target {target:,.0f}, ratio {value / target:.2f}, {verdict})"
     )
     print(f"{name}: {value:.0f}")
+
+
+def figure(name: str, value: float, unit: str, note: str) -> None:
+    """Print a figure that has no target: a human line and a ``name: value`` line."""
+    print(f"{name}: {value:,.0f} {unit} ({note})")
+    print(f"{name}: {value:.0f}")
