@@ -14,6 +14,7 @@ from __future__ import annotations
 import sys
 import warnings
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -26,45 +27,38 @@ import quadsitl  # noqa: F401
 NUM_ENVS = 4096
 
 
+def _vector_env(first_actions: np.ndarray, **options: Any) -> Any:
+    """The Hover vector env of NUM_ENVS envs with ``options``, reset and stepped once."""
+    env = gym.make_vec(
+        "QuadSITL/Hover-v0", num_envs=NUM_ENVS, vectorization_mode="vector_entry_point", **options
+    )
+    env.reset(seed=0)
+    env.step(first_actions)
+    return env
+
+
 def main() -> None:
     pin_to_one_core()
     warnings.filterwarnings("ignore")
     rng = np.random.default_rng(0)
 
-    vec = gym.make_vec(
-        "QuadSITL/Hover-v0", num_envs=NUM_ENVS, vectorization_mode="vector_entry_point"
-    )
-    vec.reset(seed=0)
     vec_actions = rng.normal(0, 0.3, (20, NUM_ENVS, 4)).astype(np.float32)
-    vec.step(vec_actions[0])
+    vec = _vector_env(vec_actions[0])
 
     def run_vector() -> int:
         for actions in vec_actions:
             vec.step(actions)
         return len(vec_actions) * NUM_ENVS
 
-    randomized = gym.make_vec(
-        "QuadSITL/Hover-v0",
-        num_envs=NUM_ENVS,
-        vectorization_mode="vector_entry_point",
-        randomize=True,
-    )
-    randomized.reset(seed=0)
-    randomized.step(vec_actions[0])
+    randomized = _vector_env(vec_actions[0], randomize=True)
 
     def run_randomized() -> int:
         for actions in vec_actions:
             randomized.step(actions)
         return len(vec_actions) * NUM_ENVS
 
-    breezy = gym.make_vec(  # a constant wind on every env: no turbulence, no draws
-        "QuadSITL/Hover-v0",
-        num_envs=NUM_ENVS,
-        vectorization_mode="vector_entry_point",
-        wind={"speed": 5.0, "from_deg": 270.0},
-    )
-    breezy.reset(seed=0)
-    breezy.step(vec_actions[0])
+    # A constant wind on every env: no turbulence, no draws.
+    breezy = _vector_env(vec_actions[0], wind={"speed": 5.0, "from_deg": 270.0})
 
     def run_breezy() -> int:
         for actions in vec_actions:

@@ -209,12 +209,12 @@ _SEED_MIX = 0xD1B54A32D192ED03  # odd: a seed's streams start at seed·_SEED_MIX
 
 def seed_streams(seed: int, n: int) -> NDArray[np.uint64]:
     """(n,) stream states for vehicles 0..n−1 of a fleet seeded with ``seed``."""
-    base = _U64(seed * _SEED_MIX % 2**64)
+    base = seed_stream_each([seed])[0]
     return base + np.arange(n, dtype=np.uint64) * _U64(0x9E3779B97F4A7C15 * 0x632BE5AB % 2**64)
 
 
 def seed_stream_each(seeds: Sequence[int]) -> NDArray[np.uint64]:
-    """(len(seeds),) the first stream of each seed: ``seed_streams(s, 1)[0]`` for each s."""
+    """(len(seeds),) for each seed s, the stream of vehicle 0 of a fleet seeded with s."""
     return np.array([int(s) * _SEED_MIX % 2**64 for s in seeds], dtype=np.uint64)
 
 

@@ -32,7 +32,7 @@ _U64, _I64, _F32 = np.uint64, np.int64, np.float32
 GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 MIX1, MIX2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
 # What a step's N_NORMALS // 2 draws add to a splitmix64 stream (mod 2⁶⁴): a calm step's.
-SKIPPED_DRAWS = np.uint64(0x9E3779B97F4A7C15 * (N_NORMALS // 2) % 2**64)
+SKIPPED_DRAWS = np.uint64(int(GOLDEN) * (N_NORMALS // 2) % 2**64)
 # float32 constants of the normals (a float64 literal would promote the arithmetic).
 F0, F1, F2, F_HALF = _F32(0.0), _F32(1.0), _F32(2.0), _F32(0.5)
 F_2POW_M32, F_QUARTER_PI = _F32(2.0**-32), _F32(math.pi / 2)
@@ -253,6 +253,29 @@ def _map_exp_neg(x, first, rows, B):  # pragma: no cover - compiled
 
 
 @_inline
+def _step_channel(
+    ws, x, wp, k, n, length, rate_length, decay, rate_decay, m, B
+):  # pragma: no cover
+    """One second-order channel of the first m vehicles: modal states in ws rows k..k+2,
+    normals in x rows n..n+2, its scale length in x row ``length``, its rate filter's
+    length ``rate_length``·b, the decays exp(−Δτ) and exp(−Δτ/ρ) in x rows ``decay`` and
+    ``rate_decay``. A vehicle without turbulence keeps its states (a select: the loop
+    stays vectorised)."""
+    for j in range(m):
+        scale, step = x[length * B + j], x[_STEP * B + j]
+        rho = rate_length * wp[L.W_SPAN * B + j] / scale
+        z1, z2, z3 = _channel_step(
+            ws[k * B + j], ws[(k + 1) * B + j], ws[(k + 2) * B + j],
+            x[n * B + j], x[(n + 1) * B + j], x[(n + 2) * B + j],
+            step / scale, rho, x[decay * B + j], x[rate_decay * B + j],
+        )  # fmt: skip
+        live = wp[L.W_SIGMA_W * B + j] > 0.0
+        ws[k * B + j] = z1 if live else ws[k * B + j]
+        ws[(k + 1) * B + j] = z2 if live else ws[(k + 1) * B + j]
+        ws[(k + 2) * B + j] = z3 if live else ws[(k + 2) * B + j]
+
+
+@_inline
 def advance_block(s, p, wp, ws, rng, scratch, sums, m, B, dt, calm):  # pragma: no cover
     """One physics step of the first m vehicles' weather (wind.advance), then the air
     the derivative holds over the step, into the kernel's ``sums`` rows AIR0..AIR0+5:
@@ -308,32 +331,9 @@ def advance_block(s, p, wp, ws, rng, scratch, sums, m, B, dt, calm):  # pragma: 
             live = wp[L.W_SIGMA_W * B + j] > 0.0  # a vehicle in still air keeps its states
             ws[L.WS_U * B + j] = z_u if live else ws[L.WS_U * B + j]
             ws[L.WS_P * B + j] = z_p if live else ws[L.WS_P * B + j]
-        k, n = L.WS_V1, 1  # lateral v with the yaw-rate filter: states k.., normals n..
-        for j in range(m):
-            lu, step = x[_LU * B + j], x[_STEP * B + j]
-            rho = D.RATE_LENGTH_R * wp[L.W_SPAN * B + j] / lu
-            z1, z2, z3 = _channel_step(
-                ws[k * B + j], ws[(k + 1) * B + j], ws[(k + 2) * B + j],
-                x[n * B + j], x[(n + 1) * B + j], x[(n + 2) * B + j],
-                step / lu, rho, x[_E_U * B + j], x[_E_R * B + j],
-            )  # fmt: skip
-            live = wp[L.W_SIGMA_W * B + j] > 0.0
-            ws[k * B + j] = z1 if live else ws[k * B + j]
-            ws[(k + 1) * B + j] = z2 if live else ws[(k + 1) * B + j]
-            ws[(k + 2) * B + j] = z3 if live else ws[(k + 2) * B + j]
-        k, n = L.WS_W1, 4  # vertical w with the pitch-rate filter
-        for j in range(m):
-            lw, step = x[_LW * B + j], x[_STEP * B + j]
-            rho = D.RATE_LENGTH_P * wp[L.W_SPAN * B + j] / lw
-            z1, z2, z3 = _channel_step(
-                ws[k * B + j], ws[(k + 1) * B + j], ws[(k + 2) * B + j],
-                x[n * B + j], x[(n + 1) * B + j], x[(n + 2) * B + j],
-                step / lw, rho, x[_E_W * B + j], x[_E_P * B + j],
-            )  # fmt: skip
-            live = wp[L.W_SIGMA_W * B + j] > 0.0
-            ws[k * B + j] = z1 if live else ws[k * B + j]
-            ws[(k + 1) * B + j] = z2 if live else ws[(k + 1) * B + j]
-            ws[(k + 2) * B + j] = z3 if live else ws[(k + 2) * B + j]
+        # lateral v with the yaw-rate filter, vertical w with the pitch-rate filter
+        _step_channel(ws, x, wp, L.WS_V1, 1, _LU, D.RATE_LENGTH_R, _E_U, _E_R, m, B)
+        _step_channel(ws, x, wp, L.WS_W1, 4, _LW, D.RATE_LENGTH_P, _E_W, _E_P, m, B)
         for j in range(m):  # outputs, turbulence frame: σ times the filters' rows
             sigma_w = wp[L.W_SIGMA_W * B + j]
             d04, lu, lw = x[_LN_D * B + j], x[_LU * B + j], x[_LW * B + j]
