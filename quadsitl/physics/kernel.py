@@ -10,7 +10,8 @@ over blocks (scratch, substeps, the weather first); the derivative and the groun
 contact it inlines are in :mod:`quadsitl.physics.kernel_dynamics`. The same source is
 compiled once per block size (:func:`compile_step`): ``batch_step`` and ``single_step``
 agree bit for bit, and ``tests/test_physics_equivalence.py`` holds them to the reference
-within 1e-12.
+within 1e-12. :func:`specific_force` gives what an accelerometer feels at a state, from
+the same derivative and the same world (a weak rotor, ground effect, the air).
 Read the reference to understand the physics; read this only to change its speed.
 """
 
@@ -25,6 +26,7 @@ import numpy as np
 from quadsitl.physics import layout as L
 from quadsitl.physics import wind_kernel
 from quadsitl.physics.kernel_dynamics import (
+    AIR0,
     SUMS_ROWS,
     derivative,
     ground_contact,
@@ -272,3 +274,29 @@ batch_step = compile_step(BLOCK, release_gil=True)
 single_step = compile_step(1, release_gil=False)
 batch_step_wind = compile_step(BLOCK, release_gil=True, wind=True)
 single_step_wind = compile_step(1, release_gil=False, wind=True)
+
+
+@numba.njit(**_OPTIONS)
+def specific_force(state, params, contact, air_velocity, out):  # pragma: no cover - compiled
+    """The non-gravitational acceleration of each vehicle, m/s² world ENU, into ``out``
+    (n, 3): a − g, what an ideal accelerometer feels (before it is turned into the body).
+
+    In the air: the physics' own :func:`derivative`, with the world the kernel builds at
+    the state (each rotor's efficiency and ground-effect gain, the air's velocity
+    ``air_velocity`` (n, 3) m/s world ENU), so thrust and drag are those integrated; on
+    the ground, which holds the vehicle up, gravity's reaction (0, 0, g).
+    """
+    sums = np.zeros(SUMS_ROWS)  # the air's angular velocity stays 0: moments are unused
+    rate = np.empty(L.STATE_SIZE)
+    idle = np.zeros(L.N_ROTORS)  # the command only moves the rotors, not read here
+    for j in range(state.shape[0]):
+        gravity = params[j, L.P_GRAVITY]
+        if contact[j] != L.AIRBORNE:
+            out[j, 0], out[j, 1], out[j, 2] = 0.0, 0.0, gravity
+            continue
+        s, p = state[j], params[j]  # a block of one vehicle: value k at s[k]
+        for k in range(3):
+            sums[AIR0 + k] = air_velocity[j, k]
+        rotor_factors(s, p, sums, 1, 1)
+        derivative(s, p, idle, rate, 1, sums, 1, True)
+        out[j, 0], out[j, 1], out[j, 2] = rate[L.I_VX], rate[L.I_VY], rate[L.I_VZ] + gravity

@@ -17,6 +17,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
+from quadsitl.physics import kernel
 from quadsitl.physics import layout as L
 from quadsitl.physics.sensors import failures as FL
 from quadsitl.physics.sensors.barometer import Barometer, BarometerParams
@@ -74,32 +75,20 @@ def body_from_world(state: Array, vectors: Array) -> Array:
 
 @numba.njit(cache=True, error_model="numpy")
 def _specific_force(state, params, contact, air_velocity, out):  # pragma: no cover - compiled
+    kernel.specific_force(state, params, contact, air_velocity, out)
     for j in range(state.shape[0]):
-        if contact[j] != L.AIRBORNE:  # the ground holds it up: gravity's reaction, world
-            wx, wy, wz, thrust = 0.0, 0.0, params[j, L.P_GRAVITY], 0.0
-        else:  # drag through the air, world; thrust along body +z
-            mass = params[j, L.P_MASS]
-            rx = state[j, L.I_VX] - air_velocity[j, 0]
-            ry = state[j, L.I_VY] - air_velocity[j, 1]
-            rz = state[j, L.I_VZ] - air_velocity[j, 2]
-            drag = -params[j, L.P_KD] * np.sqrt(rx * rx + ry * ry + rz * rz) / mass
-            wx, wy, wz = rx * drag, ry * drag, rz * drag
-            rotor_sq = 0.0
-            for i in range(L.N_ROTORS):
-                rotor_sq += state[j, L.I_ROTOR0 + i] * state[j, L.I_ROTOR0 + i]
-            thrust = params[j, L.P_KT] * rotor_sq / mass
-        bx, by, bz = _rotate_into_body(
-            state[j, L.I_QW], state[j, L.I_QX], state[j, L.I_QY], state[j, L.I_QZ], wx, wy, wz
-        )
-        out[j, 0], out[j, 1], out[j, 2] = bx, by, bz + thrust
+        out[j, 0], out[j, 1], out[j, 2] = _rotate_into_body(
+            state[j, L.I_QW], state[j, L.I_QX], state[j, L.I_QY], state[j, L.I_QZ],
+            out[j, 0], out[j, 1], out[j, 2],
+        )  # fmt: skip
 
 
 def specific_force(state: Array, params: Array, contact: np.ndarray, air_velocity: Array) -> Array:
-    """(N, 3) m/s², body FLU: what an ideal accelerometer reads, a − g = (thrust + drag)/m
-    by the paper's force law (:func:`quadsitl.physics.reference.derivative`, which a test
-    holds this to); on the ground, which holds the vehicle up, gravity's reaction
-    (0, 0, g) in world. Compiled: a PX4 round reads it twice for one vehicle, where
-    numpy's per-call costs made it 31 µs."""
+    """(N, 3) m/s², body FLU: what an ideal accelerometer reads, a − g, from the forces the
+    physics integrates (:func:`quadsitl.physics.kernel.specific_force`: thrust with each
+    rotor's efficiency and ground effect, drag through the air); on the ground, which
+    holds the vehicle up, gravity's reaction (0, 0, g) in world. Compiled: a PX4 round
+    reads it twice for one vehicle, where numpy's per-call costs made it 31 µs."""
     out = np.empty((state.shape[0], 3))
     _specific_force(state, params, contact, air_velocity, out)
     return out
