@@ -12,6 +12,7 @@ import pytest
 from quadsitl import frames
 from quadsitl.bridges.fake_px4 import HilState, Px4HoverController, state_from
 from quadsitl.bridges.frame_reader import FrameReader
+from quadsitl.bridges.notices import Notices
 from quadsitl.bridges.px4_airframe import (
     SCRIPT_NAME,
     SHIPPED,
@@ -25,6 +26,7 @@ from quadsitl.bridges.px4_hil import (
     LOCKSTEP_FLAG,
     ROUND_US,
     HilPhysics,
+    fit_to_wire,
 )
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics import layout as L
@@ -217,3 +219,67 @@ def test_closed_loop_hover_through_the_adapter_matches_in_process_physics(airfra
     assert max(abs(v) for v in state.velocity) <= 3  # cm/s
     assert np.allclose(u_through, math.sqrt(spec.hover_thrust_fraction), atol=0.005)
     assert np.allclose(u_local, u_through, atol=0.005)
+
+
+def test_notices_are_said_once_per_interval_by_kind_and_the_rest_counted() -> None:
+    """A kind of notice about one vehicle is said once per interval, whatever numbers its
+    text holds; the rest are counted and said with the next line of that kind, or when
+    the vehicle's peer goes. Other kinds and other vehicles have their own."""
+    said: list[str] = []
+    now = [0.0]
+    notices = Notices(said.append, interval=10.0, clock=lambda: now[0])
+    for i in range(1000):
+        notices(0, "refused commands", f"command {i}: refused")
+    notices(0, "bad outputs", "a bad output")
+    notices(1, "refused commands", "command 5: refused")
+    assert said == [
+        "vehicle 0: command 0: refused",
+        "vehicle 0: a bad output",
+        "vehicle 1: command 5: refused",
+    ]
+    now[0] = 10.0
+    notices(0, "refused commands", "command 1000: refused")
+    assert said[-1] == (
+        "vehicle 0: command 1000: refused (999 more refused commands in the last 10 s)"
+    )
+    notices(0, "refused commands", "command 1001: refused")
+    notices.flush(0)
+    assert said[4:] == ["vehicle 0: 1 more refused commands were not shown"]
+    notices.flush()
+    assert len(said) == 5  # nothing more was held back
+    notices(0, "refused commands", "command 1002: refused")  # a new peer: said again
+    assert said[-1] == "vehicle 0: command 1002: refused"
+
+
+@pytest.mark.parametrize("value", [1e9, -1e30, math.inf, math.nan])
+def test_a_physics_value_beyond_the_wire_is_clamped_never_an_error_nor_nan(value: float) -> None:
+    """A vehicle whose state is out of this world (blown away by a 1e9 m/s wind, or NaN)
+    is still sent to PX4: every field of HIL_SENSOR, HIL_GPS and HIL_STATE_QUATERNION
+    within its wire type and finite, never a struct.error."""
+    physics = HilPhysics(Fleet(1, "iris"), notice=lambda _: None)
+    physics.connect(0)
+    physics.peers[0].state_interval_us = ROUND_US
+    data = b""
+    for _ in range(60):  # 0.24 s: GPS fixes 120 ms late among them
+        physics.fleet.state[0, : L.I_ROTOR0] = value
+        data += physics.answer({0: [actuators([0.5] * 4)]})[0]
+    got = received(data)
+    for msgid in (
+        mav.MAVLINK_MSG_ID_HIL_SENSOR,
+        mav.MAVLINK_MSG_ID_HIL_GPS,
+        mav.MAVLINK_MSG_ID_HIL_STATE_QUATERNION,
+    ):
+        assert got[msgid], msgid
+        assert all(math.isfinite(v) for values in got[msgid] for v in values), msgid
+
+
+def test_fit_to_wire_rounds_and_clamps_to_each_fields_type() -> None:
+    cls = mav.MAVLink_hil_gps_message  # Q i i i H H H h h h H B B B H
+    values = (5, 1e12, -1e12, math.nan, 70000.4, -3, 12.6, 40000, -40000, math.inf, 1, 3, 300, 0, 0)
+    assert fit_to_wire(cls, values) == (
+        5, 2**31 - 1, -(2**31), 0, 65535, 0, 13, 32767, -32768, 32767, 1, 3, 255, 0, 0,
+    )  # fmt: skip
+    floats = fit_to_wire(
+        mav.MAVLink_hil_sensor_message, (0, 1e40, -1e40, math.nan, *[0.5] * 10, 0, 0)
+    )
+    assert floats[1:5] == (np.finfo(np.float32).max, -np.finfo(np.float32).max, 0, 0.5)

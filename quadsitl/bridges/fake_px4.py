@@ -162,6 +162,18 @@ class FakePx4:
                 self._take(frame)
         return self._pending.pop(0)
 
+    def poll(self) -> None:
+        """Take whatever the simulator has sent so far, without waiting for more."""
+        self.sock.settimeout(0.0)
+        try:
+            while data := self.sock.recv(65536):
+                for frame in self.reader.feed(data):
+                    self._take(frame)
+        except BlockingIOError:
+            pass
+        finally:
+            self.sock.settimeout(10.0)
+
     def exchange(self, controls: list[float] | tuple[float, ...]) -> HilSensor:
         """One lockstep round: send ``controls``, return the HIL_SENSOR that answers."""
         self.send_controls(controls)

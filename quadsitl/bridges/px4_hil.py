@@ -28,13 +28,17 @@ CA_ROTORi (:mod:`.px4_airframe`); Ω_c = Ω_max · clip(u, 0, 1), so thrust ∝ 
 
 from __future__ import annotations
 
+import functools
 import math
+import re
+import sys
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from quadsitl.bridges.lockstep import step_vehicles
+from quadsitl.bridges.notices import Notices
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import Fleet, initial_state
@@ -76,7 +80,6 @@ class Peer:
     next_state_us: int = 0
     seq: int = 0
     seen: tuple[int, int, int] = (0, 0, 0)  # magnetometer, barometer, GPS samples sent
-    notices: set[str] = field(default_factory=set)
 
 
 def motor_commands(controls: Sequence[float], omega_max: float) -> tuple[list[float], bool]:
@@ -99,7 +102,8 @@ class HilPhysics:
         home: where the local frame's origin is (GPS, barometer, magnetic field).
         noise_scale: of every sensor's noise (0: the truth).
         seed: of the sensors' noise; vehicle i uses seed + i, again at each reconnection.
-        notice: where one-line messages go (connections, bad messages).
+        notice: where one-line messages go (connections, bad messages); those about
+            bad messages are rate-limited by kind (:class:`~.notices.Notices`).
     """
 
     def __init__(
@@ -111,6 +115,7 @@ class HilPhysics:
         notice: Callable[[str], None] = print,
     ) -> None:
         self.fleet, self.notice = fleet, notice
+        self.notices = Notices(notice)
         self.home = home or Home()
         self.noise_scale, self.seed = noise_scale, seed
         fleet.dt = ROUND_US * 1e-6 / PHYSICS_SUBSTEPS
@@ -129,6 +134,7 @@ class HilPhysics:
     def connect(self, index: int) -> None:
         """PX4 instance ``index`` connected: its vehicle starts again at rest at home,
         with new sensors and the clock at 0, on the server's clock until PX4 leads."""
+        self.notices.flush(index)
         self.peers[index] = Peer(connected=True, rounds=self.peers[index].rounds)
         self.sensors[index] = self._new_sensors(index)
         self._put_on_ground(index)
@@ -138,6 +144,7 @@ class HilPhysics:
         peer = self.peers[index]
         peer.connected = peer.lockstep = False
         self._put_on_ground(index)
+        self.notices.flush(index)
 
     def waiting_for_clock(self) -> list[int]:
         """Connected instances the server's clock moves (PX4 not in lockstep, or not yet)."""
@@ -183,7 +190,11 @@ class HilPhysics:
         peer.armed = bool(mode & ARMED_FLAG)
         commands, bad = motor_commands(controls, self._omega_max[index])
         if bad:
-            self.notice_once(index, "PX4 sent a motor output that is not a number; taken as 0")
+            self.notices(
+                index,
+                "motor outputs not a number",
+                "PX4 sent a motor output that is not a number; taken as 0",
+            )
         self._commands[index] = commands
         if flags & LOCKSTEP_FLAG and not peer.lockstep:
             peer.lockstep = True
@@ -208,7 +219,11 @@ class HilPhysics:
                 peer.state_interval_us = int(p2) if p2 > 0 else DEFAULT_STATE_INTERVAL_US
                 peer.next_state_us = peer.time_us
         else:
-            self.notice_once(index, f"PX4 asked for command {command} ({p1:g}, {p2:g}): refused")
+            self.notices(
+                index,
+                "refused commands",
+                f"PX4 asked for command {command} ({p1:g}, {p2:g}): refused",
+            )
         ack = (command, result, 0, 0, frame.sysid, frame.compid)
         return self._pack(peer, mav.MAVLink_command_ack_message, ack)
 
@@ -256,7 +271,7 @@ class HilPhysics:
             fields,
             0,  # sensor id 0: PX4's lockstep master
         )
-        parts = [self._pack(peer, mav.MAVLink_hil_sensor_message, sensor)]
+        parts = [self._pack(peer, mav.MAVLink_hil_sensor_message, sensor, fit=True)]
         if gps.samples != seen_gps:
             parts.append(self._gps_message(index))
         due = peer.state_interval_us is not None and peer.time_us >= peer.next_state_us
@@ -275,25 +290,25 @@ class HilPhysics:
         v_east, v_north, v_up = fix.velocity[0].tolist()
         lat, lon, alt = self.home.to_global(east, north, up - self._gear[index])
         speed = math.hypot(v_north, v_east)
-        cog = round(math.degrees(math.atan2(v_east, v_north)) * 100) % 36000
+        cog = math.degrees(math.atan2(v_east, v_north)) * 100 % 36000  # cdeg
         gps = (
             peer.time_us,
-            round(lat * 1e7),
-            round(lon * 1e7),
-            round(alt * 1000),  # mm above mean sea level
-            _u16(float(fix.eph[0]) * 100),  # cm, 1-σ horizontal (PX4 reads it as metres·100)
-            _u16(float(fix.epv[0]) * 100),
-            _u16(speed * 100),  # cm/s over ground
-            _i16(v_north * 100),
-            _i16(v_east * 100),
-            _i16(-v_up * 100),
-            cog if speed > 0.1 else 65535,  # cdeg; 65535: unknown
+            lat * 1e7,
+            lon * 1e7,
+            alt * 1000,  # mm above mean sea level
+            float(fix.eph[0]) * 100,  # cm, 1-σ horizontal (PX4 reads it as metres·100)
+            float(fix.epv[0]) * 100,
+            speed * 100,  # cm/s over ground
+            v_north * 100,
+            v_east * 100,
+            -v_up * 100,
+            min(cog, 35999) if speed > 0.1 and math.isfinite(cog) else 65535,  # 65535: unknown
             int(fix.fix_type[0]),
             int(fix.satellites[0]),
             0,  # receiver id
             0,  # yaw: not measured
         )
-        return self._pack(peer, mav.MAVLink_hil_gps_message, gps)
+        return self._pack(peer, mav.MAVLink_hil_gps_message, gps, fit=True)
 
     def _state_message(self, index: int) -> bytes:
         """HIL_STATE_QUATERNION: the vehicle's true state (PX4 publishes it as ground
@@ -311,18 +326,22 @@ class HilPhysics:
             peer.time_us,
             *(h * (w + z), h * (x + y), h * (x - y), h * (w - z)),  # FLU->ENU to FRD->NED
             *(wx, -wy, -wz),  # rad/s, body FRD
-            round(lat * 1e7),
-            round(lon * 1e7),
-            round(alt * 1000),
-            *(_i16(vy * 100), _i16(vx * 100), _i16(-vz * 100)),  # cm/s, NED
-            _u16(air_speed * 100),
-            _u16(air_speed * 100),
-            *(_i16(force[0] * mg), _i16(-force[1] * mg), _i16(-force[2] * mg)),  # mG, FRD
+            lat * 1e7,
+            lon * 1e7,
+            alt * 1000,
+            *(vy * 100, vx * 100, -vz * 100),  # cm/s, NED
+            air_speed * 100,
+            air_speed * 100,
+            *(force[0] * mg, -force[1] * mg, -force[2] * mg),  # mG, FRD
         )
-        return self._pack(peer, mav.MAVLink_hil_state_quaternion_message, state)
+        return self._pack(peer, mav.MAVLink_hil_state_quaternion_message, state, fit=True)
 
-    def _pack(self, peer: Peer, message_class: object, values: tuple) -> bytes:
+    def _pack(self, peer: Peer, message_class: object, values: tuple, fit: bool = False) -> bytes:
+        """One frame of ``values``; ``fit``: they come from the physics, so each is first
+        made what its field holds (:func:`fit_to_wire`)."""
         peer.seq += 1
+        if fit:
+            values = fit_to_wire(message_class, values)
         return FC.pack(message_class, values, peer.seq, SYSTEM_ID, COMPONENT_ID)
 
     def _new_sensors(self, index: int) -> SensorSuite:
@@ -345,17 +364,39 @@ class HilPhysics:
         self.fleet.reset(rest, contact=L.ON_GROUND, mask=one)
         self._commands[index] = 0.0
 
-    def notice_once(self, index: int, text: str) -> None:
-        """Say ``text`` about vehicle ``index`` once per connection."""
-        peer = self.peers[index]
-        if text not in peer.notices:
-            peer.notices.add(text)
-            self.notice(f"vehicle {index}: {text}")
+
+def fit_to_wire(message_class: object, values: tuple) -> tuple:
+    """``values`` in wire order, each made what its field can hold, so that no value of
+    the physics (a vehicle blown away at 1e9 m/s, a NaN) raises or goes out as NaN: an
+    integer field's value rounded and clamped to its type, a float field's clamped to
+    float32 (NaN: 0)."""
+    out = []
+    for value, (low, high, whole) in zip(values, _fields(message_class), strict=True):
+        if value != value:  # NaN
+            value = 0
+        value = low if value < low else high if value > high else value
+        out.append(round(value) if whole else value)
+    return tuple(out)
 
 
-def _i16(value: float) -> int:
-    return max(-32768, min(32767, round(value)))
+_F32_MAX = float(np.finfo(np.float32).max)
+_RANGES = {  # struct code: (low, high, integer)
+    "f": (-_F32_MAX, _F32_MAX, False),
+    "d": (-sys.float_info.max, sys.float_info.max, False),
+    **{c: (0, 2 ** (8 * b) - 1, True) for c, b in zip("BHIQ", (1, 2, 4, 8), strict=True)},
+    **{
+        c: (-(2 ** (8 * b - 1)), 2 ** (8 * b - 1) - 1, True)
+        for c, b in zip("bhiq", (1, 2, 4, 8), strict=True)
+    },
+}
 
 
-def _u16(value: float) -> int:
-    return max(0, min(65535, round(value)))
+@functools.cache
+def _fields(message_class: object) -> tuple[tuple[float, float, bool], ...]:
+    """(low, high, integer) of each wire value of ``message_class`` (arrays flattened)."""
+    form = message_class.unpacker.format.lstrip("<")  # type: ignore[attr-defined]
+    return tuple(
+        _RANGES[code]
+        for count, code in re.findall(r"(\d*)(\w)", form)
+        for _ in range(int(count or 1))
+    )

@@ -4,8 +4,10 @@ One listening TCP socket per PX4 instance (port 4560 + i, as PX4's instance i co
 to), on loopback unless asked otherwise. PX4 connects out to it; what it sends is read
 as MAVLink 2 frames and answered by :class:`~quadsitl.bridges.px4_hil.HilPhysics`. A
 PX4 that disconnects is said, and the next connection on that port starts its vehicle
-again; the other instances are served throughout. This module only moves bytes,
-prints and stops.
+again; the other instances are served throughout. Each :meth:`Px4TcpServer.serve` is a
+turn of every connection: at most one lockstep round and :data:`FRAMES_PER_TURN` frames
+each, so a PX4 that floods its port moves its own vehicle no faster than the others
+move theirs. This module only moves bytes, prints and stops.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import signal
 import socket
 import sys
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
@@ -25,13 +28,16 @@ from typing import Any
 from quadsitl.bridges.frame_reader import FrameReader
 from quadsitl.bridges.px4_airframe import parameter_folder
 from quadsitl.bridges.px4_hil import PORT, ROUND_US, HilPhysics
+from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.links import is_loopback
 from quadsitl.physics.fleet import Fleet
 from quadsitl.physics.wind import Wind
 from quadsitl.vehicle.geo import Home
+from quadsitl.wire import fast_codec as FC
 
 WAIT = 0.2  # wall s, longest sleep in select() (signals, --duration)
-RECEIVE = 65536  # bytes per read
+RECEIVE = 65536  # bytes per read, taken when the frames of the last read are all handled
+FRAMES_PER_TURN = 64  # frames of one connection handled in one turn (bounds a flood's work)
 SEND_LIMIT = 4 << 20  # bytes queued for a PX4 that does not read: it is dropped
 
 
@@ -59,7 +65,19 @@ class Connection:
         sock.setblocking(False)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.reader = FrameReader()
+        self.pending: deque[FC.Frame] = deque()  # read, not handled yet: they wait their turn
         self.outgoing = bytearray()
+
+    def turn(self) -> list[FC.Frame]:
+        """The frames handled in this turn: up to and with the first HIL_ACTUATOR_CONTROLS
+        (one lockstep round), at most FRAMES_PER_TURN."""
+        pending = self.pending
+        frames: list[FC.Frame] = []
+        while pending and len(frames) < FRAMES_PER_TURN:
+            frames.append(pending.popleft())
+            if frames[-1].msgid == mav.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS:
+                break
+        return frames
 
     def send(self, data: bytes) -> None:
         """Send ``data`` after what is queued; OSError when PX4 stopped reading."""
@@ -106,46 +124,34 @@ class Px4TcpServer:
         self._clock = time.monotonic()  # wall s of the next round on the server's clock
 
     def serve(self, timeout: float = WAIT) -> int:
-        """Wait up to ``timeout`` s, accept, read and answer; also move the vehicles the
-        server's clock moves when their round is due. The count of messages read."""
+        """One turn of every connection: wait up to ``timeout`` s (none while frames wait
+        their turn), accept, read, answer each connection's turn (:meth:`Connection.turn`);
+        also move the vehicles the server's clock moves when their round is due. The
+        count of frames handled."""
         waiting = self.physics.waiting_for_clock()
-        now = time.monotonic()
         if waiting:
-            timeout = max(0.0, min(timeout, self._clock - now))
-        watched: list[socket.socket] = list(self.listeners)
-        owner: dict[int, int] = {}
-        for index, conn in enumerate(self.connections):
-            if conn is not None:
-                watched.append(conn.sock)
-                owner[conn.sock.fileno()] = index
-        writers = [c.sock for c in self.connections if c is not None and c.outgoing]
-        readable, writable, _ = select.select(watched, writers, [], timeout)
-        for sock in writable:
-            self._guard(owner[sock.fileno()], Connection.flush)
+            timeout = max(0.0, min(timeout, self._clock - time.monotonic()))
+        live = [(i, c) for i, c in enumerate(self.connections) if c is not None]
+        if any(c.pending for _, c in live):
+            timeout = 0.0
+        readers = [c.sock for _, c in live if not c.pending]  # the others are read later:
+        writers = [c.sock for _, c in live if c.outgoing]  # TCP holds a flood back meanwhile
+        ready = select.select(self.listeners + readers, writers, [], timeout)
+        readable, writable = set(ready[0]), set(ready[1])
+        # By connection, not by socket number: a connection dropped or replaced in this
+        # turn has closed its socket (number -1), and what it sent goes with it.
+        for index, conn in live:
+            if conn.sock in writable:
+                self._guard(index, conn, Connection.flush)
+            if conn.sock in readable and self.connections[index] is conn:
+                self._receive(index, conn)
+        for index, sock in enumerate(self.listeners):
+            if sock in readable:
+                self._accept(index)
         messages = {}
-        count = 0
-        for sock in readable:
-            if sock in self.listeners:
-                self._accept(self.listeners.index(sock))
-                continue
-            index = owner[sock.fileno()]
-            conn = self.connections[index]
-            if conn is None:
-                continue
-            try:
-                data = sock.recv(RECEIVE)
-            except (BlockingIOError, InterruptedError):
-                continue
-            except OSError as error:
-                self._drop(index, _failure(error))
-                continue
-            if not data:
-                self._drop(index, "PX4 disconnected")
-                continue
-            frames = conn.reader.feed(data)
-            if frames:
-                messages[index] = frames
-                count += len(frames)
+        for index, current in enumerate(self.connections):
+            if current is not None and current.pending:
+                messages[index] = current.turn()
         replies = self.physics.answer(messages) if messages else {}
         waiting = self.physics.waiting_for_clock()
         if waiting and time.monotonic() >= self._clock:
@@ -153,8 +159,24 @@ class Px4TcpServer:
             for index, data in self.physics.tick(waiting).items():
                 replies[index] = replies.get(index, b"") + data
         for index, data in replies.items():
-            self._guard(index, partial(Connection.send, data=data))
-        return count
+            current = self.connections[index]
+            if current is not None:
+                self._guard(index, current, partial(Connection.send, data=data))
+        return sum(len(frames) for frames in messages.values())
+
+    def _receive(self, index: int, conn: Connection) -> None:
+        """Read what instance ``index``'s PX4 sent into its frames waiting their turn."""
+        try:
+            data = conn.sock.recv(RECEIVE)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError as error:
+            self._drop(index, _failure(error))
+            return
+        if not data:
+            self._drop(index, "PX4 disconnected")
+            return
+        conn.pending.extend(conn.reader.feed(data))
 
     def _accept(self, index: int) -> None:
         try:
@@ -171,9 +193,10 @@ class Px4TcpServer:
             f"(port {self.ports[index]}); its vehicle is at rest at home"
         )
 
-    def _guard(self, index: int, action: Callable[[Connection], None]) -> None:
-        conn = self.connections[index]
-        if conn is None:
+    def _guard(self, index: int, conn: Connection, action: Callable[[Connection], None]) -> None:
+        """``action`` on instance ``index``'s connection ``conn`` unless it was dropped or
+        replaced; an OSError drops it."""
+        if self.connections[index] is not conn:
             return
         try:
             action(conn)
@@ -196,6 +219,7 @@ class Px4TcpServer:
         for conn in self.connections:
             if conn is not None:
                 conn.sock.close()
+        self.physics.notices.flush()  # what was counted and not said
         for sock in self.listeners:
             sock.close()
 
@@ -267,6 +291,21 @@ def _banner(config: Px4Config, server: Px4TcpServer, out: Callable[[str], None])
         out(f"  vehicle {index}: TCP {config.bind}:{port}  <-  {start}")
     if folder is None:
         out(f"  (no PX4 parameter file ships for {config.airframe}; see docs/autopilots.md)")
+    if config.wind is not None and not config.wind.calm:
+        out(f"  weather: {_weather(config.wind)}")
+
+
+def _weather(wind: Wind) -> str:
+    """The weather every vehicle flies in, as ``--wind`` and ``--turbulence`` gave it."""
+    parts = []
+    if wind.speed:
+        parts.append(f"wind {wind.speed:g} m/s from {wind.from_deg % 360:g} deg")
+    if wind.sigma_w:
+        named = f"{wind.turbulence} " if isinstance(wind.turbulence, str) else ""
+        parts.append(f"{named}turbulence, sigma_w {wind.sigma_w:.2f} m/s")
+    if wind.gust is not None:
+        parts.append(f"a gust of {wind.gust.amplitude} m/s (E, N, U)")
+    return "; ".join(parts)
 
 
 def _failure(error: OSError) -> str:
