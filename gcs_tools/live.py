@@ -20,10 +20,16 @@ from quadsitl.viz.viewer import open_recording
 
 
 def watch(
-    url: str, save: str | None, duration: float | None, spawn: bool = True, web: bool = False
+    url: str,
+    save: str | None,
+    duration: float | None,
+    spawn: bool = True,
+    web: bool = False,
+    messages: int | None = None,
 ) -> int:
-    """Log what arrives on ``url`` until Ctrl-C or ``duration``; returns messages seen.
-    ``web``: serve the web viewer on this host instead of spawning a viewer."""
+    """Log what arrives on ``url`` until Ctrl-C, ``duration`` s or ``messages`` messages;
+    returns messages seen. ``web``: serve the web viewer on this host instead of spawning
+    a viewer."""
     conn = mavutil.mavlink_connection(url, source_system=255, source_component=190)
     layout = blueprint(
         (*LIVE_PANELS, "battery_remaining", "gps", "mission_item"), map_view=True, whole_range=False
@@ -35,7 +41,7 @@ def watch(
     count, last_beat = 0, 0.0
     end = None if duration is None else time.monotonic() + duration
     try:
-        while end is None or time.monotonic() < end:
+        while (end is None or time.monotonic() < end) and (messages is None or count < messages):
             if time.monotonic() - last_beat >= 1.0:
                 last_beat = time.monotonic()
                 conn.mav.heartbeat_send(
@@ -68,13 +74,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     parser.add_argument(
+        "--messages", type=int, metavar="N", help="stop after N messages (with --duration: first)"
+    )
+    parser.add_argument(
         "--web",
         action="store_true",
         help="serve the Rerun web viewer on this host (loopback) and print its URL",
     )
     args = parser.parse_args(argv)
     try:
-        count = watch(args.url, args.save, args.duration, web=args.web)
+        count = watch(args.url, args.save, args.duration, web=args.web, messages=args.messages)
     except (OSError, ValueError) as error:
         print(f"gcs-live: error: {args.url}: {error}", file=sys.stderr)
         return 2

@@ -99,10 +99,9 @@ def test_a_second_env_is_refused_with_the_owners_address(running_sim):
     try:
         _fly_both(local, first, seed=1, steps=5)
         owner = first.unwrapped.backend.clients[0].sock.getsockname()
-        started = time.monotonic()
+        # Told who owns it (a refusal), not timed out (which would say "no answer").
         with pytest.raises(SimulatorError, match=rf"lockstep in use by 127\.0\.0\.1:{owner[1]}"):
             _remote(running_sim, timeout=2.0)
-        assert time.monotonic() - started < 5  # told at once, not timed out
         _fly_both(local, first, seed=2, steps=20)  # the owner flies on untouched
     finally:
         first.close()
@@ -153,10 +152,11 @@ def test_after_a_stalled_simulator_the_env_refuses_to_step_until_reset_then_matc
         backend="mavlink",
         sim_address=f"127.0.0.1:{sim.port}",
         vehicles_per_sim=2,
-        timeout=0.5,
+        timeout=10.0,  # the flights before and after the stall: a loaded machine's pauses
         init_position_noise=0.3,
     )
     pid = sim.process.pid
+    clients = remote.unwrapped.backend.clients
     try:
         local.reset(seed=4)
         remote.reset(seed=4)
@@ -164,10 +164,14 @@ def test_after_a_stalled_simulator_the_env_refuses_to_step_until_reset_then_matc
         fly_both(local, remote, rng, 10, 0.1)
         os.kill(pid, signal.SIGSTOP)
         try:
+            for client in clients:  # the stall: past a short timeout
+                client.timeout = 0.5
             with pytest.raises(SimulatorError, match="no state answer"):
                 remote.step(np.zeros((2, 4), np.float32))
         finally:
             os.kill(pid, signal.SIGCONT)
+            for client in clients:
+                client.timeout = 10.0
         with pytest.raises(SimulatorError, match=r"call reset\(\)"):
             remote.step(np.zeros((2, 4), np.float32))
         a, _ = local.reset(seed=5)

@@ -25,6 +25,25 @@ def _hold_position(client, seconds: float) -> np.ndarray:
     return np.array(samples)
 
 
+def test_a_ground_station_just_heard_is_greeted_with_the_heartbeat(client, sim):
+    """``client``: the simulator is up. A second ground station's first heartbeat gets the
+    vehicle's at once, before any telemetry stream: a peer that connects (a lockstep env's
+    client too) does not wait for the next 1 Hz beat."""
+    station = mavutil.mavlink_connection(
+        f"udpout:127.0.0.1:{sim.port}", source_system=254, source_component=190
+    )
+    try:
+        station.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        first = None
+        deadline = time.monotonic() + 10
+        while first is None or first.get_type() == "STATUSTEXT":
+            assert time.monotonic() < deadline, "the vehicle sent nothing to a new station"
+            first = station.recv_match(blocking=True, timeout=0.5)
+        assert first.get_type() == "HEARTBEAT" and first.get_srcSystem() == 1
+    finally:
+        station.close()
+
+
 def test_heartbeat_identifies_a_disarmed_quadrotor(client):
     hb = client.latest["HEARTBEAT"]
     assert hb.get_srcSystem() == 1 and hb.get_srcComponent() == 1

@@ -65,10 +65,9 @@ def test_simulators_on_the_second_node_fly_as_in_process_and_survive_a_lost_acto
         lost = backend.processes[0]
         ray.kill(lost.actor)  # asynchronous: wait until its simulator has gone with it
         assert _released(lost.address)
-        started = time.monotonic()
+        # Named as the actor's loss, not a hang or a timeout's silence.
         with pytest.raises(SimulatorError, match="lost with its Ray actor"):
             remote.step(np.zeros((4, 4), np.float32))
-        assert time.monotonic() - started < 10.0  # the env's timeout, not a hang
 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

@@ -495,14 +495,15 @@ def test_sim_rerun_without_a_display_says_so_in_one_plain_line(tmp_path):
 
 
 def test_live_viewer_watches_a_running_vehicle(sim, client, tmp_path):
-    """``client``: the simulator is up (its heartbeat heard) before the 3 s watch starts."""
+    """``client``: the simulator is up (its heartbeat heard) before the watch starts. The
+    watch stops after a count of messages, not a time: telemetry slows under load."""
     from gcs_tools.live import watch
 
     out = tmp_path / "live.rrd"
-    count = watch(f"udpout:127.0.0.1:{sim.port}", str(out), duration=3.0)
-    assert count > 100
+    count = watch(f"udpout:127.0.0.1:{sim.port}", str(out), duration=120.0, messages=400)
+    assert count == 400
     rows = rows_per_entity(out)
-    assert rows["/world/vehicle"] > 50 and rows["/plots/altitude/altitude"] > 50
+    assert rows["/world/vehicle"] > 20 and rows["/plots/altitude/altitude"] > 20
     check_attitude(out)
     assert ("3D", "world") in views(out).values()
     assert rows["/events"] >= 1  # the first heartbeat: disarmed, mode LOITER

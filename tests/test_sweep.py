@@ -13,6 +13,7 @@ import signal
 import subprocess
 import tempfile
 import time
+import tracemalloc
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -166,7 +167,6 @@ def _checkpointed_after(metrics: Path) -> bool:
 def test_bad_sweeps_are_refused_before_ray_starts(tmp_path, capsys, options, message):
     """The command's own entry point, in this process (a process of its own per case
     cost 3 s of imports each); the one case that needs Ray's answer runs as a program."""
-    started = time.monotonic()
     words = f"sweep --runs {tmp_path} {options}"
     if "--address" in options:  # Ray is asked, and must not stay behind in this process
         done = subprocess.run(cli(words), capture_output=True, text=True, timeout=60)
@@ -178,16 +178,21 @@ def test_bad_sweeps_are_refused_before_ray_starts(tmp_path, capsys, options, mes
             code = exit_.code
         stderr = capsys.readouterr().err
     assert code == 2 and message in stderr, stderr
-    assert time.monotonic() - started < 30 and not (tmp_path / "sweeps").exists()
+    assert not (tmp_path / "sweeps").exists()
 
 
 def test_grids_are_checked_before_they_are_built():
-    started = time.monotonic()
-    with pytest.raises(SS.SweepError, match="100,000,001 values"):
-        SS.parse_grid(["seed=0..100000000"])
-    with pytest.raises(SS.SweepError, match=r"the sweep has 10,100 trials"):
-        SS.check_trials(SS.parse_grid(["task=hover", "algo=ppo", "seed=0..100"]), {}, samples=100)
-    assert time.monotonic() - started < 5  # nothing of that size was built
+    tracemalloc.start()
+    try:
+        with pytest.raises(SS.SweepError, match="100,000,001 values"):
+            SS.parse_grid(["seed=0..100000000"])
+        with pytest.raises(SS.SweepError, match=r"the sweep has 10,100 trials"):
+            grid = SS.parse_grid(["task=hover", "algo=ppo", "seed=0..100"])
+            SS.check_trials(grid, {}, samples=100)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 10_000_000  # bytes: nothing of that size was built
     with pytest.raises(SS.SweepError, match=r"0\.0001 given twice"):
         SS.parse_grid(["learning_rate=1e-4,0.0001"])  # equal values, spelt differently
     with pytest.raises(SS.SweepError, match="seed is already an axis"):

@@ -100,8 +100,12 @@ class FleetServer:
                 continue
             if self.tlog is not None and link.name != MOTOR_LINK:
                 self.tlog.record(bytes(message.get_msgbuf()), received_at)
+            new_peer = peer.heard is None
             handler = self.handlers.get(message.get_msgId(), self._dispatch)
             handler(message, link, peer)
+            if new_peer and peer.heard is not None:  # accepted just now: it hears us now
+                for server in self.servers:
+                    server.greet()
 
     def _on_set_actuator_control_target(self, message: Any, link: Link, peer: Peer) -> None:
         """A round command through pymavlink (signed, or not on the motor link)."""

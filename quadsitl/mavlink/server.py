@@ -239,6 +239,11 @@ class MavlinkServer:
             self.vehicle, self.comm_errors, self.error_counts, self.identity, self.motors.resets
         )
 
+    def greet(self) -> None:
+        """Send the heartbeat at the next tick, not up to a second later: a peer just
+        heard (a ground station, a lockstep client) waits for it to connect."""
+        self.last_heartbeat = -math.inf
+
     # --- the ground station's heartbeat: link-loss failsafe (PX4's NAV_DLL_ACT) --------
     def _on_heartbeat(self, msg: Any, link: Link) -> None:
         if msg.type != mav.MAV_TYPE_GCS or link.name == MOTOR_LINK:
