@@ -15,9 +15,11 @@ import pytest
 from quadsitl import frames
 from quadsitl.bridges.ardupilot_json import (
     ARDUPILOT_QUAD_FRAMES,
+    MAX_STEP,
     PACKET_SIZES,
     PWM_MAX_US,
     PWM_MIN_US,
+    REPLY_LIMIT,
     SERVO_MAGIC_16,
     SERVO_MAGIC_32,
     JsonPhysics,
@@ -125,7 +127,9 @@ def test_the_reply_has_ardupilots_units_and_frames() -> None:
         state[L.QUAT] = frames.quat_normalize(rng.normal(size=4))
         state[L.RATES] = rng.normal(0, 2, 3)
         before = state[L.VEL] - rng.normal(0, 0.01, 3)
-        k = parse_kinematics(kinematics_line(7.5, state.tolist(), tuple(before), dt, g, gear))
+        line, replaced = kinematics_line(7.5, state.tolist(), tuple(before), dt, g, gear)
+        k = parse_kinematics(line)
+        assert not replaced
         accel_enu = (state[L.VEL] - before) / dt - np.array([0.0, 0.0, -g])
         accel_flu = frames.quat_rotate(frames.quat_conjugate(state[L.QUAT]), accel_enu)
         np.testing.assert_allclose(
@@ -197,6 +201,55 @@ def test_a_frame_rate_change_mid_flight_is_said_and_followed() -> None:
         "vehicle 0: ArduPilot's frame rate changed mid-flight from 1200 to 400 Hz "
         "(SIM_RATE_HZ); stepping 1/400 s per frame from now on"
     ]
+
+
+def test_a_reply_never_carries_a_number_that_is_not_finite_or_out_of_range() -> None:
+    """NaN becomes 0 and the rest is clamped to ±REPLY_LIMIT (ArduPilot reads floats: a
+    NaN or an overflow there spreads through its EKF); the timestamp is kept."""
+    state = np.zeros(L.STATE_SIZE)
+    state[L.QUAT] = (1.0, 0.0, 0.0, 0.0)
+    state[L.I_PX], state[L.I_PY], state[L.I_PZ] = math.nan, 1e300, -math.inf
+    state[L.I_VX] = 3.0
+    line, replaced = kinematics_line(1e7, state.tolist(), (0.0, 0.0, 0.0), 1 / RATE, 9.81, 0.1)
+    k = parse_kinematics(line)
+    assert replaced and b"nan" not in line.lower() and b"inf" not in line.lower()
+    assert k.position == (REPLY_LIMIT, 0.0, REPLY_LIMIT)  # NED: north = y, east = x
+    assert k.velocity[1] == 3.0 and k.timestamp == 1e7
+    values = [*k.gyro, *k.accel_body, *k.position, *k.velocity, *k.quaternion]
+    assert all(math.isfinite(v) and abs(v) <= REPLY_LIMIT for v in values)
+    assert len(line) < 400
+
+
+def test_a_vehicle_whose_physics_failed_is_answered_in_range_and_said_once() -> None:
+    said: list[str] = []
+    physics = JsonPhysics(Fleet(1, "iris", dt=1 / RATE), notice=said.append)
+    physics.answer({0: frame(0, [1000] * 4)})
+    physics.fleet.state[0, L.I_VX] = math.nan  # as a physics that failed would leave it
+    for count in range(1, 50):
+        reply = physics.answer({0: frame(count, [1500] * 4)})[0]
+        assert b"nan" not in reply.lower() and b"inf" not in reply.lower()
+        parse_kinematics(reply)
+    assert len(said) == 1 and "not finite or beyond" in said[0]
+
+
+@pytest.mark.parametrize("rate", [1, 2, 5])
+def test_a_long_frame_is_flown_in_physics_steps_and_ends_where_short_frames_do(rate: int) -> None:
+    """SIM_RATE_HZ 1..5: each frame is sub-stepped at 400 Hz, so the vehicle ends exactly
+    where 400 Hz frames with the same outputs leave it, and every reply is finite (one RK4
+    step of 1 s took the position to 1e115 m, then NaN)."""
+    assert MAX_STEP == 1 / 400
+    slow = JsonPhysics(Fleet(1, "iris", dt=1 / RATE))
+    fast = JsonPhysics(Fleet(1, "iris", dt=1 / RATE))
+    seconds, pwm = 3, [1000 + round(1000 * math.sqrt(0.6))] * 4  # climbs
+    for count in range(seconds * rate):
+        k = parse_kinematics(slow.answer({0: frame(count, pwm, rate=rate)})[0])
+        values = [*k.gyro, *k.accel_body, *k.position, *k.velocity, *k.quaternion]
+        assert all(math.isfinite(v) for v in values)
+    for count in range(seconds * 400):
+        k_fast = parse_kinematics(fast.answer({0: frame(count, pwm, rate=400)})[0])
+    np.testing.assert_allclose(slow.fleet.state, fast.fleet.state, rtol=1e-9, atol=1e-9)
+    assert k.timestamp == pytest.approx(seconds) and k.position == k_fast.position
+    assert 1.0 < -k.position[2] < 100.0
 
 
 def test_vehicles_step_only_with_their_own_frames() -> None:

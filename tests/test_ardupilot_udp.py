@@ -1,9 +1,11 @@
 """``quadsitl sim --flight-stack ardupilot`` as a process on real UDP, flown by the fake
-ArduPilot: closed loop, re-sends, restarts, fleets, the 32-channel form and bad input."""
+ArduPilot: closed loop, re-sends, restarts, fleets, the 32-channel form and bad input;
+and its server in this process on real UDP: who may fly an instance, and floods."""
 
 from __future__ import annotations
 
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -14,9 +16,11 @@ from contextlib import contextmanager
 
 import pytest
 
-from quadsitl.bridges.ardupilot_json import ServoFrame, encode_servo_packet
+from quadsitl.bridges.ardupilot_json import JsonPhysics, ServoFrame, encode_servo_packet
+from quadsitl.bridges.ardupilot_udp import ArduPilotJsonServer
 from quadsitl.bridges.fake_ardupilot import FakeArduPilot, HoverController
 from quadsitl.physics.airframe import get_airframe
+from quadsitl.physics.fleet import Fleet
 from tests.conftest import refused_here
 
 START_TIMEOUT = 60.0  # s for the process to open its ports (numba loads its cache)
@@ -96,6 +100,7 @@ def running_sim(*options: str, vehicles: int = 1) -> Iterator[tuple[Sim, int]]:
     finally:
         process.terminate()
         process.wait(timeout=30)
+        sim._reader.join(timeout=30)  # all it said, to the end
 
 
 def hover(fake: FakeArduPilot, airframe: str, seconds: float, altitude: float = 2.0) -> tuple:
@@ -110,13 +115,15 @@ def hover(fake: FakeArduPilot, airframe: str, seconds: float, altitude: float = 
 @pytest.mark.parametrize("poll", [False, True], ids=["asleep", "polling"])
 def test_the_fake_flies_the_simulator_to_a_hover_over_udp(poll: bool) -> None:
     """Whether the peer waits asleep (as ArduPilot) or polls (as the benchmark's fake, to
-    which the simulator answers polling too), every frame gets its one answer."""
+    which the simulator answers polling too), every frame is stepped once, in order: the
+    timestamp counts the steps. A reply slow enough (on a busy machine) for the fake to
+    send its frame again is allowed: the repeat is answered without a step."""
     with running_sim("--airframe", "paper-x-fast") as (_, port):
         fake = FakeArduPilot(port=port, poll=poll)
         k, pwm = hover(fake, "paper-x-fast", 12.0)
-        assert k.timestamp == pytest.approx(12.0)
+        assert fake.frame_count == 14_400 and k.timestamp == pytest.approx(12.0, abs=1e-7)
         assert k.position[2] == pytest.approx(-2.0, abs=0.05)
-        assert abs(k.velocity[2]) < 0.05 and fake.resends == 0
+        assert abs(k.velocity[2]) < 0.05
         assert all(abs(p - 1707) <= 3 for p in pwm)  # throttle √0.5: half the full thrust
         fake.close()
 
@@ -188,7 +195,7 @@ def test_the_32_channel_form_flies_too() -> None:
         fake.close()
 
 
-def test_bad_datagrams_are_said_once_and_the_simulator_keeps_serving() -> None:
+def test_bad_datagrams_are_said_once_counted_and_the_simulator_keeps_serving() -> None:
     with running_sim("--airframe", "iris") as (sim, port):
         fake = FakeArduPilot(port=port)
         fake.exchange([1000] * 4)
@@ -206,6 +213,9 @@ def test_bad_datagrams_are_said_once_and_the_simulator_keeps_serving() -> None:
         sim.wait_for_line("frame rate changed mid-flight from 1200 to 400 Hz")
         assert sim.process.poll() is None
         fake.close()
+    # At the end, what was held back is counted: the second of each kind.
+    assert "quadsitl sim: vehicle 0: 1 more datagrams of unknown magic were not shown" in sim.said
+    assert "quadsitl sim: vehicle 0: 1 more datagrams of the wrong size were not shown" in sim.said
 
 
 def test_a_port_in_use_is_a_one_line_error_naming_it() -> None:
@@ -253,3 +263,123 @@ def test_the_banner_names_the_ardupilot_instance_each_port_serves() -> None:
     lines.clear()
     _banner(ArduPilotConfig(port=9005), physics, SimpleNamespace(ports=[9005]), lines.append)  # type: ignore[arg-type]
     assert lines[1].endswith("-I 0 --sim-port-out 9005")
+
+
+@contextmanager
+def serving(server: ArduPilotJsonServer) -> Iterator[ArduPilotJsonServer]:
+    """``server`` answering in a thread of this process until the block ends."""
+    stop = threading.Event()
+
+    def serve() -> None:
+        while not stop.is_set():
+            server.serve(0.02)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        yield server
+    finally:
+        stop.set()
+        thread.join(timeout=30)
+        server.close()
+
+
+def server_on_free_port(said: list[str], silence: float = 60.0) -> ArduPilotJsonServer:
+    """A server of one iris on free ports, its physics compiled (or loaded) beforehand."""
+    JsonPhysics(Fleet(1, "iris", dt=1 / 1200)).answer({0: ServoFrame(1200, 0, (1000,) * 16)})
+    physics = JsonPhysics(Fleet(1, "iris", dt=1 / 1200), notice=said.append)
+    return ArduPilotJsonServer(physics, port=free_port_base(1), silence=silence)
+
+
+def test_a_stranger_can_neither_restart_a_flying_vehicle_nor_take_its_answers() -> None:
+    """A 40-byte frame with frame_count 0 from another port of this host, while the bound
+    ArduPilot flies: refused, unanswered, said; the flight goes on from where it was."""
+    said: list[str] = []
+    with serving(server_on_free_port(said)) as server:
+        fake = FakeArduPilot(port=server.ports[0])
+        k, pwm = hover(fake, "iris", 2.0)
+        assert k.position[2] < -0.5
+        stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        stranger.bind(("127.0.0.1", 0))
+        stranger.setblocking(False)
+        stranger_port = stranger.getsockname()[1]
+        for _ in range(3):
+            stranger.sendto(encode_servo_packet(ServoFrame(1200, 0, (1000,) * 16)), fake.target)
+        after = fake.exchange(pwm)  # answered after the stranger's frames were read
+        assert after.timestamp == pytest.approx(2401 / 1200, abs=1e-7)
+        assert after.position[2] == pytest.approx(k.position[2], abs=0.01)
+        with pytest.raises(BlockingIOError):
+            stranger.recv(4096)  # nothing was sent to it
+        assert server.refused == [3]
+        fake.close()
+        stranger.close()
+    refusals = [
+        line for line in said if f"refused a servo frame from 127.0.0.1:{stranger_port}" in line
+    ]
+    assert len(refusals) == 1 and "restarted" not in " ".join(said), said
+
+
+def test_a_restarted_ardupilot_on_a_new_port_is_taken_once_the_old_one_is_silent() -> None:
+    """ArduPilot's JSON socket is never bound, so a restarted ArduPilot sends from a new
+    port: it is taken once the old peer has been silent for ``silence`` s (it sends its
+    frame again each time it is not answered), and its frame 0 restarts the vehicle."""
+    said: list[str] = []
+    with serving(server_on_free_port(said, silence=0.3)) as server:
+        old = FakeArduPilot(port=server.ports[0])
+        k, _ = hover(old, "iris", 1.0)
+        old.close()
+        new = FakeArduPilot(port=server.ports[0], resend_after=0.1)
+        new.send([1000] * 4)
+        k = new.receive(attempts=300)
+        assert k.timestamp == pytest.approx(1 / 1200) and k.position == (0, 0, 0)
+        assert new.exchange([1000] * 4).timestamp == pytest.approx(2 / 1200)
+        new.close()
+    assert any("now flown by 127.0.0.1:" in line for line in said), said
+    assert any("ArduPilot restarted (frame 0 after 1199)" in line for line in said), said
+
+
+def test_a_flood_of_distinct_garbage_gives_a_few_lines_and_a_count() -> None:
+    """5,000 datagrams that are not servo frames, each different (length, magic, rate):
+    one line per kind, then the rest counted; the notices keep one entry per kind."""
+    said: list[str] = []
+    with serving(server_on_free_port(said)) as server:
+        fake = FakeArduPilot(port=server.ports[0])
+        junk = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        good = encode_servo_packet(ServoFrame(1200, 0, (1000,) * 16))
+        sent = 0
+        for i in range(500):
+            batch = [
+                bytes([i % 256]) * (i % 8),  # too short
+                (20000 + i).to_bytes(2, "little") + i.to_bytes(38, "little"),  # magic
+                good + i.to_bytes(2 + i % 30, "little"),  # wrong size
+                good[:2] + bytes(2) + i.to_bytes(36, "little"),  # frame rate 0
+            ]
+            batch += [(30000 + i + 500 * k).to_bytes(2, "little") + bytes(6 + k) for k in range(6)]
+            for datagram in batch:
+                junk.sendto(datagram, fake.target)
+            sent += len(batch)
+            fake.exchange([1000] * 4)  # answered: the batch before it was read
+        assert len(server.notices._said) == 4  # one entry per kind, whatever came
+        server.notices.flush()
+        junk.close()
+        fake.close()
+    held = sum(int(m.group(1)) for line in said if (m := re.search(r"(\d+) more ", line)))
+    shown = [line for line in said if "ignored a datagram" in line]
+    assert sent == 5000 and len(shown) + held == sent
+    assert len(said) <= 2 * 4 * 3, said  # a line and a count per kind (and one interval)
+
+
+def test_the_banner_says_the_weather_the_vehicles_fly_in() -> None:
+    from types import SimpleNamespace
+
+    from quadsitl.bridges.ardupilot_udp import ArduPilotConfig, _banner
+    from quadsitl.physics.wind import Wind
+
+    physics = JsonPhysics(Fleet(1, "iris"))
+    lines: list[str] = []
+    windy = ArduPilotConfig(wind=Wind(speed=5.0, from_deg=270.0, turbulence="light"))
+    _banner(windy, physics, SimpleNamespace(ports=[9002]), lines.append)  # type: ignore[arg-type]
+    assert lines[-1] == "  weather: wind 5 m/s from 270 deg; light turbulence, sigma_w 0.77 m/s"
+    lines.clear()
+    _banner(ArduPilotConfig(), physics, SimpleNamespace(ports=[9002]), lines.append)  # type: ignore[arg-type]
+    assert not any("weather" in line for line in lines)

@@ -18,6 +18,10 @@ rad/s body FRD, ``imu.accel_body`` m/s² body FRD specific force ((0, 0, −g) a
 ``position`` m NED from where the vehicle started, ``velocity`` m/s NED, ``quaternion``
 (w, x, y, z) body FRD -> world NED.
 
+Long frames: a frame of 1/frame_rate s longer than MAX_STEP (ArduPilot's SIM_RATE_HZ may be as
+low as 1 Hz) is flown in equal sub-steps of at most MAX_STEP: one RK4 step of a second
+diverges. No reply carries a number that is not finite or beyond REPLY_LIMIT in magnitude.
+
 Motors: ArduPilot's motor i drives the airframe rotor at the same bearing with the same
 spin (:func:`motor_channels`); Ω_c = Ω_max · clip((pwm − 1000 µs) / 1000 µs, 0, 1), so that
 thrust ∝ throttle², which is ArduPilot's ``MOT_THST_EXPO 1``.
@@ -28,11 +32,12 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from quadsitl.bridges.lockstep import step_vehicles
+from quadsitl.bridges.notices import Notices
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe
 from quadsitl.physics.fleet import Fleet, initial_state
@@ -47,6 +52,12 @@ PACKET_SIZES = {magic: _HEADER.size + 2 * n for magic, n in _CHANNELS.items()}  
 PWM_MIN_US, PWM_MAX_US = 1000.0, 2000.0  # the parameter files' MOT_PWM_MIN / MOT_PWM_MAX
 PORT = 9002  # UDP port of instance 0 (ArduPilot's default); instance i: PORT + 10 i
 PORT_STRIDE = 10
+# s, the longest physics step: 1/400 s, ArduCopter's main loop rate, which ArduPilot asks
+# SIM_RATE_HZ to stay above; frames at 400 Hz and faster are one step each.
+MAX_STEP = 1 / 400
+# The largest magnitude a reply's field may carry (m, m/s, m/s², rad/s): what is beyond, or
+# not a number, is replaced (NaN by 0, the rest clamped) and said; the timestamp is exempt.
+REPLY_LIMIT = 1e6
 _SQRT_HALF = math.sqrt(0.5)
 _NORTH_ENU = 0.5 * math.pi  # rad, the ENU heading of north: vehicles start facing it
 
@@ -69,7 +80,12 @@ _REPLY = (
 
 
 class PacketError(ValueError):
-    """A datagram that is not an ArduPilot servo frame (the message says why, in one line)."""
+    """A datagram that is not an ArduPilot servo frame (the message says why, in one line;
+    ``kind`` names the fault with a fixed phrase, for rate-limited notices)."""
+
+    def __init__(self, kind: str, text: str) -> None:
+        super().__init__(text)
+        self.kind = kind
 
 
 @dataclass(frozen=True)
@@ -84,19 +100,23 @@ class ServoFrame:
 def parse_servo_packet(data: bytes) -> ServoFrame:
     """The servo frame in ``data``; PacketError when the magic or the size is wrong."""
     if len(data) < _HEADER.size:
-        raise PacketError(f"a {len(data)}-byte datagram is too short for a servo frame")
+        raise PacketError(
+            "datagrams too short", f"a {len(data)}-byte datagram is too short for a servo frame"
+        )
     magic, frame_rate, frame_count = _HEADER.unpack_from(data)
     channels = _CHANNELS.get(magic)
     if channels is None:
         raise PacketError(
-            f"magic {magic} is not a servo frame's ({SERVO_MAGIC_16} or {SERVO_MAGIC_32})"
+            "datagrams of unknown magic",
+            f"magic {magic} is not a servo frame's ({SERVO_MAGIC_16} or {SERVO_MAGIC_32})",
         )
     if len(data) != PACKET_SIZES[magic]:
         raise PacketError(
-            f"a servo frame with magic {magic} has {PACKET_SIZES[magic]} bytes, got {len(data)}"
+            "datagrams of the wrong size",
+            f"a servo frame with magic {magic} has {PACKET_SIZES[magic]} bytes, got {len(data)}",
         )
     if frame_rate == 0:
-        raise PacketError("a servo frame with frame_rate 0")
+        raise PacketError("frames with frame rate 0", "a servo frame with frame_rate 0")
     return ServoFrame(frame_rate, frame_count, _PWM[channels].unpack_from(data, _HEADER.size))
 
 
@@ -146,8 +166,9 @@ def kinematics_line(
     dt: float,
     gravity: float,
     gear_height: float,
-) -> bytes:
-    """The reply for one vehicle after a step of ``dt`` s.
+) -> tuple[bytes, bool]:
+    """The reply for one vehicle after a step of ``dt`` s, and whether a value had to be
+    replaced (not finite, or beyond REPLY_LIMIT: see :func:`in_range`).
 
     ``state``: the vehicle's state row as floats (layout: world ENU, body FLU);
     ``previous_velocity``: m/s ENU before the step. The specific force is the step's
@@ -166,7 +187,7 @@ def kinematics_line(
     by = fy + w * ty - z * tx + x * tz
     bz = fz + w * tz - x * ty + y * tx
     h = _SQRT_HALF
-    text = _REPLY % (
+    values = (
         time_s,
         *(wx, -wy, -wz),  # body rates FLU -> FRD
         *(bx, -by, -bz),  # specific force FLU -> FRD
@@ -174,7 +195,19 @@ def kinematics_line(
         *(vy, vx, -vz),
         *(h * (w + z), h * (x + y), h * (x - y), h * (w - z)),  # FLU->ENU to FRD->NED
     )
-    return text.encode()
+    # One C call decides for all but the timestamp: hypot is NaN or inf if any value is,
+    # and at least each |value| (the north-east-down height may pass the limit by the
+    # gear's height: still finite).
+    if math.hypot(wx, wy, wz, bx, by, bz, px, py, pz, vx, vy, vz, w, x, y, z) < REPLY_LIMIT:
+        return (_REPLY % values).encode(), False
+    clean = (time_s, *in_range(values[1:]))
+    return (_REPLY % clean).encode(), clean != values
+
+
+def in_range(values: tuple[float, ...]) -> tuple[float, ...]:
+    """``values`` with NaN replaced by 0 and the rest clamped to ±REPLY_LIMIT: ArduPilot
+    reads the reply into floats, and a NaN or an overflow there spreads through its EKF."""
+    return tuple(0.0 if math.isnan(v) else max(-REPLY_LIMIT, min(REPLY_LIMIT, v)) for v in values)
 
 
 @dataclass
@@ -186,25 +219,26 @@ class Peer:
     time_s: float = 0.0  # physics time of this vehicle since ArduPilot (re)started
     reply: bytes = b""  # the last answer, sent again for a repeated frame
     frames: int = 0  # frames stepped since this process started
-    notices: set[str] = field(default_factory=set)  # one-time messages already given
 
 
 class JsonPhysics:
     """N ArduPilot instances flying one batched Fleet, each in lockstep with its vehicle.
 
     :meth:`answer` takes the frames that arrived and returns the replies: a new frame
-    steps its vehicle by 1/frame_rate, a repeated frame (same count) is answered again
-    without a step, a count that goes back means ArduPilot restarted and puts the vehicle
-    back at rest at its start. Vehicles whose frames arrive together step in one batch;
-    the others keep their state.
+    steps its vehicle by 1/frame_rate (in sub-steps of at most MAX_STEP), a repeated frame
+    (same count) is answered again without a step, a count that goes back means ArduPilot
+    restarted and puts the vehicle back at rest at its start. Vehicles whose frames arrive
+    together step in one batch; the others keep their state.
 
     Args:
         fleet: the vehicles, one per ArduPilot instance; each starts at rest on the ground.
-        notice: where one-line messages go (restarts, rate changes, bad packets).
+        notice: where one-line messages go (restarts, rate changes, bad packets), through
+            :attr:`notices`, which rate-limits them by kind.
     """
 
     def __init__(self, fleet: Fleet, notice: Callable[[str], None] = print) -> None:
-        self.fleet, self.notice = fleet, notice
+        self.fleet = fleet
+        self.notices = Notices(notice)
         self.frame_types = []
         channels = []
         for airframe in fleet.airframes:
@@ -231,18 +265,22 @@ class JsonPhysics:
                     replies[index] = peer.reply
                     continue
                 if frame.frame_count < peer.frame_count:
-                    self.notice(
-                        f"vehicle {index}: ArduPilot restarted (frame {frame.frame_count} "
-                        f"after {peer.frame_count}); the vehicle is back at its start"
+                    self.notices(
+                        index,
+                        "restarts",
+                        f"ArduPilot restarted (frame {frame.frame_count} after "
+                        f"{peer.frame_count}); the vehicle is back at its start",
                     )
                     self._put_on_ground(index)
                     peer.frame_count = peer.frame_rate = None
                     peer.time_s = 0.0
             if peer.frame_rate is not None and frame.frame_rate != peer.frame_rate:
-                self.notice(
-                    f"vehicle {index}: ArduPilot's frame rate changed mid-flight from "
-                    f"{peer.frame_rate} to {frame.frame_rate} Hz (SIM_RATE_HZ); stepping "
-                    f"1/{frame.frame_rate} s per frame from now on"
+                self.notices(
+                    index,
+                    "frame rate changes",
+                    f"ArduPilot's frame rate changed mid-flight from {peer.frame_rate} to "
+                    f"{frame.frame_rate} Hz (SIM_RATE_HZ); stepping 1/{frame.frame_rate} s "
+                    "per frame from now on",
                 )
             peer.frame_count, peer.frame_rate = frame.frame_count, frame.frame_rate
             pwm, omega_max = frame.pwm, self._omega_max[index]
@@ -258,14 +296,15 @@ class JsonPhysics:
         """Step vehicles ``rows`` by ``dt`` s (the others keep their state) and answer."""
         fleet = self.fleet
         before = fleet.state[rows, L.I_VX : L.I_VZ + 1].tolist()  # m/s ENU
-        fleet.dt = dt  # this Fleet is ours: its step is the frame's
-        step_vehicles(fleet, self._commands, rows)
+        substeps = math.ceil(dt / MAX_STEP - 1e-9)  # 1 at 400 Hz and faster
+        fleet.dt = dt / substeps  # this Fleet is ours: its steps are the frame's
+        step_vehicles(fleet, self._commands, rows, substeps)
         replies = {}
         for index, velocity in zip(rows, before, strict=True):
             peer = self.peers[index]
             peer.time_s += dt
             peer.frames += 1
-            peer.reply = kinematics_line(
+            peer.reply, replaced = kinematics_line(
                 peer.time_s,
                 fleet.state[index].tolist(),
                 velocity,
@@ -273,6 +312,14 @@ class JsonPhysics:
                 self._gravity[index],
                 self._gear[index],
             )
+            if replaced:
+                self.notices(
+                    index,
+                    "out-of-range replies",
+                    f"the physics gave a value that is not finite or beyond ±{REPLY_LIMIT:g} "
+                    "(m, m/s, m/s², rad/s); ArduPilot is sent it replaced (NaN by 0, the "
+                    "rest clamped)",
+                )
             replies[index] = peer.reply
         return replies
 
@@ -284,11 +331,3 @@ class JsonPhysics:
         rest = initial_state(1, position=(0.0, 0.0, self._gear[index]), yaw=_NORTH_ENU)
         self.fleet.reset(rest, contact=L.ON_GROUND, mask=one)
         self._commands[index] = 0.0
-
-    def notice_once(self, index: int, text: str, key: str | None = None) -> None:
-        """Give ``text`` about vehicle ``index`` the first time only of its ``key`` (the
-        text itself unless given): bad packets of one kind are named once."""
-        peer = self.peers[index]
-        if (key or text) not in peer.notices:
-            peer.notices.add(key or text)
-            self.notice(f"vehicle {index}: {text}")

@@ -4,6 +4,14 @@ One UDP socket per ArduPilot instance (port 9002 + 10 i, as ArduPilot's ``-I i``
 on loopback unless asked otherwise. Each datagram that arrives is a servo frame; the
 answer goes back to the address it came from. The protocol and the physics are
 :mod:`.ardupilot_json`; this module only moves bytes, prints and stops.
+
+Each instance belongs to one peer (address and port): the first to send it a servo
+frame. Frames from any other sender are refused and counted, so that a stray datagram
+can neither put a flying vehicle back at its start (a frame count of 0 reads as a
+restart) nor turn the answers towards itself. ArduPilot's JSON backend sends from a
+socket it never binds, so a restarted ArduPilot comes from a new ephemeral port: a new
+sender is taken only once the bound one has been silent for SILENCE s (a live ArduPilot
+sends a frame at least once a second, re-sending when unanswered).
 """
 
 from __future__ import annotations
@@ -29,6 +37,7 @@ from quadsitl.bridges.ardupilot_json import (
     ServoFrame,
     parse_servo_packet,
 )
+from quadsitl.bridges.banner import weather_line
 from quadsitl.mavlink.links import is_loopback
 from quadsitl.physics.fleet import Fleet
 from quadsitl.physics.wind import Wind
@@ -41,6 +50,10 @@ DATAGRAM = 2048  # bytes, more than the largest servo frame (72)
 # leave an extra answer queued, which ArduPilot would take for the next frame's. Queued
 # re-sends are dropped by this rule one by one, so no socket needs draining.
 CROSSING = 0.5
+# wall s: the bound peer's silence after which another sender may take the instance.
+# ArduPilot, when unanswered, sends its frame again every 1 s (SIM_JSON.cpp, recv_fdm), so
+# a restarted one is taken within about SILENCE + 1 s of the old one's last frame.
+SILENCE = 3.0
 # Waiting for the next frame of one instance: a blocked process takes tens of µs to wake
 # on a busy machine, more than ArduPilot's own turn-around when it is quick. So the wait
 # first polls the socket for up to SPIN s, but only while the peer's recent turn-arounds
@@ -74,13 +87,28 @@ class ArduPilotConfig:
 class ArduPilotJsonServer:
     """The sockets of N ArduPilot instances around one :class:`JsonPhysics`.
 
+    Args:
+        physics: the vehicles and the protocol; its ``notices`` say what is refused.
+        bind: address the sockets listen on.
+        port: of instance 0; instance i listens on ``port + 10 i``.
+        silence: wall s the bound peer must be silent before another sender is taken.
+
     Raises OSError naming the port when a port cannot be opened (in use, say)."""
 
-    def __init__(self, physics: JsonPhysics, bind: str = "127.0.0.1", port: int = PORT) -> None:
-        self.physics = physics
+    def __init__(
+        self,
+        physics: JsonPhysics,
+        bind: str = "127.0.0.1",
+        port: int = PORT,
+        silence: float = SILENCE,
+    ) -> None:
+        self.physics, self.silence = physics, silence
+        self.notices = physics.notices
         self.sockets: list[socket.socket] = []
         self.ports = [port + PORT_STRIDE * i for i in range(physics.fleet.n)]
-        self.addresses: list[Any] = [None] * physics.fleet.n  # where each instance sends from
+        self.addresses: list[Any] = [None] * physics.fleet.n  # each one's bound peer
+        self.heard = [-math.inf] * physics.fleet.n  # monotonic s of its peer's last frame
+        self.refused = [0] * physics.fleet.n  # frames from other senders, refused
         self.answered = [-math.inf] * physics.fleet.n  # monotonic s of each one's last answer
         try:
             for index, number in enumerate(self.ports):
@@ -119,19 +147,21 @@ class ArduPilotJsonServer:
             except (TimeoutError, BlockingIOError, InterruptedError):
                 continue
             except OSError as error:  # e.g. ICMP unreachable from a peer that left
-                self.physics.notice_once(index, f"receive failed: {error}")
+                self.notices(index, "receive errors", f"receive failed: {error}")
                 continue
             try:
                 frame = parse_servo_packet(data)
             except PacketError as error:
-                text = f"ignored a datagram from {address}: {error}"
-                self.physics.notice_once(index, text, key=str(error))
+                text = f"ignored a datagram from {_name(address)}: {error}"
+                self.notices(index, error.kind, text)
                 continue
+            if address != self.addresses[index] and not self._take(index, address, now):
+                continue
+            self.heard[index] = now
             repeat = frame.frame_count == self.physics.peers[index].frame_count
             if repeat and now - self.answered[index] < CROSSING:
                 continue  # sent again just as our answer went out: it has one
             frames[index] = frame
-            self.addresses[index] = address
         if not frames:
             return 0
         replies = self.physics.answer(frames)
@@ -140,11 +170,35 @@ class ArduPilotJsonServer:
             try:
                 self.sockets[index].sendto(reply, self.addresses[index])
             except OSError as error:
-                self.physics.notice_once(
-                    index, f"could not answer {self.addresses[index]}: {error}"
-                )
+                text = f"could not answer {_name(self.addresses[index])}: {error}"
+                self.notices(index, "send errors", text)
         self._sent_at = time.perf_counter()
         return len(replies)
+
+    def _take(self, index: int, address: Any, now: float) -> bool:
+        """Whether instance ``index`` now belongs to ``address``, which sent it a frame:
+        yes if it had no peer, or its peer has been silent for ``silence`` s; otherwise
+        the frame is refused, counted and said (rate-limited)."""
+        bound = self.addresses[index]
+        quiet = now - self.heard[index]
+        if bound is not None and quiet < self.silence:
+            self.refused[index] += 1
+            self.notices(
+                index,
+                "frames from another sender",
+                f"refused a servo frame from {_name(address)}: this instance is flown by "
+                f"{_name(bound)} (another sender is taken once it has been silent for "
+                f"{self.silence:g} s)",
+            )
+            return False
+        if bound is not None:
+            self.notices(
+                index,
+                "new senders",
+                f"now flown by {_name(address)}: {_name(bound)} was silent for {quiet:.1f} s",
+            )
+        self.addresses[index] = address
+        return True
 
     def _wait_one(self, timeout: float) -> bool:
         """Wait up to ``timeout`` s for the one socket to hold a datagram; whether it does.
@@ -166,6 +220,11 @@ class ArduPilotJsonServer:
     def close(self) -> None:
         for sock in self.sockets:
             sock.close()
+
+
+def _name(address: Any) -> str:
+    """``host:port`` of a socket address."""
+    return f"{address[0]}:{address[1]}"
 
 
 def _readable(sock: socket.socket) -> bool:
@@ -199,8 +258,9 @@ def run_ardupilot(config: ArduPilotConfig, say: Callable[[str], None] | None = N
     if not is_loopback(config.bind):
         say(
             f"warning: the ArduPilot ports on {config.bind} can be reached from other hosts: "
-            "anyone there can fly the vehicles, and each 40-byte datagram is answered with "
-            "~300 bytes to its claimed sender (docs/security.md)"
+            "whoever sends an instance the first servo frame flies that vehicle (or once its "
+            f"ArduPilot has been silent {SILENCE:g} s), and each 40-byte frame is answered "
+            "with ~300 bytes to the address it claims (docs/security.md)"
         )
     stopping: list[int] = []
     previous = [signal.signal(s, lambda n, _: stopping.append(n)) for s in _SIGNALS]
@@ -211,6 +271,7 @@ def run_ardupilot(config: ArduPilotConfig, say: Callable[[str], None] | None = N
         end = None if config.duration is None else started + config.duration
         while not stopping and (end is None or time.monotonic() < end):
             server.serve(WAIT if end is None else max(0.0, min(WAIT, end - time.monotonic())))
+        physics.notices.flush()
         wall = time.monotonic() - started
         simulated = max(peer.time_s for peer in physics.peers)
         frames = sum(peer.frames for peer in physics.peers)
@@ -257,3 +318,6 @@ def _banner(
         )
     if parm is None:
         out(f"  (no parameter file ships for {config.airframe}; see docs/autopilots.md)")
+    weather = weather_line(config.wind)
+    if weather is not None:
+        out(f"  weather: {weather}")
