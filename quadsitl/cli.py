@@ -17,6 +17,7 @@ from typing import Any
 
 from quadsitl import __version__
 from quadsitl.commands.options import (
+    CommandParser,
     add_signing_options,
     add_weather_options,
     parse_weather,
@@ -27,7 +28,7 @@ from quadsitl.commands.sim_setup import flight_stack_config, sim_config
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = CommandParser(
         prog="quadsitl",
         description="A MAVLink-speaking software-in-the-loop quadrotor simulator.",
     )

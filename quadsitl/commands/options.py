@@ -1,5 +1,6 @@
 """Options more than one subcommand takes, and how their values are read: MAVLink
-signing (``sim``, ``fly``) and the weather (``sim``, ``demo``).
+signing (``sim``, ``fly``) and the weather (``sim``, ``demo``); and the parser every
+subcommand's options go into (:class:`CommandParser`).
 
 Parsing (``add_*``) and reading (:func:`signing_key`, :func:`parse_weather`) sit
 together, so that an option's words and their meaning are read in one place.
@@ -9,7 +10,75 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
+import sys
+from collections.abc import Sequence
 from typing import Any
+
+# A word that starts as a negative number does: "-3,90", "-33.86,151.21,30", "-.5".
+_SIGNED_VALUE = re.compile(r"-\.?\d")
+
+
+class CommandParser(argparse.ArgumentParser):
+    """An ArgumentParser whose options that take one value take it even when it starts
+    with a minus sign and a digit: ``--wind -3,90``, ``--home -33.86,151.21,30``. Plain
+    argparse reads such a word as an unknown option (only a word that is wholly one
+    number counts as a negative number) and stops with "expected one argument"; here
+    ``--wind -3,90`` is read as ``--wind=-3,90``. Subcommands' parsers are of this class
+    too (``add_subparsers`` makes them so), and the words are joined once, at the top."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.valued_options: set[str] = set()  # option strings that take exactly one value
+        self._commands: list[Any] = []  # the add_subparsers actions
+
+    def add_argument(self, *args: Any, **kwargs: Any) -> argparse.Action:
+        action = super().add_argument(*args, **kwargs)
+        if action.option_strings and action.nargs is None:
+            self.valued_options.update(action.option_strings)
+        return action
+
+    def add_subparsers(self, **kwargs: Any) -> Any:
+        commands = super().add_subparsers(**kwargs)
+        self._commands.append(commands)
+        return commands
+
+    def all_valued_options(self) -> set[str]:
+        """This parser's one-value options and those of its subcommands."""
+        options = set(self.valued_options)
+        for commands in self._commands:
+            for parser in commands.choices.values():
+                if isinstance(parser, CommandParser):
+                    options |= parser.all_valued_options()
+        return options
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: Any = None
+    ) -> tuple[Any, list[str]]:
+        words = sys.argv[1:] if args is None else list(args)
+        return super().parse_known_args(
+            join_signed_values(words, self.all_valued_options()), namespace
+        )
+
+
+def join_signed_values(words: Sequence[str], options: set[str]) -> list[str]:
+    """``words`` with each ``OPTION VALUE`` pair whose VALUE starts as a negative number
+    written as one word ``OPTION=VALUE`` (``OPTION`` one of ``options``); nothing after
+    ``--`` is touched."""
+    out: list[str] = []
+    i = 0
+    while i < len(words):
+        word = words[i]
+        if word == "--":
+            return out + list(words[i:])
+        following = words[i + 1] if i + 1 < len(words) else ""
+        if word in options and _SIGNED_VALUE.match(following):
+            out.append(f"{word}={following}")
+            i += 2
+        else:
+            out.append(word)
+            i += 1
+    return out
 
 
 def add_signing_options(parser: argparse.ArgumentParser, what: str) -> None:
@@ -54,7 +123,8 @@ def add_weather_options(parser: argparse.ArgumentParser) -> None:
         "--wind",
         metavar="SPEED,FROM",
         help="mean wind: SPEED m/s blowing from FROM degrees (clockwise from north, as "
-        "weather reports give it), e.g. 5,270 (default: still air)",
+        "weather reports give it), e.g. 5,270; a negative SPEED blows the other way: -3,90 "
+        "is 3,270; limits in docs/physics.md (default: still air)",
     )
     parser.add_argument(
         "--turbulence",
@@ -66,7 +136,9 @@ def add_weather_options(parser: argparse.ArgumentParser) -> None:
 
 def parse_weather(wind: str | None, turbulence: str | None) -> Any:
     """``--wind SPEED,FROM`` and ``--turbulence SEVERITY|SIGMA`` as a Wind (None: still
-    air); a one-line ValueError for what does not parse or is not weather."""
+    air); a one-line ValueError for what does not parse or is not weather (beyond the
+    limits of :mod:`quadsitl.physics.wind`, too). A negative SPEED is a wind from the
+    opposite side, as ``w = −SPEED·(sin FROM, cos FROM)`` gives it."""
     from quadsitl.physics.wind import Wind
 
     if wind is None and turbulence is None:
@@ -77,6 +149,8 @@ def parse_weather(wind: str | None, turbulence: str | None) -> Any:
             speed, from_deg = (float(x) for x in wind.split(","))
         except ValueError:
             raise ValueError(f"--wind must be SPEED,FROM (m/s, degrees), got {wind!r}") from None
+        if speed < 0:
+            speed, from_deg = -speed, (from_deg + 180.0) % 360.0
     level: str | float | None = turbulence
     if turbulence is not None:
         try:

@@ -4,7 +4,9 @@ Every telemetry message of a tick is built from one :class:`Snapshot` (the
 ``telemetry_*`` modules, ODOMETRY's covariance in :mod:`.estimate`): world ENU -> local
 NED, body FLU -> FRD, through :mod:`quadsitl.frames` and the conversion the motor path
 shares (:class:`~quadsitl.wire.state.WireState`). The sensors are read only when a
-sensor message asks for them.
+sensor message asks for them. What it reports is finite: a state or a sensor reading
+with NaN or beyond :data:`REPORT_BOUND` (a diverged physics) is reported with NaN as 0
+and the rest clamped (:func:`~quadsitl.wire.fit.finite`).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from quadsitl.mavlink.identity import IDENTITIES, Identity
 from quadsitl.physics import layout as L
 from quadsitl.physics.sensors import environment as E
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire.fit import finite
 from quadsitl.wire.state import WireState
 from quadsitl.wire.units import to_time_usec
 
@@ -27,6 +30,9 @@ from quadsitl.wire.units import to_time_usec
 HIGHRES_ACCEL, HIGHRES_GYRO, HIGHRES_MAG = 0x007, 0x038, 0x1C0
 HIGHRES_BARO = 0x200 | 0x800 | 0x1000  # absolute pressure, pressure altitude, temperature
 HIGHRES_DIFF_PRESSURE = 0x400
+# The largest state or sensor value reported (m, m/s, rad/s, m/s², ...): no flight comes
+# near it, and a square of it (dynamic pressure, variances) still fits a float32 field.
+REPORT_BOUND = 1e15
 
 
 class Snapshot:
@@ -45,7 +51,8 @@ class Snapshot:
         self.resets = resets  # state resets through the motor path (ODOMETRY reset_counter)
         self.comm_errors = min(comm_errors, 65535)  # malformed frames received
         self.error_counts = [min(n, 65535) for n in error_counts]  # signing, motor commands
-        s = vehicle.nav_state  # the truth itself unless EKF2_EN selects the estimate
+        # The truth itself unless EKF2_EN selects the estimate.
+        s = finite(vehicle.nav_state, REPORT_BOUND)
         self.time_boot_ms = int(vehicle.time * 1000) & 0xFFFFFFFF
         self.time_usec = to_time_usec(vehicle.time)
         # Local origin: the start position on the ground (the resting centre of mass is
@@ -68,23 +75,23 @@ class Snapshot:
     @cached_property
     def specific_force_frd(self) -> np.ndarray:
         """The accelerometer, m/s², body FRD: specific force, (0, 0, −g) at rest."""
-        return frames.flu_to_frd(self.vehicle.sensors.accel)
+        return frames.flu_to_frd(finite(self.vehicle.sensors.accel, REPORT_BOUND))
 
     @cached_property
     def gyro_frd(self) -> np.ndarray:
         """The gyroscope, rad/s, body FRD."""
-        return frames.flu_to_frd(self.vehicle.sensors.gyro)
+        return frames.flu_to_frd(finite(self.vehicle.sensors.gyro, REPORT_BOUND))
 
     @cached_property
     def magnetic_field_frd(self) -> np.ndarray:
         """The magnetometer, gauss, body FRD: the Earth's field at home (WMM)."""
-        return frames.flu_to_frd(self.vehicle.sensors.magnetic_field)
+        return frames.flu_to_frd(finite(self.vehicle.sensors.magnetic_field, REPORT_BOUND))
 
     @cached_property
     def wind_ned(self) -> np.ndarray:
         """The air's velocity at the vehicle, m/s, local NED (mean wind, turbulence and
         gust; 0 in still air)."""
-        return frames.enu_to_ned(self.vehicle.fleet.air_velocity[0])
+        return frames.enu_to_ned(finite(self.vehicle.fleet.air_velocity[0], REPORT_BOUND))
 
     @cached_property
     def airspeed(self) -> float:
@@ -96,9 +103,13 @@ class Snapshot:
         """(static pressure hPa, differential pressure hPa, temperature °C): the
         barometer's, and the dynamic pressure ½ρv² of the speed through the air."""
         sensors = self.vehicle.sensors
-        density = sensors.pressure / (E.AIR_GAS_CONSTANT * sensors.temperature)  # kg/m³
-        dynamic = 0.5 * density * self.airspeed**2 / 100
-        return sensors.pressure / 100, dynamic, sensors.temperature - 273.15
+        pressure, temperature = np.float64(sensors.pressure), np.float64(sensors.temperature)
+        with np.errstate(all="ignore"):  # a diverged state: made finite below
+            density = pressure / (E.AIR_GAS_CONSTANT * temperature)  # kg/m³
+            dynamic = 0.5 * density * self.airspeed**2 / 100
+            values = np.array([pressure / 100, dynamic, temperature - 273.15])
+        hpa, differential, celsius = finite(values, REPORT_BOUND).tolist()
+        return hpa, differential, celsius
 
     @cached_property
     def highres_fields(self) -> int:

@@ -2,7 +2,8 @@
 (the truth, or with EKF2_EN = 1 the onboard estimate): ATTITUDE, ATTITUDE_QUATERNION,
 LOCAL_POSITION_NED, GLOBAL_POSITION_INT, HOME_POSITION, VFR_HUD and ODOMETRY (the
 estimate's, with its covariance: :mod:`.estimate`). One ``build_*`` function per message;
-when each is sent is :mod:`.telemetry`'s.
+when each is sent is :mod:`.telemetry`'s. Integers are rounded with
+:func:`~quadsitl.wire.fit.wire_int` (saturated at their field's limits when packed).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from quadsitl.mavlink.estimate import build_estimate_odometry
 from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.answer import odometry_values
+from quadsitl.wire.fit import wire_int
 
 _encoder = mav.MAVLink(None)
 
@@ -42,14 +44,14 @@ def build_global_position_int(s: Snapshot) -> Any:
     v = s.velocity_ned * 100.0  # cm/s
     return _encoder.global_position_int_encode(
         s.time_boot_ms,
-        round(s.lat * 1e7),
-        round(s.lon * 1e7),
-        round(s.alt_amsl * 1000),
-        round(s.relative_alt * 1000),
-        round(v[0]),
-        round(v[1]),
-        round(v[2]),
-        round(s.heading_deg * 100) % 36000,
+        wire_int(s.lat * 1e7),
+        wire_int(s.lon * 1e7),
+        wire_int(s.alt_amsl * 1000),
+        wire_int(s.relative_alt * 1000),
+        wire_int(v[0]),
+        wire_int(v[1]),
+        wire_int(v[2]),
+        wire_int(s.heading_deg * 100) % 36000,
     )
 
 
@@ -74,11 +76,11 @@ def build_home_position(s: Snapshot) -> Any:
 
 def build_vfr_hud(s: Snapshot) -> Any:
     v = s.vehicle
-    throttle = round(100 * float(np.mean(v.rotor_cmd)) / v.airframe.max_rotor_speed)
+    throttle = wire_int(100 * float(np.mean(v.rotor_cmd)) / v.airframe.max_rotor_speed)
     return _encoder.vfr_hud_encode(
         s.airspeed,
         s.ground_speed,
-        round(s.heading_deg) % 360,
+        wire_int(s.heading_deg) % 360,
         throttle,
         s.alt_amsl,
         -float(s.velocity_ned[2]),

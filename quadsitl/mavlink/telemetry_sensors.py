@@ -2,7 +2,8 @@
 SCALED_PRESSURE (the vehicle's sensor models, :mod:`quadsitl.physics.sensors`: noise,
 bias, GPS latency), and WIND_COV (the air at the vehicle). Body FRD, local NED. One
 ``build_*`` function per message; when each is sent is :mod:`.telemetry`'s (all but
-GPS_RAW_INT and WIND_COV on request only).
+GPS_RAW_INT and WIND_COV on request only). Integers are rounded with
+:func:`~quadsitl.wire.fit.wire_int` (saturated at their field's limits when packed).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.physics import dryden as D
 from quadsitl.physics.sensors.gps import FIX_3D
+from quadsitl.wire.fit import wire_int
 from quadsitl.wire.units import STANDARD_GRAVITY
 
 _encoder = mav.MAVLink(None)
@@ -25,22 +27,22 @@ def build_gps_raw_int(s: Snapshot) -> Any:
     g = s.gps
     vn, ve = (float(x) for x in g["velocity_ned"][:2])
     speed = math.hypot(vn, ve)
-    course = round(math.degrees(math.atan2(ve, vn)) % 360 * 100)
+    course = wire_int(math.degrees(math.atan2(ve, vn)) % 360 * 100)
     fixed = g["fix_type"] == FIX_3D
     return _encoder.gps_raw_int_encode(
         s.time_usec,
         g["fix_type"],
-        round(g["lat"] * 1e7) if fixed else 0,
-        round(g["lon"] * 1e7) if fixed else 0,
-        round(g["alt"] * 1000) if fixed else 0,
-        min(round(g["hdop"] * 100), 65534) if fixed else 65535,
-        min(round(g["vdop"] * 100), 65534) if fixed else 65535,
-        round(speed * 100) if fixed else 65535,
+        wire_int(g["lat"] * 1e7) if fixed else 0,
+        wire_int(g["lon"] * 1e7) if fixed else 0,
+        wire_int(g["alt"] * 1000) if fixed else 0,
+        min(wire_int(g["hdop"] * 100), 65534) if fixed else 65535,
+        min(wire_int(g["vdop"] * 100), 65534) if fixed else 65535,
+        min(wire_int(speed * 100), 65534) if fixed else 65535,
         course if fixed and speed > 0.2 else 65535,
         g["satellites"],
-        h_acc=min(round(g["eph"] * 1000), 2**32 - 1),
-        v_acc=min(round(g["epv"] * 1000), 2**32 - 1),
-        vel_acc=min(round(g["speed_accuracy"] * 1000), 2**32 - 1),
+        h_acc=wire_int(g["eph"] * 1000),
+        v_acc=wire_int(g["epv"] * 1000),
+        vel_acc=wire_int(g["speed_accuracy"] * 1000),
     )
 
 
@@ -65,17 +67,17 @@ def _imu_integers(s: Snapshot) -> list[int]:
     """Accelerometer mG, gyroscope mrad/s, magnetometer mgauss (body FRD), int16."""
     mg = s.specific_force_frd / STANDARD_GRAVITY * 1000
     values = [*mg, *(s.gyro_frd * 1000), *(s.magnetic_field_frd * 1000)]
-    return [int(max(-32767, min(32767, round(float(x))))) for x in values]
+    return [max(-32767, min(32767, wire_int(float(x)))) for x in values]
 
 
 def build_scaled_imu(s: Snapshot) -> Any:
-    return _encoder.scaled_imu_encode(s.time_boot_ms, *_imu_integers(s), round(s.air[2] * 100))
+    return _encoder.scaled_imu_encode(s.time_boot_ms, *_imu_integers(s), wire_int(s.air[2] * 100))
 
 
 def build_raw_imu(s: Snapshot) -> Any:
     """There are no sensor counts: the values of SCALED_IMU (mG, mrad/s, mgauss), as
     ArduPilot fills RAW_IMU."""
-    return _encoder.raw_imu_encode(s.time_usec, *_imu_integers(s), 0, round(s.air[2] * 100))
+    return _encoder.raw_imu_encode(s.time_usec, *_imu_integers(s), 0, wire_int(s.air[2] * 100))
 
 
 def build_wind_cov(s: Snapshot) -> Any:
@@ -103,5 +105,5 @@ def build_scaled_pressure(s: Snapshot) -> Any:
     """The barometer: hPa, the differential pressure hPa, cdegC."""
     pressure, differential, temperature = s.air
     return _encoder.scaled_pressure_encode(
-        s.time_boot_ms, pressure, differential, round(temperature * 100)
+        s.time_boot_ms, pressure, differential, wire_int(temperature * 100)
     )

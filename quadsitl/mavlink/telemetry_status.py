@@ -2,7 +2,8 @@
 health, battery, errors), EXTENDED_SYS_STATE, BATTERY_STATUS, the motor outputs
 (SERVO_OUTPUT_RAW, ACTUATOR_OUTPUT_STATUS), SYSTEM_TIME, MISSION_CURRENT,
 AUTOPILOT_VERSION and CURRENT_MODE. One ``build_*`` function per message; when each is
-sent is :mod:`.telemetry`'s.
+sent is :mod:`.telemetry`'s. Integers from the physics (battery, motor outputs) are
+rounded with :func:`~quadsitl.wire.fit.wire_int` (saturated when packed).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.vehicle.modes import MAIN_AUTO, MAIN_OFFBOARD, MAIN_POSCTL, Mode
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire.answer import UNUSED_OUTPUTS
+from quadsitl.wire.fit import wire_int
 
 _encoder = mav.MAVLink(None)
 
@@ -96,9 +98,9 @@ def build_sys_status(s: Snapshot) -> Any:
         present,
         health,
         100,
-        int(v.battery.voltage * 1000),
-        int(v.battery.current * 100),
-        int(v.battery.remaining * 100),
+        wire_int(v.battery.voltage * 1000),
+        wire_int(v.battery.current * 100),
+        wire_int(v.battery.remaining * 100),
         0,
         s.comm_errors,
         *s.error_counts,
@@ -111,24 +113,24 @@ def build_extended_sys_state(s: Snapshot) -> Any:
 
 def build_battery_status(s: Snapshot) -> Any:
     b = s.vehicle.battery
-    cells = [round(b.voltage / b.cells * 1000)] * b.cells + [65535] * (10 - b.cells)
+    cells = [min(wire_int(b.voltage / b.cells * 1000), 65534)] * b.cells + [65535] * (10 - b.cells)
     return _encoder.battery_status_encode(
         0,
         mav.MAV_BATTERY_FUNCTION_ALL,
         mav.MAV_BATTERY_TYPE_LIPO,
         32767,
         cells,
-        round(b.current * 100),
-        round(b.used_mah),
+        wire_int(b.current * 100),
+        wire_int(b.used_mah),
         -1,
-        round(b.remaining * 100),
+        wire_int(b.remaining * 100),
     )
 
 
 def build_servo_output_raw(s: Snapshot) -> Any:
     v = s.vehicle
     pwm = [
-        round(1000 + 1000 * c / v.airframe.max_rotor_speed) if v.armed else 1000
+        wire_int(1000 + 1000 * c / v.airframe.max_rotor_speed) if v.armed else 1000
         for c in v.rotor_cmd
     ]
     return _encoder.servo_output_raw_encode(s.time_usec & 0xFFFFFFFF, 0, *pwm, 0, 0, 0, 0)

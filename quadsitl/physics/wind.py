@@ -28,6 +28,12 @@ Array = NDArray[np.float64]
 
 Z0_FT = 0.15  # ft, surface roughness of the log profile, Category C flight phases
 PROFILES = ("uniform", "log")
+
+# The strongest weather accepted (docs/physics.md, "Limits"): beyond it no multirotor
+# flies, and the numbers would only grow until a float or a telemetry field overflows.
+MAX_WIND_SPEED = 50.0  # m/s, mean wind: hurricane force starts at 32.7 m/s (Beaufort 12)
+MAX_SIGMA_W = 10.0  # m/s, σ_w: 0.1·W20 of a 100 m/s wind, 4× "severe" (2.31 m/s)
+MAX_GUST_SPEED = 50.0  # m/s, |A| of a discrete gust: as strong as the strongest mean wind
 _U64 = np.uint64
 
 
@@ -62,6 +68,11 @@ class Gust:
         if len(amp) != 3 or not all(_finite(a) for a in amp):
             raise ValueError(
                 f"gust amplitude must be 3 finite m/s (E, N, U), got {self.amplitude!r}"
+            )
+        if math.hypot(*amp) > MAX_GUST_SPEED:
+            raise ValueError(
+                f"gust amplitude must be at most {MAX_GUST_SPEED:g} m/s, got "
+                f"{math.hypot(*amp):.6g} m/s {self.amplitude!r}"
             )
         if not (_finite(self.length) and self.length > 0):
             raise ValueError(
@@ -106,8 +117,11 @@ class Wind:
     gust: Gust | None = None
 
     def __post_init__(self) -> None:
-        if not (_finite(self.speed) and self.speed >= 0):
-            raise ValueError(f"wind speed must be a finite number >= 0 m/s, got {self.speed!r}")
+        if not (_finite(self.speed) and 0 <= self.speed <= MAX_WIND_SPEED):
+            raise ValueError(
+                f"wind speed must be a finite number >= 0 and at most {MAX_WIND_SPEED:g} m/s, "
+                f"got {self.speed!r}"
+            )
         if not _finite(self.from_deg):
             raise ValueError(f"wind direction must be finite degrees, got {self.from_deg!r}")
         if self.profile not in PROFILES:
@@ -123,8 +137,11 @@ class Wind:
                     f"unknown turbulence severity {t!r}; choose one of "
                     f"{sorted(D.SEVERITY_W20_KT)} or give σ_w in m/s"
                 )
-        elif t is not None and not (_finite(t) and t >= 0):  # type: ignore[operator]
-            raise ValueError(f"turbulence σ_w must be a finite number >= 0 m/s, got {t!r}")
+        elif t is not None and not (_finite(t) and 0 <= t <= MAX_SIGMA_W):  # type: ignore[operator]
+            raise ValueError(
+                f"turbulence σ_w must be a finite number >= 0 and at most {MAX_SIGMA_W:g} m/s, "
+                f"got {t!r}"
+            )
         if self.gust is not None and not isinstance(self.gust, Gust):
             raise ValueError(f"gust must be a Gust or None, got {self.gust!r}")
 

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from quadsitl.physics import layout as L
-from quadsitl.physics.wind import Wind
+from quadsitl.physics.wind import MAX_WIND_SPEED, Wind
 from quadsitl.tasks.delay import Delay
 
 # Parameter columns each airframe scale acts on.
@@ -78,8 +78,11 @@ class WindDraw:
                 raise ValueError(
                     f"randomize wind {name} must be a finite (low, high) pair, got {pair!r}"
                 )
-        if self.speed[0] < 0:
-            raise ValueError(f"randomize wind speed must be >= 0 m/s, got {self.speed!r}")
+        if self.speed[0] < 0 or self.speed[1] > MAX_WIND_SPEED:
+            raise ValueError(
+                f"randomize wind speed must be >= 0 m/s and at most {MAX_WIND_SPEED:g} m/s, "
+                f"got {self.speed!r}"
+            )
         if not isinstance(self.turbulence, (tuple, list)) or not self.turbulence:
             raise ValueError(
                 f"randomize wind turbulence must be a non-empty list, got {self.turbulence!r}"

@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 
 from quadsitl.physics.airframe import AIRFRAMES
+from quadsitl.physics.wind import MAX_SIGMA_W, MAX_WIND_SPEED
 
 
 @dataclass(frozen=True)
@@ -132,10 +133,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
          "airframe preset: " + ", ".join(f"{i} {n}" for i, n in enumerate(AIRFRAME_NAMES))),
     # The weather (ArduPilot's SIM_WIND_* names and units; PX4's SIH has only a constant
     # wind, as north and east parts). Takes effect at the next physics step.
-    ParamSpec("SIM_WIND_SPD", 0.0, 0.0, 50.0, "m/s", "mean wind speed"),
+    ParamSpec("SIM_WIND_SPD", 0.0, 0.0, MAX_WIND_SPEED, "m/s", "mean wind speed"),
     ParamSpec("SIM_WIND_DIR", 0.0, 0.0, 360.0, "deg", "direction the wind blows from, "
               "clockwise from north"),
-    ParamSpec("SIM_WIND_TURB", 0.0, 0.0, 10.0, "m/s", "Dryden turbulence intensity σ_w "
+    ParamSpec("SIM_WIND_TURB", 0.0, 0.0, MAX_SIGMA_W, "m/s", "Dryden turbulence intensity σ_w "
               "(0: none; light 0.77, moderate 1.54, severe 2.31)"),
     # The estimator (PX4's name; its default differs: here the truth unless asked).
     _int("EKF2_EN", 0, 0, 1, "-", "flight software flies on: 0 the true state, 1 the "

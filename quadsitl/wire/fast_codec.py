@@ -20,6 +20,7 @@ from typing import Any
 from fastcrc import crc16
 
 from quadsitl.wire.dialect import mavlink as mav
+from quadsitl.wire.fit import pack_payload
 
 MAGIC = 0xFD  # MAVLink 2
 HEADER = struct.Struct("<BBBBBBBHB")  # magic, len, incompat, compat, seq, sys, comp, id
@@ -62,8 +63,9 @@ def pack(
 ) -> bytes:
     """One MAVLink 2 frame of ``message_class`` (e.g. ``mavlink.MAVLink_odometry_message``)
     with ``values`` in wire order, arrays flattened (the order of
-    ``message_class.unpacker``); signed when a :class:`Signer` is given."""
-    payload = message_class.unpacker.pack(*values).rstrip(b"\0") or b"\0"
+    ``message_class.unpacker``); signed when a :class:`Signer` is given. A value that does
+    not fit its field is saturated (:mod:`.fit`): no physics value can stop a frame."""
+    payload = pack_payload(message_class, values).rstrip(b"\0") or b"\0"
     msgid = message_class.id
     flags = SIGNED if signature is not None else 0
     header = HEADER.pack(
