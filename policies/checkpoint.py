@@ -13,6 +13,7 @@ from __future__ import annotations
 import pickle
 import re
 import warnings
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -110,7 +111,8 @@ def _build(payload: dict[str, Any]) -> tuple[ActorCritic, TrainConfig]:
             raise ValueError(f"{name} must be an integer in 1..{MAX_SIZE}, got {value!r}")
     if not isinstance(payload["two_headed"], bool):
         raise ValueError(f"two_headed must be true or false, got {payload['two_headed']!r}")
-    net = ActorCritic(
+    build = partial(
+        ActorCritic,
         obs_size=payload["obs_size"],
         act_size=payload["act_size"],
         hidden=config.hidden,
@@ -119,7 +121,12 @@ def _build(payload: dict[str, Any]) -> tuple[ActorCritic, TrainConfig]:
         init_log_std=config.init_log_std,
         fine_offset_scale=config.fine_offset_scale,
     )
-    _check_state_dict(payload["state_dict"], net.state_dict())
+    # The tensors are checked against the shapes first, on the meta device (nothing
+    # allocated): a size they do not hold, 10^6 observations say, is refused unbuilt.
+    with torch.device("meta"):
+        expected = build().state_dict()
+    _check_state_dict(payload["state_dict"], expected)
+    net = build()
     net.load_state_dict(payload["state_dict"])
     net.eval()
     return net, config

@@ -27,6 +27,7 @@ from policies.export.contract import (
     observation_size,
     trained_options,
 )
+from policies.export.onnx_check import check_batch, first_line, read_policy_graph
 from policies.export.to_c import parse_weights, render
 from policies.export.to_onnx import METADATA_KEY
 from policies.networks import DeterministicPolicy
@@ -47,48 +48,60 @@ void quadsitl_forward_batch(const float *obs, float *action, long n)
 """
 C_FLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-pedantic", "-Werror", "-shared", "-fPIC")
 FLOATS = ctypes.POINTER(ctypes.c_float)
+MAX_HEADER_BYTES = 4 * 2**20  # ~250,000 weights; quadsitl's headers are 80-180 KB
 
 
 class OnnxPolicy:
     """An ONNX policy (input ``[batch or 1, obs_size]`` float32, first output the
-    actions) run by onnxruntime on the CPU, one thread."""
+    actions) run by onnxruntime on the CPU, one thread. Its graph is checked before it
+    runs (policies/export/onnx_check.py): when loaded, and for each batch size before
+    that size is first fed, so that no call can hang or take unbounded memory; a
+    failure is a ValueError of one line, never onnxruntime's log or traceback."""
 
     def __init__(self, path: Path) -> None:
+        self.path = path
+        self.graph = read_policy_graph(path)
         try:
             import onnxruntime
         except ImportError:
             raise ValueError(
                 "running an ONNX policy needs onnxruntime: pip install 'quadsitl[export]'"
             ) from None
+        self.input, self.output = self.graph.input, self.graph.output
+        self.obs_size = self.graph.obs_size
+        self.one_at_a_time = self.graph.fixed_batch == 1  # a graph exported for a batch of one
+        self.metadata = self.graph.metadata
+        self.act_size = check_batch(path, self.graph, 1)
+        self.checked = {1}  # batch sizes whose shapes and work are bounded
         options = onnxruntime.SessionOptions()
         options.intra_op_num_threads = options.inter_op_num_threads = 1
-        options.log_severity_level = 3  # errors only
-        try:
+        options.log_severity_level = 4  # fatal only: an error comes back as one line
+        try:  # from the checked bytes: what runs is what was checked
             self.session = onnxruntime.InferenceSession(
-                str(path), options, providers=["CPUExecutionProvider"]
+                self.graph.data, options, providers=["CPUExecutionProvider"]
             )
         except Exception as error:  # onnxruntime raises its own kinds for a bad file
-            first = str(error).strip().splitlines()[0] if str(error).strip() else ""
-            raise ValueError(f"{path} is not an ONNX model onnxruntime can run ({first})") from None
-        inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
-        shape = inputs[0].shape
-        if len(inputs) != 1 or len(shape) != 2 or not isinstance(shape[1], int):
             raise ValueError(
-                f"{path} must take one input of shape [batch, observations], not "
-                f"{[(i.name, i.shape) for i in inputs]}"
-            )
-        out_shape = outputs[0].shape
-        self.input, self.output = inputs[0].name, outputs[0].name
-        self.obs_size = shape[1]
-        self.act_size = out_shape[-1] if out_shape and isinstance(out_shape[-1], int) else 0
-        self.one_at_a_time = shape[0] == 1  # a graph exported for a batch of one
-        self.metadata = self.session.get_modelmeta().custom_metadata_map
+                f"{path} is not an ONNX model onnxruntime can run ({first_line(error)})"
+            ) from None
+        given = self.mean_action(np.zeros((1, self.obs_size), np.float32)).shape
+        if given != (1, self.act_size):  # a first call: one that fails, fails here
+            raise ValueError(f"{path} gives {list(given)} for 1 observation, not [1, actions]")
 
     def mean_action(self, obs: np.ndarray) -> np.ndarray:
         obs = np.ascontiguousarray(obs, dtype=np.float32)
         if self.one_at_a_time and obs.shape[0] != 1:
             return np.concatenate([self.mean_action(row[None]) for row in obs])
-        return np.asarray(self.session.run([self.output], {self.input: obs})[0], np.float32)
+        if obs.shape[0] not in self.checked:
+            check_batch(self.path, self.graph, obs.shape[0])
+            self.checked.add(obs.shape[0])
+        try:
+            action = self.session.run([self.output], {self.input: obs})[0]
+        except Exception as error:  # onnxruntime's kinds: Fail, InvalidArgument, ...
+            raise ValueError(
+                f"{self.path} fails when run on {obs.shape[0]} observation(s): {first_line(error)}"
+            ) from None
+        return np.asarray(action, np.float32)
 
 
 class CPolicy:
@@ -99,10 +112,20 @@ class CPolicy:
     its contract render to), so a file from elsewhere can hold weights, never code."""
 
     def __init__(self, header: Path, contract: dict[str, Any] | None = None) -> None:
+        size = header.stat().st_size
+        if size > MAX_HEADER_BYTES:
+            raise ValueError(
+                f"{header} is {size:,} bytes; a policy header is at most "
+                f"{MAX_HEADER_BYTES:,} ({MAX_HEADER_BYTES // 2**20} MiB)"
+            )
         text = header.read_text(errors="replace")
         if contract is None:
             contract = json.loads(contract_path(header).read_text())
-        if not _as_exported(text, contract):
+        try:
+            arrays = parse_weights(text)
+        except ValueError as error:  # a weight that is not a finite float, named
+            raise ValueError(f"{header}: {error}") from None
+        if not _as_exported(text, arrays, contract):
             raise ValueError(
                 f"{header} is not a header as quadsitl export writes it (refused: it would be "
                 "compiled and run)"
@@ -149,11 +172,11 @@ class CPolicy:
         return speeds
 
 
-def _as_exported(text: str, contract: dict[str, Any]) -> bool:
-    """Is ``text`` exactly the header of its own numbers and ``contract``?"""
+def _as_exported(text: str, arrays: dict[str, np.ndarray], contract: dict[str, Any]) -> bool:
+    """Is ``text`` exactly the header of its own numbers (``arrays``) and ``contract``?"""
     named = re.match(r"/\* (.+?): the quadsitl ", text)
     try:
-        return named is not None and render(parse_weights(text), contract, named[1]) == text
+        return named is not None and render(arrays, contract, named[1]) == text
     except (KeyError, ValueError, TypeError, IndexError):
         return False
 
@@ -196,7 +219,12 @@ def load_policy(
             f"{expected}: {layout_text(config.task, options)}"
         )
     if policy.act_size != L.N_ROTORS:
-        raise ValueError(f"{path} gives {policy.act_size} actions; the vehicle takes {L.N_ROTORS}")
+        outputs = policy.graph.outputs if isinstance(policy, OnnxPolicy) else 1
+        raise ValueError(
+            f"{path} gives {policy.act_size} action{'s' * (policy.act_size != 1)}"
+            + (f" (the first of its {outputs} outputs)" if outputs > 1 else "")
+            + f"; the vehicle takes {L.N_ROTORS}"
+        )
     return policy, config
 
 

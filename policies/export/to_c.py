@@ -11,7 +11,6 @@ output matches PyTorch's to float32 rounding.
 
 from __future__ import annotations
 
-import math
 import re
 from typing import Any
 
@@ -24,6 +23,9 @@ from quadsitl.tasks.features import OBS_GOAL_POS
 
 PER_LINE = 6  # numbers per line of an array initialiser
 ARRAY = re.compile(r"static const (float|double) (\w+)\[[^\]]*\] = \{([^}]*)\};")
+# A decimal C literal as _float and _double write it (no hex, no nan or inf spellings).
+LITERAL = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?f?")
+DTYPES = {"float": np.float32, "double": np.float64}
 
 
 def c_header(net: ActorCritic, contract: dict[str, Any], name: str) -> str:
@@ -47,11 +49,16 @@ def weights_of(net: ActorCritic) -> dict[str, np.ndarray]:
 
 
 def parse_weights(text: str) -> dict[str, np.ndarray]:
-    """The arrays of a header's text (what :func:`weights_of` gave :func:`render`)."""
+    """The arrays of a header's text (what :func:`weights_of` gave :func:`render`).
+    ValueError naming the array and index of an item that is not a finite number of
+    its type (``1e999f``, ``nanf``, ``1e39f`` overflows a float)."""
     arrays = {}
     for kind, name, body in ARRAY.findall(text):
-        numbers = [float(item.strip().rstrip("f")) for item in body.split(",")]
-        arrays[name] = np.array(numbers, np.float32 if kind == "float" else np.float64)
+        items = [item.strip() for item in body.split(",")]
+        numbers = [float(t.removesuffix("f")) if LITERAL.fullmatch(t) else np.nan for t in items]
+        with np.errstate(over="ignore"):  # an overflow is reported below, by its index
+            arrays[name] = np.array(numbers, DTYPES[kind])
+        _check_finite(name, arrays[name], items)
     return arrays
 
 
@@ -210,8 +217,18 @@ def _double(value: float) -> str:
     return text if any(c in text for c in ".e") else text + ".0"
 
 
+def _check_finite(name: str, values: np.ndarray, written: list[str] | None = None) -> None:
+    """ValueError naming the first item of ``values`` that is NaN or infinite (as
+    ``written`` in a header, if given)."""
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        i = int(bad[0])
+        item = written[i] if written is not None else str(values[i])
+        raise ValueError(f"{name}[{i}] is {item!r}, not a finite decimal number")
+
+
 def _array(declaration: str, values: np.ndarray, literal: Any) -> str:
-    assert all(math.isfinite(v) for v in values.tolist())  # checkpoint.load checked
+    _check_finite(declaration.split("[")[0].split()[-1], values)  # checkpoint.load checked too
     items = [literal(v) for v in values.tolist()]
     rows = [", ".join(items[k : k + PER_LINE]) for k in range(0, len(items), PER_LINE)]
     return declaration + " = {\n    " + ",\n    ".join(rows) + "\n};"
