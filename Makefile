@@ -20,10 +20,11 @@ $(VENV)/.installed: pyproject.toml
 demo: venv
 	$(BIN)/quadsitl demo
 
-# Test processes in parallel (pytest-xdist); TEST_WORKERS=0 runs the suite in one. The
-# tests that start a Ray of their own share one process (xdist_group "ray"), so that two
-# Rays never compete for the cores at once. The 20 slowest tests are listed at the end.
-TEST_WORKERS ?= 4
+# Test processes in parallel (pytest-xdist): two per core, as most tests wait on sockets
+# and simulators; TEST_WORKERS=0 runs the suite in one. The tests that start a Ray of
+# their own share one process (xdist_group "ray"), so that two Rays never compete for the
+# cores at once. The 20 slowest tests are listed at the end.
+TEST_WORKERS ?= $(shell echo $$(( 2 * $$(nproc 2>/dev/null || echo 2) )))
 test: venv
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --durations=20
 
