@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import ipaddress
+import itertools
 import socket
 import time
 from dataclasses import dataclass, field
@@ -95,7 +96,8 @@ class Link:
         self.system_id, self.component_id = system_id, component_id
         self.signer: FC.Signer | None = None  # signs every frame sent here (set_signing)
         self._seq: dict[int, int] = {}  # next sequence number of each system sending here
-        self._held: list[bytes] | None = None  # frames kept back by hold()
+        # Frames kept back by hold(), each with its one peer's address (None: every peer).
+        self._held: list[tuple[bytes, Any]] | None = None
         self._held_limit = FC.DATAGRAM_LIMIT  # bytes per datagram when released
         self.peers: dict[Any, Peer] = {}
         self.destination: tuple[str, int] | None = None
@@ -252,17 +254,21 @@ class Link:
             self._held_limit = limit
 
     def release(self) -> None:
-        """Send what was held, in as few datagrams as fit (each unit given to
-        :meth:`send_bytes` stays whole)."""
+        """Send what was held, in order, in as few datagrams as fit (each unit given to
+        :meth:`send_bytes` or :meth:`send_to` stays whole)."""
         held, self._held = self._held, None
-        for datagram in FC.datagrams(held or [], self._held_limit):
-            self.send_bytes(datagram)
+        for address, run in itertools.groupby(held or [], key=lambda unit: unit[1]):
+            for datagram in FC.datagrams([frame for frame, _ in run], self._held_limit):
+                if address is None:
+                    self.send_bytes(datagram)
+                else:
+                    self.send_to(datagram, address)
 
     def send_bytes(self, frame: bytes) -> None:
         """Write already packed frames to every live peer (and the fixed destination),
         or keep them for :meth:`release` while held."""
         if self._held is not None:
-            self._held.append(frame)
+            self._held.append((frame, None))
             return
         now = time.monotonic()
         targets = []
@@ -291,7 +297,11 @@ class Link:
         self.sent += 1
 
     def send_to(self, frame: bytes, address: Any) -> None:
-        """Write packed frames to one peer only (not held, whatever :attr:`only` says)."""
+        """Write packed frames to one peer only, whatever :attr:`only` says (kept, in
+        order with the rest, for :meth:`release` while held)."""
+        if self._held is not None:
+            self._held.append((frame, address))
+            return
         peer = self.peers.get(address)
         with contextlib.suppress(OSError):
             if peer is not None and peer.sock is not None:

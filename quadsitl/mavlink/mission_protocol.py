@@ -6,10 +6,14 @@ MISSION_REQUEST_LIST -> MISSION_COUNT -> the client requests items -> MISSION_AC
 Only the mission type MISSION is stored; fence and rally lists are empty, and an
 upload of one is refused with MAV_MISSION_UNSUPPORTED and a STATUSTEXT saying why.
 
-One upload at a time, as PX4 and ArduPilot do: a transaction belongs to the (system,
-component) that sent its MISSION_COUNT, only that pair's items count, and a MISSION_COUNT
-from anyone else while it runs is refused with MAV_MISSION_DENIED (busy). The same pair
-sending MISSION_COUNT again starts over.
+One upload at a time, as PX4 and ArduPilot do: a transaction belongs to the sender of its
+MISSION_COUNT, known by the link and remote address it came from and its (system,
+component) ids (two ground stations on two links, or two peers of one link, may well both
+be 255/190). Only the owner's items count; a MISSION_COUNT (or MISSION_CLEAR_ALL) from
+anyone else while it runs is refused with MAV_MISSION_DENIED (busy), and the owner carries
+on. The owner sending MISSION_COUNT again starts over. Every answer goes to the sender
+alone (:class:`Origin`), so a refusal or a request meant for one never reaches another
+that has the same ids.
 """
 
 from __future__ import annotations
@@ -45,17 +49,40 @@ UNSUPPORTED_LISTS = {
     mav.MAV_MISSION_TYPE_RALLY: "no rally points; return (RTL) flies home, at RTL_RETURN_ALT",
 }
 
-Reply = Callable[[Any], None]  # sends a message back on the link the request came from
+Reply = Callable[[Any], None]  # sends a message back to the sender alone
+
+
+@dataclass(frozen=True)
+class Origin:
+    """Where a message came from, and how to answer there alone."""
+
+    link: str  # the name of the link it came on
+    address: Any  # the remote address it came from (None: not known)
+    reply: Reply = field(compare=False, hash=False)
 
 
 @dataclass
 class _Upload:
-    reply: Reply
+    origin: Origin
     peer: tuple[int, int]  # (system, component) of the uploader
     count: int
     items: list[M.MissionItem] = field(default_factory=list)
     requested_at: float = 0.0
     retries: int = 0
+
+    def owned_by(self, msg: Any, origin: Origin) -> bool:
+        """Whether ``msg``, arrived from ``origin``, comes from the uploader: the same
+        link, remote address and (system, component)."""
+        return origin == self.origin and (msg.get_srcSystem(), msg.get_srcComponent()) == self.peer
+
+
+def _who(peer: tuple[int, int], origin: Origin) -> str:
+    """'255/190 on gcs from 127.0.0.1:14551' (for STATUSTEXTs about two uploaders)."""
+    where = origin.address
+    if isinstance(where, tuple) and len(where) == 2:
+        where = f"{where[0]}:{where[1]}"
+    text = f"{peer[0]}/{peer[1]} on {origin.link}"
+    return text if where is None else f"{text} from {where}"
 
 
 class MissionProtocol:
@@ -66,8 +93,9 @@ class MissionProtocol:
         self.upload: _Upload | None = None
 
     # --- upload -----------------------------------------------------------------------
-    def on_count(self, msg: Any, reply: Reply, now: float) -> None:
+    def on_count(self, msg: Any, origin: Origin, now: float) -> None:
         peer = (msg.get_srcSystem(), msg.get_srcComponent())
+        reply = origin.reply
         mission_type = getattr(msg, "mission_type", 0)
         if mission_type != mav.MAV_MISSION_TYPE_MISSION:
             why = UNSUPPORTED_LISTS.get(mission_type, f"mission type {mission_type} unknown")
@@ -75,11 +103,11 @@ class MissionProtocol:
             self._ack(reply, peer, mav.MAV_MISSION_UNSUPPORTED, mission_type)
             return
         busy = self.upload
-        if busy is not None and busy.peer != peer:
+        if busy is not None and not busy.owned_by(msg, origin):
             self.notify(
                 Severity.WARNING,
-                f"mission upload from {peer[0]}/{peer[1]} refused: busy with the upload "
-                f"from {busy.peer[0]}/{busy.peer[1]}",
+                f"mission upload from {_who(peer, origin)} refused: busy with the upload "
+                f"from {_who(busy.peer, busy.origin)}",
             )
             self._ack(reply, peer, mav.MAV_MISSION_DENIED)
             return
@@ -93,14 +121,14 @@ class MissionProtocol:
             self.vehicle.set_mission([])
             self._ack(reply, peer, mav.MAV_MISSION_ACCEPTED)
             return
-        self.upload = _Upload(reply, peer, msg.count)
+        self.upload = _Upload(origin, peer, msg.count)
         self._request_next(now)
 
-    def on_item(self, msg: Any, reply: Reply, now: float) -> None:
+    def on_item(self, msg: Any, origin: Origin, now: float) -> None:
         up = self.upload
         if up is None or getattr(msg, "mission_type", 0) != mav.MAV_MISSION_TYPE_MISSION:
             return
-        if (msg.get_srcSystem(), msg.get_srcComponent()) != up.peer:
+        if not up.owned_by(msg, origin):
             return  # not part of this transaction: someone else's items never mix in
         if msg.seq != len(up.items):
             return  # a duplicate or out of order: the pending request will be repeated
@@ -117,10 +145,10 @@ class MissionProtocol:
         result = self.vehicle.set_mission(up.items)
         self.upload = None
         if result.ok:
-            self._ack(up.reply, up.peer, mav.MAV_MISSION_ACCEPTED)
+            self._ack(up.origin.reply, up.peer, mav.MAV_MISSION_ACCEPTED)
             self.notify(Severity.INFO, f"mission of {len(up.items)} items accepted")
         else:  # e.g. a jump to an item that does not exist: the old mission stays
-            self._ack(up.reply, up.peer, mav.MAV_MISSION_INVALID_SEQUENCE)
+            self._ack(up.origin.reply, up.peer, mav.MAV_MISSION_INVALID_SEQUENCE)
             self.notify(Severity.WARNING, f"mission refused, {result.reason}")
 
     def tick(self, now: float) -> None:
@@ -138,25 +166,27 @@ class MissionProtocol:
         assert self.upload is not None
         up = self.upload
         up.requested_at = now
-        up.reply(self.encoder.mission_request_int_encode(*up.peer, len(up.items), 0))
+        up.origin.reply(self.encoder.mission_request_int_encode(*up.peer, len(up.items), 0))
 
     def _fail(self, code: int, text: str) -> None:
         assert self.upload is not None
         self.notify(Severity.WARNING, f"mission refused, {text}; the previous one stays")
-        self._ack(self.upload.reply, self.upload.peer, code)
+        self._ack(self.upload.origin.reply, self.upload.peer, code)
         self.upload = None
 
     def _ack(self, reply: Reply, peer: tuple[int, int], code: int, mission_type: int = 0) -> None:
         reply(self.encoder.mission_ack_encode(peer[0], peer[1], code, mission_type))
 
     # --- download and the rest --------------------------------------------------------
-    def on_request_list(self, msg: Any, reply: Reply) -> None:
+    def on_request_list(self, msg: Any, origin: Origin) -> None:
+        reply = origin.reply
         mission_type = getattr(msg, "mission_type", 0)
         count = len(self.vehicle.mission) if mission_type == mav.MAV_MISSION_TYPE_MISSION else 0
         src = (msg.get_srcSystem(), msg.get_srcComponent())
         reply(self.encoder.mission_count_encode(*src, count, mission_type))
 
-    def on_request(self, msg: Any, reply: Reply) -> None:
+    def on_request(self, msg: Any, origin: Origin) -> None:
+        reply = origin.reply
         src = (msg.get_srcSystem(), msg.get_srcComponent())
         mission = self.vehicle.mission
         if getattr(msg, "mission_type", 0) != 0 or not 0 <= msg.seq < len(mission):
@@ -198,11 +228,12 @@ class MissionProtocol:
                 )
             )
 
-    def on_clear_all(self, msg: Any, reply: Reply) -> None:
+    def on_clear_all(self, msg: Any, origin: Origin) -> None:
+        reply = origin.reply
         src = (msg.get_srcSystem(), msg.get_srcComponent())
         mission_type = getattr(msg, "mission_type", 0)
         if mission_type in (mav.MAV_MISSION_TYPE_MISSION, mav.MAV_MISSION_TYPE_ALL):
-            if self.upload is not None and self.upload.peer != src:
+            if self.upload is not None and not self.upload.owned_by(msg, origin):
                 self._ack(reply, src, mav.MAV_MISSION_DENIED, mission_type)  # busy
                 return
             self.upload = None

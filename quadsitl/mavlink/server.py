@@ -7,7 +7,9 @@ Every frame sent or received goes to the telemetry log, except on the motor-comm
 link (``hil``), whose thousands of round trips a second would swamp it. With a signing
 key, messages other than HEARTBEAT and RADIO_STATUS must be signed (:mod:`.signing`).
 Telemetry goes to a peer of a link only once a frame from it has been accepted here
-(validly signed, when signing is on; :meth:`.links.Link.accept`).
+(validly signed, when signing is on; :meth:`.links.Link.accept`). The mission protocol's
+messages (:attr:`MavlinkServer.to_sender`) are answered to their sender alone: two ground
+stations with the same ids never hear each other's transfer.
 What the vehicle presents itself as (PX4-compatible or generic) is :mod:`.identity`;
 parameters, missions and offboard setpoints have their own modules.
 """
@@ -27,7 +29,7 @@ from quadsitl.mavlink import telemetry_status as status
 from quadsitl.mavlink.commands import Command, Commands
 from quadsitl.mavlink.identity import IDENTITIES, Identity
 from quadsitl.mavlink.links import Link, Peer
-from quadsitl.mavlink.mission_protocol import MissionProtocol
+from quadsitl.mavlink.mission_protocol import MissionProtocol, Origin
 from quadsitl.mavlink.motor_path import MotorPath
 from quadsitl.mavlink.param_protocol import ParamProtocol
 from quadsitl.mavlink.signing import (
@@ -45,6 +47,7 @@ from quadsitl.wire.statustext import split_text
 
 MOTOR_LINK = "hil"  # the link name whose traffic is not logged and has no streams
 Handler = Callable[[Any, Link], None]  # a message, the link it came on
+ToSender = Callable[[Any, Origin], None]  # a message, where it came from (answers go there)
 RESULTS = {
     Outcome.ACCEPTED: mav.MAV_RESULT_ACCEPTED,
     Outcome.TEMPORARILY_REJECTED: mav.MAV_RESULT_TEMPORARILY_REJECTED,
@@ -109,15 +112,18 @@ class MavlinkServer:
             mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST: self._replying(self.params.on_request_list),
             mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ: self._replying(self.params.on_request_read),
             mav.MAVLINK_MSG_ID_PARAM_SET: self._on_param_set,
-            # missions (mission_protocol.py)
-            mav.MAVLINK_MSG_ID_MISSION_COUNT: self._replying(self.missions.on_count, timed=True),
-            mav.MAVLINK_MSG_ID_MISSION_ITEM_INT: self._replying(self.missions.on_item, timed=True),
-            mav.MAVLINK_MSG_ID_MISSION_ITEM: self._replying(self.missions.on_item, timed=True),
-            mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST: self._replying(self.missions.on_request_list),
-            mav.MAVLINK_MSG_ID_MISSION_REQUEST_INT: self._replying(self.missions.on_request),
-            mav.MAVLINK_MSG_ID_MISSION_REQUEST: self._replying(self.missions.on_request),
-            mav.MAVLINK_MSG_ID_MISSION_CLEAR_ALL: self._replying(self.missions.on_clear_all),
             mav.MAVLINK_MSG_ID_MISSION_SET_CURRENT: self._on_mission_set_current,
+        }
+        # Transfers (mission_protocol.py): they belong to their sender, known by its link
+        # and remote address as well as its ids, and are answered to it alone.
+        self.to_sender: dict[int, ToSender] = {
+            mav.MAVLINK_MSG_ID_MISSION_COUNT: self._timed(self.missions.on_count),
+            mav.MAVLINK_MSG_ID_MISSION_ITEM_INT: self._timed(self.missions.on_item),
+            mav.MAVLINK_MSG_ID_MISSION_ITEM: self._timed(self.missions.on_item),
+            mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST: self.missions.on_request_list,
+            mav.MAVLINK_MSG_ID_MISSION_REQUEST_INT: self.missions.on_request,
+            mav.MAVLINK_MSG_ID_MISSION_REQUEST: self.missions.on_request,
+            mav.MAVLINK_MSG_ID_MISSION_CLEAR_ALL: self.missions.on_clear_all,
         }
 
     def set_signing_key(self, key: bytes | None) -> None:
@@ -191,11 +197,13 @@ class MavlinkServer:
             return
         if peer is not None and (self.signing is None or is_signed(message)):
             link.accept(peer)
+        to_sender = self.to_sender.get(message.get_msgId())
         handler = self.handlers.get(message.get_msgId())
-        if handler is None:
-            return
         try:
-            handler(message, link)
+            if to_sender is not None:
+                to_sender(message, self._origin(link, peer))
+            elif handler is not None:
+                handler(message, link)
         except (ValueError, TypeError, OverflowError) as error:
             # Out-of-range fields must never stop the vehicle: report and carry on.
             self.counters["bad_values"] += 1
@@ -361,12 +369,29 @@ class MavlinkServer:
     def _reply(self, link: Link) -> Callable[[Any], None]:
         return lambda message: self.send(message, link)
 
-    def _replying(self, on: Callable[..., None], timed: bool = False) -> Handler:
-        """A handler calling a protocol's ``on(msg, reply)`` (``timed``: with the wall
-        time, ``on(msg, reply, now)``), replies going back on the message's link."""
-        if timed:
-            return lambda msg, link: on(msg, self._reply(link), time.monotonic())
+    def _replying(self, on: Callable[[Any, Callable[[Any], None]], None]) -> Handler:
+        """A handler calling a protocol's ``on(msg, reply)``, replies going back on the
+        message's link."""
         return lambda msg, link: on(msg, self._reply(link))
+
+    def _timed(self, on: Callable[[Any, Origin, float], None]) -> ToSender:
+        """``on(msg, origin, now)`` called with the wall time."""
+        return lambda msg, origin: on(msg, origin, time.monotonic())
+
+    def _origin(self, link: Link, peer: Peer | None) -> Origin:
+        """Where a message came from: answers go to ``peer`` alone (to every peer of the
+        link when it is not known)."""
+        if peer is None:
+            return Origin(link.name, None, self._reply(link))
+        address = peer.address
+        return Origin(link.name, address, lambda message: self.answer(message, link, address))
+
+    def answer(self, message: Any, link: Link, address: Any) -> None:
+        """Send to one peer of ``link`` only."""
+        frame = link.pack(message, self.system_id)
+        link.send_to(frame, address)
+        if self.tlog is not None and link.name != MOTOR_LINK:
+            self.tlog.record(frame)
 
     def _on_mission_set_current(self, msg: Any, link: Link) -> None:
         result = self.vehicle.set_mission_current(msg.seq)
