@@ -29,11 +29,12 @@ class EstimatorParams:
     Attributes:
         accel_noise: m/s²/√Hz, drives the velocity (the IMU's 0.00186, ×10).
         gyro_noise: rad/s/√Hz, drives the attitude (the IMU's 0.00019, ×5).
-        accel_bias_walk: m/s³/√Hz (the IMU's random walk, 0.006).
+        accel_bias_walk: m/s³/√Hz (the Gazebo Iris model's random walk, 0.006: 30× the
+            IMU's 2e-4, a margin).
         gyro_bias_walk: rad/s²/√Hz (the IMU's 3.9e-5, ×2.5).
         baro_offset_walk: m/√s, how fast the barometer's offset may move (its drift's
             driving density, 6 Pa·√(2/300 s) ≈ 0.04 m/√s).
-        baro_noise: m, one barometer reading (1 Pa ≈ 0.085 m, ×1.5).
+        baro_noise: m, one barometer reading (1 Pa ≈ 0.087 m, ×1.5).
         heading_noise: rad, one magnetometer heading (EKF2_HEAD_NOISE: 0.3; ours is a
             clean, undisturbed field: 0.05).
         gps_position_factor: the GPS position's variance is (factor × EPH)²: its error

@@ -19,10 +19,18 @@ from quadsitl.physics.sensors.processes import gauss_markov_step as _advance
 
 @dataclass(frozen=True)
 class ImuParams:
-    """IMU noise, as PX4's Gazebo Iris model sets its IMU plugin (Tools/simulation/gazebo
-    classic, models/iris/iris.sdf: gyroscopeNoiseDensity ... accelerometerTurnOnBiasSigma),
-    except the turn-on bias: 0 here (a calibrated IMU; the Iris model's uncalibrated one is
-    0.0087 rad/s and 0.196 m/s²).
+    """IMU noise: the ADIS16448's, the IMU of PX4's Gazebo Iris model (Tools/simulation/
+    gazebo classic, models/iris/iris.sdf: its noise densities are the data sheet's angular
+    and velocity random walks, 0.66°/√h and 0.11 m/s/√h), with two departures.
+
+    The accelerometer's bias random walk is the ADIS16448's as Kalibr's IMU example gives
+    it (2e-4 m/s³/√Hz: a bias that settles at 0.25 mg, the data sheet's in-run bias
+    stability), not the Gazebo model's 6e-3 (rotors_simulator's doubled guess): that bias
+    wandered by 7 mg within minutes, twice as fast as PX4's EKF2 lets its bias estimate
+    move (EKF2_ACC_B_NOISE 3e-3), and tilted an estimator's level by b/g, which the
+    Earth's field, inclined 63° at the default home, turns into twice as much heading
+    (tests/test_px4_heading.py). And the turn-on bias is 0 (a calibrated IMU; the Iris
+    model's uncalibrated one is 0.0087 rad/s and 0.196 m/s²).
 
     Attributes:
         rate: samples per second, Hz (PX4 reads its IMU at 250 Hz in simulation).
@@ -42,7 +50,7 @@ class ImuParams:
     gyro_bias_tau: float = 1000.0
     gyro_turn_on_sigma: float = 0.0
     accel_noise_density: float = 0.00186
-    accel_random_walk: float = 0.006
+    accel_random_walk: float = 2.0e-4
     accel_bias_tau: float = 300.0
     accel_turn_on_sigma: float = 0.0
 
