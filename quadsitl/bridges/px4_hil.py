@@ -28,10 +28,7 @@ CA_ROTORi (:mod:`.px4_airframe`); Ω_c = Ω_max · clip(u, 0, 1), so thrust ∝ 
 
 from __future__ import annotations
 
-import functools
 import math
-import re
-import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -46,6 +43,7 @@ from quadsitl.physics.sensors import GpsParams, SensorParams, SensorSuite
 from quadsitl.physics.sensors.suite import specific_force
 from quadsitl.vehicle.geo import Home
 from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.fit import FLOAT32_MAX, wire_int
 from quadsitl.wire.lockstep import ARMED_FLAG, LOCKSTEP_FLAG
 from quadsitl.wire.units import STANDARD_GRAVITY, rotor_speed
 
@@ -271,7 +269,7 @@ class HilPhysics:
             fields,
             0,  # sensor id 0: PX4's lockstep master
         )
-        parts = [self._pack(peer, mav.MAVLink_hil_sensor_message, sensor, fit=True)]
+        parts = [self._pack(peer, mav.MAVLink_hil_sensor_message, _finite(sensor))]
         if gps.samples != seen_gps:
             parts.append(self._gps_message(index))
         due = peer.state_interval_us is not None and peer.time_us >= peer.next_state_us
@@ -293,22 +291,22 @@ class HilPhysics:
         cog = math.degrees(math.atan2(v_east, v_north)) * 100 % 36000  # cdeg
         gps = (
             peer.time_us,
-            lat * 1e7,
-            lon * 1e7,
-            alt * 1000,  # mm above mean sea level
-            float(fix.eph[0]) * 100,  # cm, 1-σ horizontal (PX4 reads it as metres·100)
-            float(fix.epv[0]) * 100,
-            speed * 100,  # cm/s over ground
-            v_north * 100,
-            v_east * 100,
-            -v_up * 100,
-            min(cog, 35999) if speed > 0.1 and math.isfinite(cog) else 65535,  # 65535: unknown
+            wire_int(lat * 1e7),
+            wire_int(lon * 1e7),
+            wire_int(alt * 1000),  # mm above mean sea level
+            wire_int(float(fix.eph[0]) * 100),  # cm, 1-σ horizontal (PX4 reads metres·100)
+            wire_int(float(fix.epv[0]) * 100),
+            wire_int(speed * 100),  # cm/s over ground
+            wire_int(v_north * 100),
+            wire_int(v_east * 100),
+            wire_int(-v_up * 100),
+            min(round(cog), 35999) if speed > 0.1 and math.isfinite(cog) else 65535,  # unknown
             int(fix.fix_type[0]),
             int(fix.satellites[0]),
             0,  # receiver id
             0,  # yaw: not measured
         )
-        return self._pack(peer, mav.MAVLink_hil_gps_message, gps, fit=True)
+        return self._pack(peer, mav.MAVLink_hil_gps_message, gps)
 
     def _state_message(self, index: int) -> bytes:
         """HIL_STATE_QUATERNION: the vehicle's true state (PX4 publishes it as ground
@@ -326,22 +324,19 @@ class HilPhysics:
             peer.time_us,
             *(h * (w + z), h * (x + y), h * (x - y), h * (w - z)),  # FLU->ENU to FRD->NED
             *(wx, -wy, -wz),  # rad/s, body FRD
-            lat * 1e7,
-            lon * 1e7,
-            alt * 1000,
-            *(vy * 100, vx * 100, -vz * 100),  # cm/s, NED
-            air_speed * 100,
-            air_speed * 100,
-            *(force[0] * mg, -force[1] * mg, -force[2] * mg),  # mG, FRD
+            wire_int(lat * 1e7),
+            wire_int(lon * 1e7),
+            wire_int(alt * 1000),
+            *(wire_int(vy * 100), wire_int(vx * 100), wire_int(-vz * 100)),  # cm/s, NED
+            wire_int(air_speed * 100),
+            wire_int(air_speed * 100),
+            *(wire_int(force[0] * mg), wire_int(-force[1] * mg), wire_int(-force[2] * mg)),  # mG
         )
-        return self._pack(peer, mav.MAVLink_hil_state_quaternion_message, state, fit=True)
+        return self._pack(peer, mav.MAVLink_hil_state_quaternion_message, _finite(state))
 
-    def _pack(self, peer: Peer, message_class: object, values: tuple, fit: bool = False) -> bytes:
-        """One frame of ``values``; ``fit``: they come from the physics, so each is first
-        made what its field holds (:func:`fit_to_wire`)."""
+    def _pack(self, peer: Peer, message_class: object, values: tuple) -> bytes:
+        """One frame; a value beyond its field's type is saturated (:mod:`quadsitl.wire.fit`)."""
         peer.seq += 1
-        if fit:
-            values = fit_to_wire(message_class, values)
         return FC.pack(message_class, values, peer.seq, SYSTEM_ID, COMPONENT_ID)
 
     def _new_sensors(self, index: int) -> SensorSuite:
@@ -365,38 +360,14 @@ class HilPhysics:
         self._commands[index] = 0.0
 
 
-def fit_to_wire(message_class: object, values: tuple) -> tuple:
-    """``values`` in wire order, each made what its field can hold, so that no value of
-    the physics (a vehicle blown away at 1e9 m/s, a NaN) raises or goes out as NaN: an
-    integer field's value rounded and clamped to its type, a float field's clamped to
-    float32 (NaN: 0)."""
-    out = []
-    for value, (low, high, whole) in zip(values, _fields(message_class), strict=True):
-        if value != value:  # NaN
-            value = 0
-        value = low if value < low else high if value > high else value
-        out.append(round(value) if whole else value)
-    return tuple(out)
-
-
-_F32_MAX = float(np.finfo(np.float32).max)
-_RANGES = {  # struct code: (low, high, integer)
-    "f": (-_F32_MAX, _F32_MAX, False),
-    "d": (-sys.float_info.max, sys.float_info.max, False),
-    **{c: (0, 2 ** (8 * b) - 1, True) for c, b in zip("BHIQ", (1, 2, 4, 8), strict=True)},
-    **{
-        c: (-(2 ** (8 * b - 1)), 2 ** (8 * b - 1) - 1, True)
-        for c, b in zip("bhiq", (1, 2, 4, 8), strict=True)
-    },
-}
-
-
-@functools.cache
-def _fields(message_class: object) -> tuple[tuple[float, float, bool], ...]:
-    """(low, high, integer) of each wire value of ``message_class`` (arrays flattened)."""
-    form = message_class.unpacker.format.lstrip("<")  # type: ignore[attr-defined]
+def _finite(values: tuple) -> tuple:
+    """``values`` of the physics with NaN as 0 and ±inf as ±FLOAT32_MAX, so that PX4 is
+    never sent a non-finite number (integer fields come through ``wire_int``, and packing
+    saturates what is beyond a field's type). The values themselves when all are finite:
+    one sum, about a µs."""
+    if math.isfinite(sum(values)):
+        return values
     return tuple(
-        _RANGES[code]
-        for count, code in re.findall(r"(\d*)(\w)", form)
-        for _ in range(int(count or 1))
+        v if isinstance(v, int) else 0.0 if v != v else max(-FLOAT32_MAX, min(FLOAT32_MAX, v))
+        for v in values
     )

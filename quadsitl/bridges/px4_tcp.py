@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
+from quadsitl.bridges.banner import weather_line
 from quadsitl.bridges.frame_reader import FrameReader
 from quadsitl.bridges.px4_airframe import parameter_folder
 from quadsitl.bridges.px4_hil import PORT, ROUND_US, HilPhysics
@@ -291,21 +292,9 @@ def _banner(config: Px4Config, server: Px4TcpServer, out: Callable[[str], None])
         out(f"  vehicle {index}: TCP {config.bind}:{port}  <-  {start}")
     if folder is None:
         out(f"  (no PX4 parameter file ships for {config.airframe}; see docs/autopilots.md)")
-    if config.wind is not None and not config.wind.calm:
-        out(f"  weather: {_weather(config.wind)}")
-
-
-def _weather(wind: Wind) -> str:
-    """The weather every vehicle flies in, as ``--wind`` and ``--turbulence`` gave it."""
-    parts = []
-    if wind.speed:
-        parts.append(f"wind {wind.speed:g} m/s from {wind.from_deg % 360:g} deg")
-    if wind.sigma_w:
-        named = f"{wind.turbulence} " if isinstance(wind.turbulence, str) else ""
-        parts.append(f"{named}turbulence, sigma_w {wind.sigma_w:.2f} m/s")
-    if wind.gust is not None:
-        parts.append(f"a gust of {wind.gust.amplitude} m/s (E, N, U)")
-    return "; ".join(parts)
+    weather = weather_line(config.wind)
+    if weather is not None:
+        out(f"  weather: {weather}")
 
 
 def _failure(error: OSError) -> str:
