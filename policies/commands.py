@@ -13,10 +13,24 @@ from pathlib import Path
 
 from policies.config import TASK_NAMES, TrainConfig
 from policies.export import cli as export_cli
+from policies.folders import check_writable, os_error_sentence
+from policies.interrupt import second_interrupt_stops
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the parsed training command ``args.command``; its exit status."""
+    """Run the parsed training command ``args.command``; its exit status. A second
+    Ctrl-C while it stops ends it at once (:mod:`policies.interrupt`); a sweep's Ctrl-C
+    is Ray Tune's. A file or folder that cannot be written is a one-line ValueError."""
+    try:
+        if args.command == "sweep":
+            return _run(args)
+        with second_interrupt_stops(f"quadsitl {args.command}"):
+            return _run(args)
+    except OSError as error:  # a write the checks before could not foresee (disk full)
+        raise ValueError(os_error_sentence(error)) from None
+
+
+def _run(args: argparse.Namespace) -> int:
     import torch
 
     torch.set_num_threads(1)  # small networks: one thread is fastest, and deterministic
@@ -98,7 +112,7 @@ def _resume_command(args: argparse.Namespace) -> str:
 
 def _train(args: argparse.Namespace) -> int:
     from policies.config import make_config
-    from policies.train import check_writable, train
+    from policies.train import train
 
     config = make_config(
         args.task,
@@ -219,6 +233,7 @@ def _robustness(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} is a file, not a folder (nothing was written)")
+    check_writable(out, "the robustness tables")
     paths = [Path(p) for p in args.checkpoint]
     names = [p.stem for p in paths]
     if len(set(names)) < len(names):  # two best.pt: tell them apart by their paths
@@ -242,6 +257,7 @@ def _plot(args: argparse.Namespace) -> int:
     from policies.plots import learning_curves
 
     runs = [Path(r) for r in args.runs]
+    check_writable(Path(args.output), "the plots")
     for path in learning_curves(runs, Path(args.output), overwrite=args.force):
         print(path)
     return 0

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from policies.comparison import comparison_table, number
+from policies.folders import check_writable
 from policies.sweep_spec import (
     RUN_KEYS,
     SweepError,
@@ -36,7 +37,7 @@ from policies.sweep_spec import (
     config_of,
     run_name,
 )
-from policies.train import check_writable, holds_run
+from policies.train import holds_run
 from quadsitl.envs.ray_simulators import LOCAL, ray_target
 
 REPORTED = ("iteration", "env_steps", "wall_seconds", "mean_return", "success_rate")
@@ -141,7 +142,7 @@ def run_sweep(
         raise SweepError(f"sweep {name!r} exists in {storage}: resume it with --resume")
     if not resume and not search:
         check_new_runs(trials, runs)
-    check_writable(storage)
+    check_writable(storage, "the sweep")
 
     import ray
     from ray import tune

@@ -21,7 +21,6 @@ import math
 import random
 import shutil
 import sys
-import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -36,6 +35,7 @@ from policies.algos.base import Algorithm, algorithm_class
 from policies.config import TrainConfig
 from policies.evaluate import VALIDATION_SEED, evaluate
 from policies.fine_tune import start_from
+from policies.folders import check_writable
 from policies.rollout import SEED_SPACING, explained_variance, make_vector_env
 
 COLUMNS = (
@@ -174,23 +174,6 @@ def train(
         env.close()
         log.close()
     return log.result()
-
-
-def check_writable(run_dir: Path) -> None:
-    """A ValueError now, before any env starts, if the run folder cannot be written: the
-    folder (or the nearest existing folder above it) is probed with a temporary file."""
-    folder = run_dir
-    while not folder.exists() and folder != folder.parent:
-        folder = folder.parent
-    if not folder.is_dir():
-        raise ValueError(f"cannot write the run to {run_dir}: {folder} is not a folder")
-    try:
-        with tempfile.TemporaryFile(dir=folder):
-            pass
-    except OSError as error:
-        raise ValueError(
-            f"cannot write the run to {run_dir}: {folder} is not writable ({error.strerror})"
-        ) from None
 
 
 def _seed(seed: int, iteration: int) -> int:

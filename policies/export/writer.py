@@ -21,6 +21,7 @@ from policies.export.contract import (
 )
 from policies.export.to_c import c_header
 from policies.export.to_onnx import onnx_bytes
+from policies.folders import check_writable
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS
 
@@ -36,6 +37,7 @@ def export(source: str | Path, fmt: str, output: str | Path | None = None) -> li
         raise ValueError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
     source = Path(source)
     target = _target(source, fmt, output)
+    check_writable(target.absolute().parent, target.name)
     net, config, _ = checkpoint.load(source)
     if config.task not in TASKS:
         raise ValueError(
