@@ -63,20 +63,26 @@ def test_env_options_beyond_the_limits_are_refused_at_make(options, says):
     """``gym.make(..., wind={"speed": 1e9})`` used to be accepted and its first step
     returned inf observations."""
     with pytest.raises(ValueError, match=re.escape(says)):
-        gym.make("QuadSITL/Hover-v0", **options)
+        gym.make("QuadSITL/Hover-v1", **options)
 
 
 def test_the_strongest_weather_accepted_flies_finite():
-    """At the limits (the strongest mean wind, turbulence and, randomised, wind speed) the
-    first steps' observations stay finite."""
-    strongest = {"speed": MAX_WIND_SPEED, "from_deg": 90.0, "turbulence": MAX_SIGMA_W}
+    """At the limits (the strongest mean wind, turbulence and gust; randomised, the
+    strongest wind speed) the first steps' observations stay finite."""
+    gust = Gust(amplitude=(0.0, 0.0, MAX_GUST_SPEED), length=0.5, hold=math.inf)
+    strongest = {
+        "speed": MAX_WIND_SPEED,
+        "from_deg": 90.0,
+        "turbulence": MAX_SIGMA_W,
+        "gust": gust,
+    }
     for options in (
         {"wind": strongest},
         {"randomize": {"wind": {"speed": (MAX_WIND_SPEED, MAX_WIND_SPEED)}}},
     ):
-        env = gym.make("QuadSITL/Hover-v0", **options)
+        env = gym.make("QuadSITL/Hover-v1", **options)
         obs, _ = env.reset(seed=1)
-        for _ in range(5):
+        for _ in range(50):
             obs, *_ = env.step(np.zeros(4, np.float32))
             assert np.isfinite(obs).all()
         env.close()
