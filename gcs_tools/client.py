@@ -144,14 +144,19 @@ class VehicleClient:
         raise ClientError(f"no {kind} within {timeout:g} s")
 
     def connect(self, timeout: float = 10.0) -> Any:
-        """Wait for the vehicle's heartbeat (sending ours, so udpout peers learn us)."""
+        """Wait for the vehicle's heartbeat (sending ours, so udpout peers learn us), then
+        for its position (what the state properties read); returns the heartbeat."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             self.conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
             try:
-                return self.wait_message("HEARTBEAT", 1.0)
+                beat = self.wait_message("HEARTBEAT", 1.0)
             except ClientError:
                 continue
+            if "LOCAL_POSITION_NED" not in self.latest:
+                left = max(0.0, deadline - time.monotonic())
+                self.wait_message("LOCAL_POSITION_NED", max(left, 1.0))
+            return beat
         raise ClientError(f"no heartbeat from system {self.target} within {timeout:g} s")
 
     # --- state ------------------------------------------------------------------------

@@ -379,7 +379,9 @@ def test_the_banner_says_the_weather_the_vehicles_fly_in() -> None:
     lines: list[str] = []
     windy = ArduPilotConfig(wind=Wind(speed=5.0, from_deg=270.0, turbulence="light"))
     _banner(windy, physics, SimpleNamespace(ports=[9002]), lines.append)  # type: ignore[arg-type]
-    assert lines[-1] == "  weather: wind 5 m/s from 270 deg; light turbulence, sigma_w 0.77 m/s"
+    assert lines[-1] == (
+        "  weather: wind 5 m/s from 270°; light turbulence (MIL-F-8785C), σ_w 0.77 m/s"
+    )
     lines.clear()
     _banner(ArduPilotConfig(), physics, SimpleNamespace(ports=[9002]), lines.append)  # type: ignore[arg-type]
     assert not any("weather" in line for line in lines)

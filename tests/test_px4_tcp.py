@@ -218,11 +218,13 @@ def test_the_banner_says_the_weather_when_there_is_some() -> None:
     weather = Wind(speed=5.0, from_deg=270.0, turbulence="moderate")
     _banner(Px4Config(wind=weather), server, lines.append)  # type: ignore[arg-type]
     assert lines[-1] == (
-        "  weather: wind 5 m/s from 270 deg; moderate turbulence, sigma_w 1.54 m/s"
+        "  weather: wind 5 m/s from 270°; moderate turbulence (MIL-F-8785C), σ_w 1.54 m/s"
     )
     lines.clear()
     _banner(Px4Config(wind=Wind(turbulence=0.8, gust=Gust((1, 0, 0), 10))), server, lines.append)  # type: ignore[arg-type]
-    assert lines[-1] == "  weather: turbulence, sigma_w 0.80 m/s; a gust of (1, 0, 0) m/s (E, N, U)"
+    assert lines[-1] == (
+        "  weather: turbulence (MIL-F-8785C), σ_w 0.80 m/s; a gust of (1, 0, 0) m/s (E, N, U)"
+    )
     for calm in (None, Wind()):
         lines.clear()
         _banner(Px4Config(wind=calm), server, lines.append)  # type: ignore[arg-type]

@@ -568,7 +568,7 @@ def test_the_demo_mission_flies_in_wind_and_turbulence(tmp_path):
         timeout=300,
     )
     assert result.returncode == 0, result.stdout + result.stderr
-    assert "wind 5 m/s from 270°, moderate turbulence" in result.stdout
+    assert "wind 5 m/s from 270°; moderate turbulence (MIL-F-8785C)" in result.stdout
     rms = float(re.search(r"path tracking error: RMS ([\d.]+) m", result.stdout).group(1))
     assert rms < 0.3, result.stdout
     assert "landed: True" in result.stdout

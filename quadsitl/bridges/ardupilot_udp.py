@@ -37,7 +37,6 @@ from quadsitl.bridges.ardupilot_json import (
     ServoFrame,
     parse_servo_packet,
 )
-from quadsitl.bridges.banner import weather_line
 from quadsitl.mavlink.links import is_loopback
 from quadsitl.physics.fleet import Fleet
 from quadsitl.physics.wind import Wind
@@ -318,6 +317,6 @@ def _banner(
         )
     if parm is None:
         out(f"  (no parameter file ships for {config.airframe}; see docs/autopilots.md)")
-    weather = weather_line(config.wind)
+    weather = None if config.wind is None or config.wind.calm else config.wind.describe()
     if weather is not None:
         out(f"  weather: {weather}")

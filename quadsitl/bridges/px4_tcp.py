@@ -25,7 +25,6 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
-from quadsitl.bridges.banner import weather_line
 from quadsitl.bridges.frame_reader import FrameReader
 from quadsitl.bridges.px4_airframe import parameter_folder
 from quadsitl.bridges.px4_hil import PORT, ROUND_US, HilPhysics
@@ -292,7 +291,7 @@ def _banner(config: Px4Config, server: Px4TcpServer, out: Callable[[str], None])
         out(f"  vehicle {index}: TCP {config.bind}:{port}  <-  {start}")
     if folder is None:
         out(f"  (no PX4 parameter file ships for {config.airframe}; see docs/autopilots.md)")
-    weather = weather_line(config.wind)
+    weather = None if config.wind is None or config.wind.calm else config.wind.describe()
     if weather is not None:
         out(f"  weather: {weather}")
 

@@ -311,10 +311,7 @@ def run_simulator(
     if config.flown_by is not None:
         sim._print(f"quadsitl sim: flown by {config.flown_by}, not the cascaded controller")
     if config.wind is not None and not config.wind.calm:
-        wind = config.wind
-        form = "MIL-F-8785C" if wind.turbulence_model == "8785C" else "MIL-HDBK-1797"
-        gusts = "" if wind.turbulence is None else f", {wind.turbulence} turbulence ({form})"
-        sim._print(f"quadsitl sim: wind {wind.speed:g} m/s from {wind.from_deg:g}°{gusts}")
+        sim._print(f"quadsitl sim: {config.wind.describe()}")
     for motor, efficiency in sorted(config.motor_faults.items()):
         state = "off" if efficiency == 0 else f"at {efficiency:.0%} thrust"
         sim._print(f"quadsitl sim: motor {motor} {state} on every vehicle (--fail-motor)")

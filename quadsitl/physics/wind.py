@@ -145,6 +145,20 @@ class Wind:
         if self.gust is not None and not isinstance(self.gust, Gust):
             raise ValueError(f"gust must be a Gust or None, got {self.gust!r}")
 
+    def describe(self) -> str:
+        """The weather in words, as every start-up banner says it ("still air" when calm)."""
+        parts = []
+        if self.speed:
+            parts.append(f"wind {self.speed:g} m/s from {self.from_deg % 360:g}°")
+        if self.sigma_w:
+            form = "MIL-F-8785C" if self.turbulence_model == "8785C" else "MIL-HDBK-1797"
+            named = f"{self.turbulence} " if isinstance(self.turbulence, str) else ""
+            parts.append(f"{named}turbulence ({form}), σ_w {self.sigma_w:.2f} m/s")
+        if self.gust is not None:
+            east, north, up = self.gust.amplitude
+            parts.append(f"a gust of ({east:g}, {north:g}, {up:g}) m/s (E, N, U)")
+        return "; ".join(parts) or "still air"
+
     @property
     def sigma_w(self) -> float:
         """Vertical turbulence intensity σ_w, m/s (0 without turbulence)."""
