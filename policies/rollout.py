@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from quadsitl.registration import task_env_id
+from quadsitl.registration import task_env_spec
 from quadsitl.tasks import TASKS
 
 
@@ -79,7 +79,7 @@ def make_vector_env(
     env i the seed ``s + i``."""
     if task in TASKS:
         return gym.make_vec(
-            task_env_id(task),
+            task_env_spec(task),
             num_envs,
             vectorization_mode="vector_entry_point",
             autoreset_mode=AutoresetMode.SAME_STEP,

@@ -25,7 +25,7 @@ def main() -> int:
     from quadsitl.mavlink.runner import compile_for_sim
     from quadsitl.physics import Fleet
     from quadsitl.physics.wind import Wind
-    from quadsitl.registration import task_env_id
+    from quadsitl.registration import task_env_spec
     from quadsitl.tasks import TASKS
 
     started = time.perf_counter()
@@ -47,12 +47,12 @@ def main() -> int:
     still_and_windy: tuple[dict[str, Any], ...] = ({}, {"wind": wind})
     for name in TASKS:
         for options in still_and_windy:
-            env = gym.make(task_env_id(name), disable_env_checker=True, **options)
+            env = gym.make(task_env_spec(name), disable_env_checker=True, **options)
             env.reset(seed=0)
             env.step(np.zeros(4, np.float32))
             env.close()
             vector = gym.make_vec(
-                task_env_id(name), num_envs=2, vectorization_mode="vector_entry_point", **options
+                task_env_spec(name), num_envs=2, vectorization_mode="vector_entry_point", **options
             )
             vector.reset(seed=0)
             vector.step(np.zeros((2, 4), np.float32))

@@ -52,7 +52,7 @@ def test_render_mode_rerun_records_episodes(tmp_path):
     assert rows["/events"] == 2  # each episode's outcome
     assert "/plots/wind/speed" not in rows and "/world/wind" not in rows  # still air
     with pytest.raises(ValueError, match="render_mode"):
-        gym.make("QuadSITL/Hover-v0", render_mode="human")
+        gym.make("QuadSITL/Hover-v0", render_mode="ansi")
 
 
 def test_episodes_in_wind_show_it(tmp_path):

@@ -3,15 +3,28 @@ task builds from its constants) and shared pieces."""
 
 from __future__ import annotations
 
+from quadsitl.registration import versioned_ids
 from quadsitl.tasks import TaskOptions, TaskSpec
 from quadsitl.tasks import features as F
 
-ACTION_SPACE = """## Action Space
+ROTOR_ORDER = "Rotor order: ``paper`` plus layout 1 front, 2 left, 3 back, 4 right."
+ACTION_SPACE = {
+    0: """## Action Space
 ``Box(-Ω_h/β, (Ω_max − Ω_h)/β, (4,), float32)`` ≈ [−6.45, 2.67] for the paper airframe:
 one raw policy output per rotor. Eq. 19 maps it to a commanded rotor speed
 ``Ω_c = Ω_h + β·a`` (β = 35 rad/s by default); the box is exactly the rotor range
 [0, Ω_max], and larger actions are accepted and clipped to it, as in the paper.
-Rotor order: ``paper`` plus layout 1 front, 2 left, 3 back, 4 right."""
+""",
+    1: """## Action Space
+``Box(-1, 1, (4,), float32)``, one value per rotor, mapped affinely onto v0's action
+range [low, high] = [−Ω_h/β, (Ω_max − Ω_h)/β]: ``a_v0 = ((1 − a)·low + (1 + a)·high)/2``,
+so −1 and +1 are v0's bounds exactly and the commanded rotor speed is
+``Ω_c = Ω_max·(a + 1)/2`` (0 is half the top speed, below hover: hovering is
+``a = 2·Ω_h/Ω_max − 1`` ≈ 0.41 for the paper airframe). Larger actions are clipped to
+±1. The reward's action penalty reads the v0 value, so a flight earns what it earns in
+v0.
+""",
+}
 
 OBSERVATION_SPACE = """## Observation Space
 ``Box(-inf, inf, ({size},), float32)``, frames ENU (world) and FLU (body):
@@ -50,23 +63,37 @@ episode), ``observe_position`` (False: columns 0–2 read 0), ``observe_integral
 (True: three more columns, the clamped integral of columns 19–21 over the episode,
 m·s; docs/tasks.md) and ``proximity_reward`` (``{{"weight": 15, "radius": 0.5}}``: every
 step also earns w·max(0, 1 − d/r) for the distance d to the goal). ``render_mode``:
-None, or "rerun" to log every episode to a Rerun viewer (or to the .rrd file ``rerun_save``).
+None; "rgb_array" (``render()`` returns a top and a side view of the vehicle, an
+(H, W, 3) uint8 frame, one per step at ``metadata["render_fps"]``; "human": Gymnasium's
+pygame window over them); or "rerun" to log every
+episode to a Rerun viewer (or to the .rrd file ``rerun_save``).
 
 Episode-end ``info`` keys: ``outcome`` (timed_out, out_of_bounds, flipped, landed,
 landed_off_pad, crashed), ``success``, ``final_distance`` (m), ``time_within_threshold``
 (s), ``reach_time`` (s, NaN if never), ``crashed``, ``episode_return``,
 ``episode_length``, ``touchdown_speed`` (m/s, NaN if airborne)."""
 
+START_V1 = """
+Defaults of this version: the task's evaluation start, as ``quadsitl eval`` flies it:
+{defaults}; pass the options (e.g. ``init_position_noise=0``) to change them."""
+
 VERSION_HISTORY = """## Version History
-* v0: {history}"""
+* v1: actions normalised to ``Box(-1, 1)`` (mapped affinely onto v0's range), and the
+  evaluation start by default; the same physics, task, reward and options. For new work.
+* v0: {history}
+  Kept as it was for the shipped checkpoints and published results."""
 PAPER_HISTORY = """the paper's task, without the original code's bugs (stale distances at reset,
   inconsistent rotor observation, inverse Euler angles, wrong crash geometry)."""
 OWN_HISTORY = "a task of quadsitl's own (not in the paper)."
 
 
-def env_doc(task: TaskSpec) -> str:
-    """Assemble the docstring of ``task``'s env in the Gymnasium template."""
+def env_doc(task: TaskSpec, version: int = 0) -> str:
+    """Assemble the docstring of ``task``'s env of ``version`` in the Gymnasium template."""
     doc, seconds = task.doc, task.episode_seconds
+    start = doc.start
+    if version >= 1:
+        defaults = ", ".join(f"``{k}={v!r}``" for k, v in task.train_start.items())
+        start += START_V1.format(defaults=defaults)
     steps = max(1, round(seconds / TaskOptions().control_period))
     extra = "\n".join(
         EXTRA_OBS_ROW.format(columns=_columns(block), meaning=meaning, unit=unit)
@@ -74,12 +101,12 @@ def env_doc(task: TaskSpec) -> str:
     )
     return "\n\n".join(
         [
-            f"# {task.env_id}",
+            f"# {versioned_ids(version)[task.env_name]}",
             f"## Description\n{doc.description}",
-            ACTION_SPACE,
+            ACTION_SPACE[version] + ROTOR_ORDER,
             OBSERVATION_SPACE.format(size=F.OBS_SIZE + task.extra_obs, extra=extra),
             f"## Rewards\n{doc.rewards}",
-            f"## Starting State\n{doc.start}",
+            f"## Starting State\n{start}",
             f"## Episode End\n{doc.end}; truncated after {seconds:g} s ({steps} steps). "
             f"Success: {task.success_text()}.",
             ARGUMENTS.format(seconds=seconds),

@@ -17,7 +17,7 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env import VecEnv
 
 from quadsitl.envs.single import ENV_CLASSES
-from quadsitl.envs.vector import VECTOR_CLASSES
+from quadsitl.envs.vector import VECTOR_VERSION_CLASSES
 
 
 class QuadSB3VecEnv(VecEnv):
@@ -25,12 +25,26 @@ class QuadSB3VecEnv(VecEnv):
 
     A face of the native vector env (:class:`~quadsitl.envs.vector.QuadVectorEnv`, in
     SAME_STEP autoreset): ``backend="mavlink"`` (and the backend options of the gym envs)
-    flies every env's vehicle in its own ``quadsitl sim`` process."""
+    flies every env's vehicle in its own ``quadsitl sim`` process. ``version=1``: the
+    ``-v1`` env (actions in [-1, 1], the evaluation start by default;
+    :mod:`quadsitl.envs.versions`)."""
 
-    def __init__(self, task: str, num_envs: int = 1, seed: int | None = None, **options: Any):
+    def __init__(
+        self,
+        task: str,
+        num_envs: int = 1,
+        seed: int | None = None,
+        version: int = 0,
+        **options: Any,
+    ):
         names = {cls.task_name for cls in ENV_CLASSES.values()}
         task_name = task if task in names else _task_name_of(task)
-        vector_class = next(v for v in VECTOR_CLASSES.values() if v.task_name == task_name)
+        if isinstance(version, bool) or version not in VECTOR_VERSION_CLASSES:
+            raise ValueError(
+                f"version must be one of {sorted(VECTOR_VERSION_CLASSES)}, got {version!r}"
+            )
+        classes = VECTOR_VERSION_CLASSES[version].values()
+        vector_class = next(v for v in classes if v.task_name == task_name)
         self.vec = vector_class(num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **options)
         self.engine = self.vec.engine
         self.render_mode = None

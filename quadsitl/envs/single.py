@@ -10,25 +10,23 @@ import numpy as np
 from gymnasium.error import ClosedEnvironmentError
 
 from quadsitl.client.motor_client import SimulatorError
-from quadsitl.envs import docs
+from quadsitl.envs import docs, versions
 from quadsitl.envs.factory import build_engine
 from quadsitl.envs.mavlink_backend import (
     reset_envs,
 )
-from quadsitl.physics import layout as L
+from quadsitl.registration import VERSIONS, class_name
 from quadsitl.tasks import TASKS, TaskEngine, TaskSpec
+from quadsitl.viz import raster
 
 if TYPE_CHECKING:  # imported when an env records: Rerun takes half a second to import
     from quadsitl.viz.episode_view import EpisodeView
 
 
-def make_spaces(engine: TaskEngine) -> tuple[gym.spaces.Box, gym.spaces.Box]:
-    """Single-env observation and action spaces of an engine."""
+def make_spaces(engine: TaskEngine, version: int = 0) -> tuple[gym.spaces.Box, gym.spaces.Box]:
+    """Single-env observation and action spaces of an engine, as ``version`` presents it."""
     obs = gym.spaces.Box(-np.inf, np.inf, (engine.obs_size,), np.float32)
-    act = gym.spaces.Box(
-        np.float32(engine.action_low), np.float32(engine.action_high), (L.N_ROTORS,), np.float32
-    )
-    return obs, act
+    return obs, versions.action_space(engine, version)
 
 
 def check_no_render(render_mode: str | None) -> None:
@@ -42,7 +40,7 @@ def check_open(closed: bool) -> None:
         raise ClosedEnvironmentError("env is closed: make a new one")
 
 
-RENDER_MODES = ("rerun",)
+RENDER_MODES = ("rgb_array", "rerun")
 
 
 class QuadEnv(gym.Env):
@@ -53,20 +51,30 @@ class QuadEnv(gym.Env):
     docs/tasks.md): ``sim_address`` ("HOST:PORT") connects to a running one instead of
     starting one, ``gcs`` gives the spawned one a ground-station link (a URL),
     ``system_id`` its MAVLink id, ``timeout`` bounds every wait (s), ``signing_key``
-    signs the traffic (32 bytes).
+    signs the traffic (32 bytes). ``version``: the id's version
+    (:mod:`quadsitl.envs.versions`: its action space and default options).
+    ``render_mode="rgb_array"``: ``render()`` returns the frame of :mod:`quadsitl.viz.raster`.
     """
 
     metadata: dict[str, Any] = {"render_modes": list(RENDER_MODES), "render_fps": 20}  # noqa: RUF012
     task_name = "hover"
+    version = 0
 
     def __init__(
         self, render_mode: str | None = None, rerun_save: str | None = None, **options: Any
     ) -> None:
         if render_mode not in (None, *RENDER_MODES):
-            raise ValueError(f"render_mode {render_mode!r} is not supported: None or 'rerun'")
+            raise ValueError(
+                f"render_mode {render_mode!r} is not supported: None, 'rgb_array' or 'rerun'"
+            )
         self.render_mode = render_mode
+        task = TASKS[self.task_name]
+        options = {**versions.default_options(task, self.version), **options}
         self.engine, self.backend = build_engine(self.task_name, 1, options)
-        self.observation_space, self.action_space = make_spaces(self.engine)
+        self.observation_space, self.action_space = make_spaces(self.engine, self.version)
+        self._to_engine = versions.action_map(self.engine, self.version)
+        fps = 1.0 / self.engine.control_period  # one frame a step, in simulated time
+        self.metadata = {**self.metadata, "render_fps": round(fps) if fps.is_integer() else fps}
         self._all = np.ones(1, bool)
         self._closed = False
         self.view: EpisodeView | None = None
@@ -96,7 +104,7 @@ class QuadEnv(gym.Env):
         check_open(self._closed)
         engine = self.engine
         try:
-            reward, terminated, truncated = engine.step(action)
+            reward, terminated, truncated = engine.step(self._to_engine(action))
         except SimulatorError as error:
             raise self._explain(error) from None
         if self.view is not None and engine.recorded:  # (0: nothing for the view to do)
@@ -111,8 +119,19 @@ class QuadEnv(gym.Env):
     def _explain(self, error: SimulatorError) -> SimulatorError:
         return self.backend.explain(error) if self.backend is not None else error
 
-    def render(self) -> None:
-        """Nothing to do: with ``render_mode="rerun"`` every reset and step is logged."""
+    def render(self) -> np.ndarray | None:
+        """``rgb_array``: the vehicle now, an (H, W, 3) uint8 frame (:mod:`quadsitl.viz.raster`).
+        ``rerun``: nothing to do, every reset and step is logged."""
+        if self.render_mode != "rgb_array":
+            return None
+        engine = self.engine
+        return raster.draw(
+            engine.fleet.state[0],
+            engine.fleet.params[0],
+            engine.goal[0, :3],
+            engine.task.goal_radius,
+            engine.steps[0] / engine.max_steps,
+        )
 
     def close(self) -> None:
         self._closed = True
@@ -124,21 +143,32 @@ class QuadEnv(gym.Env):
         super().close()
 
 
-def _env_class(task: TaskSpec) -> type[QuadEnv]:
-    """The env class of a task: ``HoverEnv`` for ``hover``, its docstring from its spec."""
-    name = f"{task.env_name}Env"
-    attributes = {"task_name": task.name, "__doc__": docs.env_doc(task), "__module__": __name__}
+def _env_class(task: TaskSpec, version: int) -> type[QuadEnv]:
+    """The env class of a task's id of ``version``: ``HoverEnv`` (v0), ``HoverV1Env`` (v1);
+    its docstring from its spec."""
+    name = f"{class_name(task.env_name, version)}Env"
+    attributes = {
+        "task_name": task.name,
+        "version": version,
+        "__doc__": docs.env_doc(task, version),
+        "__module__": __name__,
+    }
     return type(name, (QuadEnv,), {**attributes, "__qualname__": name})
 
 
-ENV_CLASSES: dict[str, type[QuadEnv]] = {t.env_name: _env_class(t) for t in TASKS.values()}
-"""Env name (``Hover``) -> env class (``HoverEnv``), one per task of the task list."""
+VERSION_CLASSES: dict[int, dict[str, type[QuadEnv]]] = {
+    version: {t.env_name: _env_class(t, version) for t in TASKS.values()} for version in VERSIONS
+}
+"""Version -> env name (``Hover``) -> env class (``HoverEnv``, ``HoverV1Env``)."""
+ENV_CLASSES = VERSION_CLASSES[0]
+"""Env name (``Hover``) -> v0 env class (``HoverEnv``), one per task of the task list."""
 
 
 def __getattr__(name: str) -> type[QuadEnv]:
-    """Each task's env class by its name (``HoverEnv``): the Gymnasium entry points and
-    pickle find them here."""
-    env_name = name.removesuffix("Env")
-    if name.endswith("Env") and env_name in ENV_CLASSES:
-        return ENV_CLASSES[env_name]
+    """Each task's env class by its name (``HoverEnv``, ``HoverV1Env``): the Gymnasium
+    entry points and pickle find them here."""
+    for classes in VERSION_CLASSES.values():
+        for cls in classes.values():
+            if cls.__name__ == name:
+                return cls
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -22,11 +22,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from quadsitl.client.motor_client import SimulatorError
+from quadsitl.envs import versions
 from quadsitl.envs.factory import build_engine
 from quadsitl.envs.mavlink_backend import (
     reset_envs,
 )
-from quadsitl.envs.single import ENV_CLASSES, check_no_render, check_open, make_spaces
+from quadsitl.envs.single import VERSION_CLASSES, check_no_render, check_open, make_spaces
+from quadsitl.registration import class_name, versioned_ids
 from quadsitl.tasks import get_task
 
 
@@ -35,7 +37,8 @@ class QuadVectorEnv(VectorEnv):
 
     ``backend="mavlink"`` flies each env's vehicle in its own ``quadsitl sim`` process
     (stepped in parallel, system ids 1..N); the other backend options are those of
-    :class:`~quadsitl.envs.single.QuadEnv` (``sim_address`` is then a list).
+    :class:`~quadsitl.envs.single.QuadEnv` (``sim_address`` is then a list); ``version``
+    as there.
     """
 
     metadata: dict[str, Any] = {  # noqa: RUF012
@@ -43,6 +46,7 @@ class QuadVectorEnv(VectorEnv):
         "autoreset_mode": AutoresetMode.NEXT_STEP,
     }
     task_name = "hover"
+    version = 0
 
     def __init__(
         self,
@@ -60,8 +64,12 @@ class QuadVectorEnv(VectorEnv):
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         self.num_envs = int(num_envs)
         self.render_mode = render_mode
+        task = get_task(self.task_name)
+        options = {**versions.default_options(task, self.version), **options}
         self.engine, self.backend = build_engine(self.task_name, self.num_envs, options)
-        self.single_observation_space, self.single_action_space = make_spaces(self.engine)
+        spaces = make_spaces(self.engine, self.version)
+        self.single_observation_space, self.single_action_space = spaces
+        self._to_engine = versions.action_map(self.engine, self.version)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._autoreset = np.zeros(self.num_envs, bool)
@@ -106,7 +114,8 @@ class QuadVectorEnv(VectorEnv):
         if self.autoreset_mode is AutoresetMode.SAME_STEP:
             return self._step_same(actions)
         resetting = self._autoreset
-        reward, terminated, truncated = _copies(self.engine.step(actions, active=~resetting))
+        step = self.engine.step(self._to_engine(actions), active=~resetting)
+        reward, terminated, truncated = _copies(step)
         ended = (terminated | truncated) & ~resetting
         info: dict[str, Any] = {}
         if ended.any():
@@ -122,7 +131,7 @@ class QuadVectorEnv(VectorEnv):
     def _step_same(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        reward, terminated, truncated = _copies(self.engine.step(actions))
+        reward, terminated, truncated = _copies(self.engine.step(self._to_engine(actions)))
         ended = terminated | truncated
         info: dict[str, Any] = {}
         if ended.any():
@@ -150,23 +159,35 @@ def _copies(arrays: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
     return tuple(a.copy() for a in arrays)
 
 
-def _vector_class(name: str, task_name: str) -> type[QuadVectorEnv]:
-    class_name = f"{name}VectorEnv"
-    attributes = {"task_name": task_name, "__module__": __name__, "__qualname__": class_name}
-    doc = f"Native vector env of {get_task(task_name).env_id}."
-    return type(class_name, (QuadVectorEnv,), {**attributes, "__doc__": doc})
+def _vector_class(name: str, task_name: str, version: int) -> type[QuadVectorEnv]:
+    vector_name = f"{class_name(name, version)}VectorEnv"
+    attributes = {
+        "task_name": task_name,
+        "version": version,
+        "__module__": __name__,
+        "__qualname__": vector_name,
+    }
+    doc = f"Native vector env of {versioned_ids(version)[name]}."
+    return type(vector_name, (QuadVectorEnv,), {**attributes, "__doc__": doc})
 
 
-VECTOR_CLASSES = {name: _vector_class(name, cls.task_name) for name, cls in ENV_CLASSES.items()}
-"""Env name (``Hover``) -> native vector env class (``HoverVectorEnv``), one per task."""
+VECTOR_VERSION_CLASSES: dict[int, dict[str, type[QuadVectorEnv]]] = {
+    version: {name: _vector_class(name, cls.task_name, version) for name, cls in classes.items()}
+    for version, classes in VERSION_CLASSES.items()
+}
+"""Version -> env name (``Hover``) -> native vector env class (``HoverVectorEnv``,
+``HoverV1VectorEnv``)."""
+VECTOR_CLASSES = VECTOR_VERSION_CLASSES[0]
+"""Env name (``Hover``) -> v0 native vector env class (``HoverVectorEnv``), one per task."""
 
 
 def __getattr__(name: str) -> type[QuadVectorEnv]:
-    """Each task's vector env class by its name (``HoverVectorEnv``): the Gymnasium
-    vector entry points and pickle find them here."""
-    env_name = name.removesuffix("VectorEnv")
-    if name.endswith("VectorEnv") and env_name in VECTOR_CLASSES:
-        return VECTOR_CLASSES[env_name]
+    """Each task's vector env class by its name (``HoverVectorEnv``,
+    ``HoverV1VectorEnv``): the Gymnasium vector entry points and pickle find them here."""
+    for classes in VECTOR_VERSION_CLASSES.values():
+        for cls in classes.values():
+            if cls.__name__ == name:
+                return cls
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
