@@ -90,13 +90,17 @@ def evaluate(
     action (``net``: a network, or an exported ONNX or C policy), from the trained start
     distribution, in ``num_envs`` envs stepped together (one batched forward pass a step).
     ``env_options``: task options on top of the trained ones (e.g. ``wind=``, a rung of
-    the robustness ladder). ``on_step(engine, reward)`` is called
-    after each reset (reward None) and step of env 0 (e.g. to record it); when env 0's
-    episode ends (and it resets at once), as ``on_step(engine, None, outcome)``.
+    the robustness ladder). ``keep_trajectories``: the tracks of the first that many
+    episodes. ``on_step(engine, reward)`` is called after each reset (reward None) and
+    step of env 0 (e.g. to record it); when env 0's episode ends (and it resets at once),
+    as ``on_step(engine, None, outcome)``.
 
-    Env i flies the episodes i, i + num_envs, i + 2·num_envs, ... (< ``episodes``) and no
-    others: which episodes are counted does not depend on how long they last (counting
-    the first ``episodes`` to end would favour short ones, crashes)."""
+    Episode k is exactly the single env reset with the seed ``seed·SEED_SPACING + k``:
+    the envs fly rounds of ``num_envs`` episodes, env i of a round flying its episode i
+    (an env that is done flies on, uncounted, until the round's last episode ends). So
+    the figures do not depend on ``num_envs`` (``quadsitl eval`` and every rung of the
+    robustness ladder agree), and which episodes are counted does not depend on how long
+    they last (counting the first ``episodes`` to end would favour short ones, crashes)."""
     task = task or config.task
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
         raise ValueError(f"episodes must be an integer ≥ 1, got {episodes!r}")
@@ -104,71 +108,100 @@ def evaluate(
     if task not in TASK_METRICS:
         raise ValueError(f"evaluation needs a quadsitl task ({sorted(TASK_METRICS)}), got {task!r}")
     env = make_vector_env(task, num_envs, backend, **{**config.task_options, **(env_options or {})})
-    engine = env.engine  # type: ignore[attr-defined]  # the native vector env's
     try:
-        checkpoint.check_fits(net, config, task, engine.obs_size)
-    except ValueError:
-        env.close()
-        raise
-    low, high = env.single_action_space.low, env.single_action_space.high  # type: ignore[attr-defined]
-    returns, success, metric, outcomes = [], [], [], {}  # type: ignore[var-annotated]
-    reached: list[bool] = []
-    crashed: list[bool] = []
-    quota = np.array([len(range(i, episodes, num_envs)) for i in range(num_envs)])
-    flown = np.zeros(num_envs, int)  # episodes counted per env
-    tracks: list[list[np.ndarray]] = [[] for _ in range(num_envs)]
-    goal_tracks: list[list[np.ndarray]] = [[] for _ in range(num_envs)]
-    trajectories: list[np.ndarray] = []
-    goals: list[np.ndarray] = []
-    key, name, unit = TASK_METRICS[task]
-    obs, _ = env.reset(seed=seed * SEED_SPACING)
-    if on_step is not None:
-        on_step(engine, None)
-    try:
-        while len(returns) < episodes:
-            for i in range(num_envs if len(trajectories) < keep_trajectories else 0):
-                tracks[i].append(engine.fleet.state[i, L.POS].copy())
-                goal_tracks[i].append(engine.goal[i, F.GOAL_POS].copy())
-            action = net.mean_action(obs)
-            obs, reward, terminated, truncated, info = env.step(np.clip(action, low, high))
-            ended = np.flatnonzero(terminated | truncated)
-            metrics = info.get("final_info", {})
-            if on_step is not None and 0 in ended:
-                on_step(engine, None, str(metrics["outcome"][0]))
-            elif on_step is not None:
-                on_step(engine, float(reward[0]))
-            for i in ended.tolist():
-                track, goal_track = tracks[i], goal_tracks[i]
-                tracks[i], goal_tracks[i] = [], []
-                if flown[i] == quota[i]:
-                    continue  # this env has flown its share; others are still flying
-                flown[i] += 1
-                crashed.append(bool(metrics["crashed"][i]))
-                returns.append(float(metrics["episode_return"][i]))
-                success.append(bool(metrics["success"][i]))
-                reached.append(bool(np.isfinite(metrics["reach_time"][i])))
-                value = float(metrics[key][i])
-                if np.isfinite(value):
-                    metric.append(value)
-                outcome = str(metrics["outcome"][i])
-                outcomes[outcome] = outcomes.get(outcome, 0) + 1
-                if len(trajectories) < keep_trajectories:
-                    trajectories.append(np.array(track))
-                    goals.append(np.array(goal_track))
+        checkpoint.check_fits(net, config, task, env.engine.obs_size)  # type: ignore[attr-defined]
+        flights: list[_Flight] = []
+        for first in range(0, episodes, num_envs):
+            counted = min(num_envs, episodes - first)
+            keep = max(0, min(counted, keep_trajectories - first))
+            flights += _fly_round(
+                env, net, seed * SEED_SPACING + first, counted, keep, TASK_METRICS[task][0], on_step
+            )
     finally:
         env.close()
+    _, name, unit = TASK_METRICS[task]
+    returns = [f.episode_return for f in flights]
+    metric = [f.metric for f in flights if np.isfinite(f.metric)]
+    outcomes: dict[str, int] = {}
+    for flight in flights:
+        outcomes[flight.outcome] = outcomes.get(flight.outcome, 0) + 1
+    kept = flights[:keep_trajectories]
     return Evaluation(
         task,
-        len(returns),
-        float(np.mean(success)),
+        len(flights),
+        float(np.mean([f.success for f in flights])),
         float(np.mean(returns)),
         float(np.std(returns)),
         name,
         unit,
         float(np.mean(metric)) if metric else float("nan"),
-        float(np.mean(reached)),
-        crash_rate=float(np.mean(crashed)),
+        float(np.mean([f.reached for f in flights])),
+        crash_rate=float(np.mean([f.crashed for f in flights])),
         outcomes=outcomes,
-        trajectories=trajectories,
-        goals=goals,
+        trajectories=[f.track for f in kept if f.track is not None],
+        goals=[f.goal_track for f in kept if f.goal_track is not None],
     )
+
+
+@dataclass
+class _Flight:
+    """One counted episode's figures (and its tracks, where kept)."""
+
+    episode_return: float
+    success: bool
+    reached: bool  # came within the goal radius at some time
+    crashed: bool
+    metric: float  # the task's metric; NaN where undefined
+    outcome: str
+    track: np.ndarray | None = None  # (T, 3) m, positions
+    goal_track: np.ndarray | None = None  # (T, 3) m, goal positions
+
+
+def _fly_round(
+    env: Any,
+    net: DeterministicPolicy,
+    first_seed: int,
+    counted: int,
+    keep: int,
+    metric_key: str,
+    on_step: Any,
+) -> list[_Flight]:
+    """Reset env i with the seed ``first_seed + i`` and fly until envs 0 … counted − 1
+    have each ended one episode; those episodes' figures, in env order (tracks of the
+    first ``keep``)."""
+    engine = env.engine  # the native vector env's
+    low, high = env.single_action_space.low, env.single_action_space.high
+    obs, _ = env.reset(seed=[first_seed + i for i in range(env.num_envs)])
+    if on_step is not None:
+        on_step(engine, None)
+    flights: list[_Flight | None] = [None] * counted
+    tracks: list[list[np.ndarray]] = [[] for _ in range(keep)]
+    goal_tracks: list[list[np.ndarray]] = [[] for _ in range(keep)]
+    while any(f is None for f in flights):
+        for i in range(keep):
+            if flights[i] is None:
+                tracks[i].append(engine.fleet.state[i, L.POS].copy())
+                goal_tracks[i].append(engine.goal[i, F.GOAL_POS].copy())
+        obs, reward, terminated, truncated, info = env.step(
+            np.clip(net.mean_action(obs), low, high)
+        )
+        ended = np.flatnonzero(terminated | truncated)
+        metrics = info.get("final_info", {})
+        if on_step is not None and 0 in ended:
+            on_step(engine, None, str(metrics["outcome"][0]))
+        elif on_step is not None:
+            on_step(engine, float(reward[0]))
+        for i in ended.tolist():
+            if i >= counted or flights[i] is not None:
+                continue  # not this round's, or flown on after its episode
+            flights[i] = _Flight(
+                float(metrics["episode_return"][i]),
+                bool(metrics["success"][i]),
+                bool(np.isfinite(metrics["reach_time"][i])),
+                bool(metrics["crashed"][i]),
+                float(metrics[metric_key][i]),
+                str(metrics["outcome"][i]),
+                np.array(tracks[i]) if i < keep else None,
+                np.array(goal_tracks[i]) if i < keep else None,
+            )
+    return [f for f in flights if f is not None]

@@ -191,3 +191,29 @@ def test_bad_input_is_one_line_and_writes_nothing(args, message, tmp_path, capsy
     error = capsys.readouterr().err.strip().splitlines()[-1]
     assert message in error and error.startswith("quadsitl robustness: error:")
     assert sorted(tmp_path.iterdir()) == before
+
+
+def test_the_nominal_rung_is_what_quadsitl_eval_prints(hover):
+    """30 episodes: eval flies them in its 25 envs, the ladder in 30; the figures agree
+    (to the float rounding of a forward pass batched differently)."""
+    net, config = hover
+    nominal = climb("hover", net, config, ["wind"], episodes=30).rows[0]
+    result = evaluate(net, config, episodes=30)  # as `quadsitl eval --episodes 30` calls it
+    assert (nominal.success_rate, nominal.crash_rate) == (result.success_rate, result.crash_rate)
+    assert nominal.outcomes == ", ".join(f"{k} {v}" for k, v in sorted(result.outcomes.items()))
+    assert nominal.metric_mean == pytest.approx(result.metric_mean, rel=1e-5)
+
+
+def test_an_evaluation_does_not_depend_on_how_many_envs_fly_it(hover):
+    """Episode k starts from the seed EVAL_SEED·SEED_SPACING + k in any batch: the same
+    flights, to float rounding (a forward pass of 6 rows or of 2 rounds differently)."""
+    net, config = hover
+    options = LADDER["delay"][1][3].options  # 40 ms: episodes of different lengths
+    one = evaluate(net, config, episodes=6, num_envs=6, env_options=options, keep_trajectories=6)
+    two = evaluate(net, config, episodes=6, num_envs=4, env_options=options, keep_trajectories=6)
+    assert one.outcomes == two.outcomes and one.success_rate == two.success_rate
+    assert one.mean_return == pytest.approx(two.mean_return, rel=1e-5)
+    assert one.metric_mean == pytest.approx(two.metric_mean, rel=1e-5)
+    assert len(one.trajectories) == len(two.trajectories) == 6
+    for a, b in zip(one.trajectories, two.trajectories, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-4)  # m
