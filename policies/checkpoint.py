@@ -44,6 +44,20 @@ def shipped_robust_checkpoints() -> dict[str, Path]:
     return {task: folder / f"{task}.pt" for task in TASKS if (folder / f"{task}.pt").is_file()}
 
 
+RUN_CHECKPOINTS = ("best", "last")  # the files quadsitl train writes in RUN/checkpoints
+
+
+def policy_name(path: str | Path) -> str:
+    """What a checkpoint (or its export) is called in exported file names, tables and
+    legends: its file's stem, after the run folder's name where training wrote it there
+    (``RUN/checkpoints/best.pt``: ``RUN-best``), so two runs' ``best.pt`` differ."""
+    path = Path(path).absolute()
+    run = path.parent.parent.name
+    if path.parent.name == "checkpoints" and path.stem in RUN_CHECKPOINTS and run:
+        return f"{run}-{path.stem}"
+    return path.stem
+
+
 def save(path: str | Path, net: ActorCritic, config: TrainConfig, **extra: Any) -> None:
     """Write atomically (a crash mid-write never leaves a broken checkpoint). ``extra``:
     plain data only (numbers, strings, tensors, lists and dicts of them)."""

@@ -190,9 +190,10 @@ def _eval(args: argparse.Namespace) -> int:
     on_step = None
     view = None
     if args.rerun is not None:
+        from policies.checkpoint import policy_name
         from quadsitl.viz.episode_view import EpisodeView
 
-        view = EpisodeView(f"eval {Path(args.checkpoint).name}", args.rerun or None)
+        view = EpisodeView(f"eval {policy_name(args.checkpoint)}", args.rerun or None)
 
         def on_step(engine, reward, outcome=None):  # type: ignore[no-untyped-def]
             view.reset(engine, outcome) if reward is None else view.step(engine)
@@ -225,6 +226,7 @@ def start_options(trained: dict, start: str) -> dict:  # type: ignore[type-arg]
 def _robustness(args: argparse.Namespace) -> int:
     """Every input checked (policies, axes, the output folder) before any episode flies;
     nothing is written unless every ladder ran."""
+    from policies.checkpoint import policy_name
     from policies.export.runtimes import load_policy
     from policies.ladder import check_axes
     from policies.robustness import check_task, climb, markdown, seeds_text, write
@@ -235,8 +237,8 @@ def _robustness(args: argparse.Namespace) -> int:
         raise ValueError(f"--out {out} is a file, not a folder (nothing was written)")
     check_writable(out, "the robustness tables")
     paths = [Path(p) for p in args.checkpoint]
-    names = [p.stem for p in paths]
-    if len(set(names)) < len(names):  # two best.pt: tell them apart by their paths
+    names = [policy_name(p) for p in paths]  # RUN-best for a run's best.pt
+    if len(set(names)) < len(names):  # the same name twice: tell them apart by their paths
         names = [str(p) for p in paths]
     policies = [load_policy(path) for path in paths]
     for name, (_, config) in zip(names, policies, strict=True):

@@ -317,6 +317,8 @@ def test_export_refuses_bad_input_with_one_line_and_writes_nothing(tmp_path, cap
         (("export", hover, "--format", "tflite", "-o", str(out)), "unknown format 'tflite'"),
         (("export", hover, "--format", "onnx", "-o", str(out / "no/such.onnx")), "no folder"),
         (("export", hover, "--format", "c", "-o", str(out / "hover.onnx")), "to a .h file"),
+        (("export", hover, "--format", "c", "-o", str(out / "fc")), "(a folder to write into: end"),
+        (("export", hover, "--format", "c", "-o", f"{junk}/"), "is a file, not a folder"),
         (("export", str(junk), "--format", "onnx", "-o", str(out)), "not a quadsitl checkpoint"),
         (("export", str(foreign), "--format", "c", "-o", str(out)), "not a quadsitl task"),
         (("export", str(wrong_shape), "--format", "onnx", "-o", str(out)), "maps 20 obs"),
@@ -375,3 +377,56 @@ def test_exported_files_that_do_not_fit_are_refused_naming_the_layout(tmp_path, 
     onnx.save(model, str(bare))
     policy, config = load_policy(bare, "hover")
     assert config.task == "hover" and policy.obs_size == 34
+
+
+def _run_checkpoint(runs: Path, run: str) -> Path:
+    """A copy of the shipped hover policy where training writes a run's best.pt."""
+    best = runs / run / "checkpoints" / "best.pt"
+    best.parent.mkdir(parents=True)
+    shutil.copy(CHECKPOINTS / "hover.pt", best)
+    return best
+
+
+def test_export_into_a_folder_makes_it_as_the_docs_type_it(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    hover = str(CHECKPOINTS / "hover.pt")
+    assert main(["export", hover, "--format", "c", "-o", "fc/"]) == 0  # docs/training.md
+    assert sorted(p.name for p in (tmp_path / "fc").iterdir()) == [
+        "hover.contract.json",
+        "hover.h",
+    ]
+    assert main(["export", hover, "--format", "c", "-o", "deep/er/"]) == 0  # made, nested
+    assert (tmp_path / "deep" / "er" / "hover.h").is_file()
+    assert main(["export", hover, "--format", "c", "-o", "fc"]) == 0  # existing: into it
+    assert main(["export", hover, "--format", "c", "-o", "fc/named.h"]) == 0  # as given
+    assert (tmp_path / "fc" / "named.h").is_file()
+    assert "quadsitl eval fc/hover.h" in capsys.readouterr().out
+
+
+def test_an_export_is_named_after_its_run(tmp_path, monkeypatch, capsys):
+    """Two runs' best.pt export to two files, not both to best.onnx."""
+    monkeypatch.chdir(tmp_path)
+    first = _run_checkpoint(tmp_path / "runs", "hover-ppo-fast-seed0")
+    second = _run_checkpoint(tmp_path / "runs", "hover-ppo-fast-seed1")
+    out = tmp_path / "out"
+    written = [export(source, "c", f"{out}/")[0] for source in (first, second)]
+    assert [p.name for p in written] == [
+        "hover-ppo-fast-seed0-best.h",
+        "hover-ppo-fast-seed1-best.h",
+    ]
+    assert contract_path(written[0]).is_file()
+    assert export(first, "c")[0] == Path("hover-ppo-fast-seed0-best.h")  # the default
+    assert export(first, "c", out / "mine.h")[0].name == "mine.h"  # an explicit name kept
+    monkeypatch.chdir(first.parent.parent)  # in the run folder: checkpoints/best.pt
+    assert export(Path("checkpoints/best.pt"), "c")[0].name == "hover-ppo-fast-seed0-best.h"
+
+
+def test_robustness_tells_two_runs_best_checkpoints_apart(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    runs = tmp_path / "runs"
+    sources = [str(_run_checkpoint(runs, f"hover-ppo-fast-seed{s}")) for s in (0, 1)]
+    args = ["robustness", *sources, "--axes", "target", "--episodes", "1", "--out", "ladder"]
+    assert main(args) == 0
+    table = (tmp_path / "ladder" / "robustness.md").read_text()
+    assert "### hover-ppo-fast-seed0-best (hover" in table
+    assert "### hover-ppo-fast-seed1-best (hover" in table

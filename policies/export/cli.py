@@ -28,8 +28,10 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         "--output",
         "-o",
         metavar="PATH",
-        help="the file (.onnx or .h) or an existing folder to write into (default: "
-        "CHECKPOINT's name with .onnx or .h, in the current folder); replaced if it exists",
+        help="the file (.onnx or .h), or a folder to write NAME.onnx or NAME.h into (an "
+        "existing one, or any ending in /, made if missing); NAME: the checkpoint's name, "
+        "RUN-best for a run's RUN/checkpoints/best.pt (default: NAME in the current "
+        "folder); replaced if it exists",
     )
 
 

@@ -9,6 +9,7 @@ nothing.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 from policies import checkpoint
@@ -30,8 +31,10 @@ FORMATS = tuple(SUFFIXES)
 
 
 def export(source: str | Path, fmt: str, output: str | Path | None = None) -> list[Path]:
-    """Write ``source``'s policy in ``fmt`` to ``output`` (a file, or a folder that takes
-    ``STEM.onnx``/``STEM.h``; default: the current folder) and its contract beside it.
+    """Write ``source``'s policy in ``fmt`` to ``output`` and its contract beside it.
+    ``output``: a file; or a folder, existing or named with a trailing ``/`` (made if
+    missing), that takes ``NAME.onnx``/``NAME.h`` (NAME: :func:`checkpoint.policy_name`,
+    e.g. ``RUN-best`` for a run's best.pt); default: NAME in the current folder.
     Returns the paths written. ValueError, with nothing written, for a bad input."""
     if fmt not in SUFFIXES:
         raise ValueError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
@@ -58,23 +61,31 @@ def export(source: str | Path, fmt: str, output: str | Path | None = None) -> li
     else:
         data = c_header(net, contract, target.name).encode()
     beside = contract_path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)  # a folder named with a trailing /
     _write(target, data)
     _write(beside, (json.dumps(contract, indent=2, ensure_ascii=False) + "\n").encode())
     return [target, beside]
 
 
 def _target(source: Path, fmt: str, output: str | Path | None) -> Path:
-    """The exported file's path; its folder must exist (nothing is created)."""
-    name = source.stem + SUFFIXES[fmt]
+    """The exported file's path. A folder named with a trailing ``/`` may be missing
+    (export makes it); a file's folder must exist."""
+    name = checkpoint.policy_name(source) + SUFFIXES[fmt]
     if output is None:
         return Path(name)
+    text = str(output)
     output = Path(output)
-    if output.is_dir():
+    if output.is_dir() or text.endswith(("/", os.sep)):
+        if output.exists() and not output.is_dir():
+            raise ValueError(f"{output} is a file, not a folder to write {name} into")
         return output / name
     if not output.parent.is_dir():
         raise ValueError(f"no folder {output.parent} for {output}")
     if output.suffix != SUFFIXES[fmt]:
-        raise ValueError(f"the {fmt} form is written to a {SUFFIXES[fmt]} file, not {output.name}")
+        folder = " (a folder to write into: end it with /)" if not output.suffix else ""
+        raise ValueError(
+            f"the {fmt} form is written to a {SUFFIXES[fmt]} file, not {output.name}{folder}"
+        )
     return output
 
 
