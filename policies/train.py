@@ -227,8 +227,14 @@ def _restore(algo: Algorithm, start: _Start) -> None:
             optimizer.load_state_dict(state)
 
 
+TERMINAL_PROGRESS_EVERY = 0.5  # s between redraws of the progress line on a terminal
+PLAIN_PROGRESS_EVERY = 30.0  # s between progress lines when stderr is a file or a pipe
+
+
 class _Log:
-    """metrics.csv, the progress line, checkpoints, and the running episode statistics."""
+    """metrics.csv, the progress line, checkpoints, and the running episode statistics.
+    The progress line is redrawn in place (``\\r``) on a terminal; to a log file or a
+    pipe it is a plain line every PLAIN_PROGRESS_EVERY seconds (and at the end)."""
 
     def __init__(
         self,
@@ -239,6 +245,8 @@ class _Log:
         tensorboard: bool = False,
     ) -> None:
         self.config, self.run_dir, self.progress = config, run_dir, progress
+        self.terminal = progress and sys.stderr.isatty()
+        self.progress_every = TERMINAL_PROGRESS_EVERY if self.terminal else PLAIN_PROGRESS_EVERY
         self.board: Any = None
         if tensorboard:
             from torch.utils.tensorboard import SummaryWriter  # needs the tensorboard package
@@ -281,11 +289,12 @@ class _Log:
                 if key not in ("iteration", "env_steps") and math.isfinite(value):
                     self.board.add_scalar(f"{config.task}/{key}", value, row["env_steps"])
             self.board.flush()
-        if self.progress and (time.perf_counter() - self.shown > 0.5 or it == config.iterations):
+        since = time.perf_counter() - self.shown
+        if self.progress and (since > self.progress_every or it == config.iterations):
             self.shown = time.perf_counter()
             done = it - self.first_iteration
             seconds_left = (self.shown - self.session_started) / done * (config.iterations - it)
-            _progress(config, row, seconds_left)
+            _progress(config, row, seconds_left, self.terminal)
         if it % config.checkpoint_every == 0 or it == config.iterations:
             self.save_last(algo)
 
@@ -322,7 +331,7 @@ class _Log:
         self.file.close()
         if self.board is not None:
             self.board.close()
-        if self.progress:
+        if self.terminal:  # end the redrawn line
             print(file=sys.stderr)
 
     def result(self) -> RunResult:
@@ -370,16 +379,18 @@ def clock(seconds: float) -> str:
     return f"{hours}:{minutes:02d}:{secs:02d}" if hours else f"{minutes}:{secs:02d}"
 
 
-def _progress(config: TrainConfig, row: dict, seconds_left: float) -> None:  # type: ignore[type-arg]
+def _progress(config: TrainConfig, row: dict, seconds_left: float, terminal: bool) -> None:  # type: ignore[type-arg]
     """The progress line; ``seconds_left``: the ETA, from this process's pace so far
-    (evaluations included)."""
+    (evaluations included); ``terminal``: redrawn over the last one, else a line of its own."""
     done = row["iteration"] / config.iterations
     bar = "#" * int(24 * done) + "-" * (24 - int(24 * done))
+    redraw = "\r" if terminal else ""
     print(
-        f"\r{config.task}/{config.algo} [{bar}] {row['env_steps']:>10,} steps  "
+        f"{redraw}{config.task}/{config.algo} [{bar}] "
+        f"{row['env_steps']:>10,} steps  "
         f"return {row['mean_return']:8.1f}  success {row['success_rate']:5.0%}  "
         f"{row['steps_per_second']:>7,} steps/s  ETA {clock(seconds_left)}",
-        end="",
+        end="" if terminal else "\n",
         file=sys.stderr,
         flush=True,
     )

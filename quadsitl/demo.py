@@ -1,7 +1,10 @@
 """A short physics demonstration: take off from the ground, hover, land, as a table.
 
 The vertical controller here is deliberately tiny (PD on altitude, mapped to a common
-rotor speed); the onboard flight controller of the simulator is a separate module.
+rotor speed); the onboard flight controller of the simulator is a separate module. Like
+PX4's land detector, it stops the motors once the vehicle has touched down after flying:
+a descent command left on would keep the rotors at the descent's thrust (about 92 % of
+the hover speed) pushing the vehicle into the ground.
 """
 
 from __future__ import annotations
@@ -46,9 +49,15 @@ def run_demo(airframe: str = "paper", altitude: float = 2.0, print_every: float 
     )
     print(f"{'t [s]':>6} {'alt [m]':>8} {'v_up [m/s]':>10} {'Ω mean [rad/s]':>15} contact")
     next_print = 0.0
+    flown = landed = False
     for duration, target in script:
         steps = round(duration / fleet.dt)
         for _ in range(steps):
+            on_ground = fleet.contact[0] == L.ON_GROUND
+            if flown and on_ground and not landed:
+                landed = True
+                print(f"landed at {fleet.time:.2f} s: motors off")
+            flown = flown or not on_ground
             if fleet.time >= next_print - 1e-9:
                 print(
                     f"{fleet.time:6.2f} {fleet.position[0, 2] - rest_z:8.3f} "
@@ -56,7 +65,7 @@ def run_demo(airframe: str = "paper", altitude: float = 2.0, print_every: float 
                     f"{L.CONTACT_NAMES[int(fleet.contact[0])]}"
                 )
                 next_print += print_every
-            if target is None:
+            if target is None or landed:
                 cmd = np.zeros(L.N_ROTORS)
             else:
                 cmd = _altitude_command(fleet, rest_z + target)

@@ -404,3 +404,12 @@ def test_airframe_table_of_the_readme_is_the_papers():
     assert numbers == expected, f"README.md airframe row {numbers}, code {expected}"
     inertia = tuple(float(x.strip(",")) for x in cells[4].split()[:3])
     assert inertia == PAPER.inertia, f"README.md inertia {inertia}, code {PAPER.inertia}"
+
+
+def test_the_readmes_command_list_has_every_subcommand():
+    """README's "Command line" block names each subcommand `quadsitl --help` lists."""
+    block = (ROOT / "README.md").read_text().split("## Command line", 1)[1].split("```")[1]
+    listed = {line.split()[1] for line in block.splitlines() if line.startswith("quadsitl ")}
+    subcommands = {name.split()[1] for name in command_options() if name.startswith("quadsitl ")}
+    missing = subcommands - listed
+    assert not missing, f"missing from README's command list: {sorted(missing)}"
