@@ -12,11 +12,18 @@ from gcs_tools.scripted_flight import fly_items, fly_mission
 
 
 def run_fly(
-    path: str, url: str, system: int, timeout: float, signing_key: bytes | None = None
+    path: str,
+    url: str,
+    system: int,
+    timeout: float,
+    signing_key: bytes | None = None,
+    stall_after: float | None = 60.0,
 ) -> int:
     """Returns an exit code: 0 flown (and landed, when the mission lands), 1 failed in
-    flight or refused by the vehicle; bad files raise ValueError before anything flies.
-    With ``signing_key`` every message is signed (a vehicle with signing on needs it)."""
+    flight, stalled (no progress for ``stall_after`` simulated s; None: never) or refused
+    by the vehicle; bad files raise ValueError before anything flies. Progress lines go
+    to stdout as items are reached and every few seconds. With ``signing_key`` every
+    message is signed (a vehicle with signing on needs it)."""
     mission = read_mission(path)
     client = VehicleClient(url, target=system, signing_key=signing_key)
     started = time.monotonic()
@@ -31,9 +38,9 @@ def run_fly(
         kind = "waypoints" if isinstance(mission, tuple) else "items"
         print(f"quadsitl fly: connected to system {system} on {url}; flying {len(mission)} {kind}")
         if isinstance(mission, tuple):
-            report = fly_mission(client, mission, timeout)
+            report = fly_mission(client, mission, timeout, stall_after, _say)
         else:
-            report = fly_items(client, mission, timeout)
+            report = fly_items(client, mission, timeout, stall_after, _say)
     except ClientError as error:
         print(f"quadsitl fly: failed: {error}", file=sys.stderr)
         return 1
@@ -43,3 +50,7 @@ def run_fly(
     for line in report.lines():
         print("  " + line)
     return 0
+
+
+def _say(line: str) -> None:
+    print(f"quadsitl fly: {line}", flush=True)

@@ -15,11 +15,13 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from gcs_tools.client import ClientError, MissionItem, VehicleClient, Waypoint, mav
+from gcs_tools.progress import LANDINGS, POSITIONS, Progress, height
 from quadsitl.vehicle.geo import Home
 
 DEFAULT_WAYPOINTS = (
@@ -60,7 +62,11 @@ def mission_items(waypoints: tuple[Waypoint, ...]) -> list[tuple[int, float, flo
 
 
 def fly_mission(
-    client: VehicleClient, waypoints: tuple[Waypoint, ...] = DEFAULT_WAYPOINTS, timeout: float = 300
+    client: VehicleClient,
+    waypoints: tuple[Waypoint, ...] = DEFAULT_WAYPOINTS,
+    timeout: float = 300,
+    stall_after: float | None = None,
+    say: Callable[[str], None] | None = None,
 ) -> FlightReport:
     """Take off to the first waypoint's height, fly the others, land at home."""
     client.request_home()
@@ -68,14 +74,20 @@ def fly_mission(
     for command, east, north, up, param1 in mission_items(waypoints):
         lat, lon = client.to_global(east, north)
         items.append(MissionItem(command, lat, lon, up, (param1, 0.0, 0.0, math.nan)))
-    return fly_items(client, items, timeout)
+    return fly_items(client, items, timeout, stall_after, say)
 
 
 def fly_items(
-    client: VehicleClient, items: list[MissionItem], timeout: float = 600
+    client: VehicleClient,
+    items: list[MissionItem],
+    timeout: float = 600,
+    stall_after: float | None = None,
+    say: Callable[[str], None] | None = None,
 ) -> FlightReport:
     """Upload, arm, fly in MISSION mode until the last item is done (and, when the mission
-    ends with a landing, the vehicle has landed and disarmed)."""
+    ends with a landing, the vehicle has landed and disarmed). With ``say``, progress
+    lines go to it; with ``stall_after`` (simulated s), no progress for that long raises
+    ClientError (gcs_tools.progress)."""
     home = client.home_position()
     ack = client.upload_items(items)
     if ack != mav.MAV_MISSION_ACCEPTED:
@@ -86,7 +98,10 @@ def fly_items(
     last = len(items) - 1
     lands = _ends_on_the_ground(items)
 
+    progress = Progress(items, home, stall_after, say or (lambda line: None))
+
     def done() -> bool:
+        progress.update(client)
         current = client.latest.get("MISSION_CURRENT")
         complete = current is not None and current.mission_state == MISSION_STATE_COMPLETE
         return last in client.reached and complete and not (lands and client.armed)
@@ -97,13 +112,6 @@ def fly_items(
 
 
 MISSION_STATE_COMPLETE = 5  # MISSION_CURRENT.mission_state
-LANDINGS = (mav.MAV_CMD_NAV_LAND, mav.MAV_CMD_NAV_RETURN_TO_LAUNCH)
-POSITIONS = (
-    mav.MAV_CMD_NAV_WAYPOINT,
-    mav.MAV_CMD_NAV_LOITER_UNLIM,
-    mav.MAV_CMD_NAV_LOITER_TIME,
-    mav.MAV_CMD_NAV_LOITER_TURNS,
-)
 
 
 def _ends_on_the_ground(items: list[MissionItem]) -> bool:
@@ -129,11 +137,11 @@ def planned_path(items: list[MissionItem], home: Home) -> PlannedPath:
     targets, polyline = [], [here]
     for item in items:
         if item.command == mav.MAV_CMD_NAV_TAKEOFF:
-            here = np.array([here[0], here[1], _height(item, home)])
+            here = np.array([here[0], here[1], height(item, home)])
             targets.append(here)
         elif item.command in POSITIONS:
             east, north, _ = home.to_local(item.latitude, item.longitude, home.altitude)
-            here = np.array([east, north, _height(item, home)])
+            here = np.array([east, north, height(item, home)])
             targets.append(here)
         elif item.command == mav.MAV_CMD_NAV_LAND:
             if not math.isnan(item.latitude):
@@ -149,13 +157,6 @@ def planned_path(items: list[MissionItem], home: Home) -> PlannedPath:
             continue
         polyline.append(here)
     return PlannedPath(np.array(targets).reshape(-1, 3), np.array(polyline))
-
-
-def _height(item: MissionItem, home: Home) -> float:
-    """m above home of an item's altitude, by its frame (AMSL or relative/terrain)."""
-    if item.frame in (mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_INT):
-        return item.altitude - home.altitude
-    return item.altitude
 
 
 def _report(client: VehicleClient, path: PlannedPath) -> FlightReport:

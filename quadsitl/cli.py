@@ -109,6 +109,14 @@ def _add_fly_parser(commands: argparse._SubParsersAction) -> None:
         metavar="S",
         help="give up when the mission is not done after S seconds (default: 600)",
     )
+    fly.add_argument(
+        "--stall-after",
+        type=float,
+        default=60.0,
+        metavar="S",
+        help="give up (exit 1) when for S simulated seconds no item is reached and the "
+        "vehicle gets no 0.5 m nearer the current one; 0: never (default: 60)",
+    )
     add_signing_options(fly, "sign every message (for a vehicle with signing on)")
 
 
@@ -118,10 +126,13 @@ def _sim_collaborators(args: argparse.Namespace) -> tuple[Any, Any]:
     make_autopilot = make_view = None
     if args.autopilot:
         try:
-            from policies.autopilot import PolicyAutopilot
+            from policies.autopilot import PolicyAutopilot, trained_range
+            from policies.export.runtimes import load_policy
         except ImportError as error:
             raise ValueError(f"--autopilot needs the training extra ({error})") from None
         path = args.autopilot
+        # What it was trained for, said (or refused) before anything starts.
+        _say("sim")(f"{path}: {trained_range(load_policy(path)[1]).describe()}")
 
         def make_autopilot(airframe: Any) -> Any:
             return PolicyAutopilot.from_checkpoint(path, airframe)
@@ -196,7 +207,12 @@ def _main(argv: Sequence[str] | None = None) -> int:
 
         try:
             key = signing_key(args)
-            return run_fly(args.mission, args.connect, args.sysid, args.timeout, key)
+            if not args.stall_after >= 0:
+                raise ValueError(
+                    f"--stall-after must be 0 (never) or more s, not {args.stall_after:g}"
+                )
+            stall = args.stall_after or None
+            return run_fly(args.mission, args.connect, args.sysid, args.timeout, key, stall)
         except ValueError as error:
             parser.exit(2, f"quadsitl fly: error: {error}\n")
     if args.command == "replay":

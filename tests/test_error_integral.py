@@ -160,9 +160,9 @@ def test_autopilot_keeps_the_integral_as_the_env_does(tmp_path):
 
 def test_robust_hover_autopilot_takes_off_and_holds_in_a_steady_wind_the_still_air_one_cannot():
     """The shipped hover policies as the simulator's autopilot, taking off to 1 m in a
-    steady 6 m/s wind (SIM_WIND_SPD): the still-air policy is held downwind and low,
-    short of its first carrot; the robust one, whose integral the autopilot keeps,
-    climbs and holds the setpoint."""
+    steady 6 m/s wind (SIM_WIND_SPD): the still-air policy is held downwind and low
+    (its carrot moves on as it climbs, so it gets near, not there); the robust one,
+    whose integral the autopilot keeps, climbs and holds the setpoint."""
     from quadsitl.vehicle.vehicle import Vehicle
 
     torch.set_num_threads(1)
@@ -183,4 +183,4 @@ def test_robust_hover_autopilot_takes_off_and_holds_in_a_steady_wind_the_still_a
         assert not vehicle.crashed
         offsets[name] = np.abs(np.array(track) - setpoint).max(axis=0)  # per axis, m
     assert offsets["robust/hover.pt"].max() < 0.1, offsets
-    assert offsets["hover.pt"][0] > 0.2 and offsets["hover.pt"][2] > 0.5, offsets
+    assert offsets["hover.pt"][0] > 0.2 and offsets["hover.pt"][2] > 0.1, offsets
