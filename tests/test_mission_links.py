@@ -24,6 +24,7 @@ from gcs_tools.demo import free_udp_port
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.links import Link
 from tests.conftest import cli
+from tests.test_ground_station_wire import _item
 
 GCS_IDS = (255, 190)  # what QGroundControl and MAVProxy use by default
 TIMEOUT = 15.0  # s to wait for one answer (a loaded machine); never reached when right
@@ -37,26 +38,7 @@ class Uploader:
         self.conn = mavutil.mavlink_connection(
             f"udpout:127.0.0.1:{port}", source_system=GCS_IDS[0], source_component=GCS_IDS[1]
         )
-        self.items = [self.item(seq, north_m + seq) for seq in range(count)]
-
-    def item(self, seq: int, north_m: float):  # type: ignore[no-untyped-def]
-        return self.conn.mav.mission_item_int_encode(
-            self.target,
-            1,
-            seq,
-            mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-            mav.MAV_CMD_NAV_WAYPOINT,
-            0,
-            1,
-            0,
-            0.5,
-            0,
-            float("nan"),
-            round((47.397742 + north_m / 111_320) * 1e7),
-            85455940,
-            5.0,
-            mav.MAV_MISSION_TYPE_MISSION,
-        )
+        self.items = [_item(self.conn, self.target, seq, north_m + seq) for seq in range(count)]
 
     def connect(self) -> None:
         """Heartbeat until the vehicle's heartbeat comes back (it is starting up: on a
