@@ -24,7 +24,7 @@ from gcs_tools.demo import free_udp_port
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.links import Link
 from tests.conftest import cli
-from tests.test_ground_station_wire import _item
+from tests.test_ground_station_wire import _item, _stop
 
 GCS_IDS = (255, 190)  # what QGroundControl and MAVProxy use by default
 TIMEOUT = 15.0  # s to wait for one answer (a loaded machine); never reached when right
@@ -126,16 +126,6 @@ class Setup:
     sim: subprocess.Popen[str]
     ports: tuple[int, int]
     target: int
-
-
-def _stop(sim: subprocess.Popen[str]) -> str:
-    sim.terminate()
-    try:
-        out, _ = sim.communicate(timeout=10)
-    except subprocess.TimeoutExpired:
-        sim.kill()
-        out, _ = sim.communicate()
-    return out
 
 
 @pytest.fixture(params=["fleet-gcs-and-api-links", "one-vehicle-one-link"])
