@@ -321,8 +321,9 @@ def test_observe_position_false_zeroes_the_position_slots_and_nothing_else(delay
         gym.make("QuadSITL/RandomWaypoint-v0", observe_position="no")
 
 
-def test_sb3_adapter_semantics_and_ppo_trains():
+def test_sb3_adapter_semantics_and_ppo_trains(tmp_path):
     from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import configure
 
     from quadsitl.envs.sb3 import QuadSB3VecEnv
 
@@ -346,5 +347,6 @@ def test_sb3_adapter_semantics_and_ppo_trains():
         seed=0,
         device="cpu",
     )
+    model.set_logger(configure(str(tmp_path), []))  # SB3's default is a new folder in /tmp
     model.learn(total_timesteps=512)
     assert model.num_timesteps >= 512
