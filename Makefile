@@ -49,6 +49,7 @@ bench: venv
 	$(BIN)/python benchmarks/px4.py
 	$(BIN)/python benchmarks/mavlink_env.py
 	$(BIN)/python benchmarks/mavlink_training.py
+	$(BIN)/python benchmarks/sb3_vs_ppo.py
 	$(BIN)/python benchmarks/replay.py
 	$(BIN)/python benchmarks/export.py
 	$(BIN)/python benchmarks/robustness.py
