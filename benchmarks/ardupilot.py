@@ -26,8 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import best_rate, report
 
 from quadsitl.bridges.fake_ardupilot import FakeArduPilot
-from quadsitl.mavlink.links import free_udp_port
 from quadsitl.physics import get_airframe
+from quadsitl.wire.addresses import free_udp_port
 
 AIRFRAME = "iris"
 FRAME_RATE = 1200  # Hz

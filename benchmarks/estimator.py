@@ -23,8 +23,8 @@ from quadsitl import frames
 from quadsitl.physics import layout as L
 from quadsitl.vehicle import mission as M
 from quadsitl.vehicle.group import VehicleGroup
-from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire.modes import Mode
 
 SETTLE = 30.0  # s on the ground before arming
 WAYPOINTS = [(0, 0, 5), (30, 0, 5), (30, 30, 10), (0, 30, 6), (-20, 10, 8), (0, 0, 5)]  # ENU m

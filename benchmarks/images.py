@@ -34,8 +34,8 @@ from gcs_tools.client import VehicleClient, mav  # noqa: E402
 from gcs_tools.demo import run_demo, start_simulator, stop_simulator  # noqa: E402
 from gcs_tools.replay import convert  # noqa: E402
 from gcs_tools.scripted_flight import Waypoint, mission_items  # noqa: E402
-from quadsitl.mavlink.links import free_udp_port  # noqa: E402
 from quadsitl.viz.viewer import viewer_binary  # noqa: E402
+from quadsitl.wire.addresses import free_udp_port  # noqa: E402
 
 OUT = ROOT / "docs" / "images"
 WINDOW = "1600x900"  # logical points; saved at this size in pixels

@@ -44,9 +44,9 @@ from _common import report
 
 from gcs_tools.demo import free_udp_port
 from quadsitl.client.motor_client import MotorClient, SimulatorError
-from quadsitl.mavlink.signing import key_from_passphrase
 from quadsitl.physics import get_airframe
 from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.signing import key_from_passphrase
 
 AIRFRAME = get_airframe("paper")
 DURATION = 20.0  # s of wall time

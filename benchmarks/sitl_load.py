@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from pymavlink.dialects.v20 import common as mavlink
 
 from gcs_tools.demo import free_udp_port
-from quadsitl.vehicle.geo import Home
+from quadsitl.geo import Home
 from quadsitl.wire import fast_codec as FC
 
 WARM_UP = 5.0  # wall s: start, arm, take off

@@ -1,7 +1,8 @@
 """A small ground-station client over pymavlink: connect, arm, fly, upload missions.
 
-It is independent of the simulator's code (it only speaks MAVLink), so the tests and
-the demo exercise the vehicle exactly as QGroundControl or MAVSDK would.
+It imports nothing of the simulator's server or flight software, only the wire's words
+(:mod:`quadsitl.wire`: modes, parameter encoding, signing; docs/architecture.md), so the
+tests and the demo exercise the vehicle exactly as QGroundControl or MAVSDK would.
 """
 
 from __future__ import annotations
@@ -16,12 +17,12 @@ from typing import Any
 os.environ.setdefault("MAVLINK20", "1")  # before pymavlink.mavutil is imported
 from pymavlink import mavutil
 
-from quadsitl.mavlink.param_protocol import decode_value as decode_param
-from quadsitl.mavlink.param_protocol import encode_raw as encode_param
-from quadsitl.mavlink.signing import keep_signing_clock
-from quadsitl.vehicle.geo import Home
-from quadsitl.vehicle.modes import Mode
+from quadsitl.geo import Home
 from quadsitl.wire.lockstep import FORCE_MAGIC
+from quadsitl.wire.modes import Mode
+from quadsitl.wire.param_values import decode_value as decode_param
+from quadsitl.wire.param_values import encode_raw as encode_param
+from quadsitl.wire.signing import keep_signing_clock
 
 mav = mavutil.mavlink
 

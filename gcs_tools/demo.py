@@ -16,7 +16,7 @@ from gcs_tools.client import ClientError, VehicleClient
 from gcs_tools.replay import convert
 from gcs_tools.scripted_flight import DEFAULT_WAYPOINTS, fly_mission
 from quadsitl.console import runnable
-from quadsitl.mavlink.links import free_udp_port
+from quadsitl.wire.addresses import free_udp_port
 
 
 def start_simulator(*args: str) -> subprocess.Popen[str]:

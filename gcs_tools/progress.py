@@ -14,7 +14,7 @@ from collections.abc import Callable
 import numpy as np
 
 from gcs_tools.client import ClientError, MissionItem, VehicleClient, mav
-from quadsitl.vehicle.geo import Home
+from quadsitl.geo import Home
 
 PROGRESS = 0.5  # m nearer the current item that counts as progress
 NEAR = 1.0  # m: within this of the item it is holding, landing or done: never a stall

@@ -22,7 +22,7 @@ import numpy as np
 
 from gcs_tools.client import ClientError, MissionItem, VehicleClient, Waypoint, mav
 from gcs_tools.progress import LANDINGS, POSITIONS, Progress, height
-from quadsitl.vehicle.geo import Home
+from quadsitl.geo import Home
 
 DEFAULT_WAYPOINTS = (
     Waypoint(0.0, 0.0, 5.0),

@@ -15,7 +15,7 @@ from pymavlink import mavutil
 from gcs_tools.demo import free_udp_port
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.links import PEER_TIMEOUT, Link
-from quadsitl.mavlink.signing import sign_outgoing
+from quadsitl.wire.signing import sign_outgoing
 from tests.conftest import cli
 
 PASSPHRASE = "amplification test"

@@ -265,7 +265,7 @@ def test_ground_station_mission_flown_by_an_exported_autopilot(form, tmp_path):
     flies it (tests/test_policies.py)."""
     from gcs_tools.client import VehicleClient
     from gcs_tools.scripted_flight import fly_mission
-    from quadsitl.mavlink.links import free_udp_port
+    from quadsitl.wire.addresses import free_udp_port
 
     exported = export(CHECKPOINTS / "random_waypoint.pt", form, tmp_path)[0]
     port = free_udp_port()

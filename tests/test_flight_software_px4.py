@@ -12,10 +12,10 @@ import pytest
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.telemetry_status import mission_state
 from quadsitl.vehicle import mission as M
-from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.params import ParamError
 from quadsitl.vehicle.results import Outcome
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire.modes import Mode
 from tests.test_vehicle import _fly, _item
 
 

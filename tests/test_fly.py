@@ -11,8 +11,8 @@ import pytest
 from gcs_tools.client import mav
 from gcs_tools.mission_file import read_mission
 from gcs_tools.scripted_flight import planned_path
-from quadsitl.mavlink.links import free_udp_port
-from quadsitl.vehicle.geo import Home
+from quadsitl.geo import Home
+from quadsitl.wire.addresses import free_udp_port
 from tests.conftest import cli, refused_here, run_cli
 
 MISSIONS = Path(__file__).resolve().parent.parent / "docs" / "missions"

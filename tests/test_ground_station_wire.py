@@ -18,7 +18,7 @@ from pymavlink import mavutil
 import quadsitl
 from gcs_tools.demo import free_udp_port
 from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.param_protocol import decode_value, encode_raw
+from quadsitl.wire.param_values import decode_value, encode_raw
 from tests.conftest import cli
 
 

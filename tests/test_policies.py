@@ -325,8 +325,8 @@ def test_waypoint_policy_flies_a_whole_mission_as_autopilot():
     from gcs_tools.scripted_flight import DEFAULT_WAYPOINTS
     from policies.autopilot import PolicyAutopilot
     from quadsitl.vehicle import mission as M
-    from quadsitl.vehicle.modes import Mode
     from quadsitl.vehicle.vehicle import Vehicle
+    from quadsitl.wire.modes import Mode
 
     torch.set_num_threads(1)
     policy = PolicyAutopilot.from_checkpoint(CHECKPOINTS / "random_waypoint.pt", PAPER)
@@ -351,7 +351,7 @@ def test_waypoint_policy_flies_a_whole_mission_as_autopilot():
 def test_ground_station_mission_flown_by_the_policy_autopilot(tmp_path):
     from gcs_tools.client import VehicleClient
     from gcs_tools.scripted_flight import fly_mission
-    from quadsitl.mavlink.links import free_udp_port
+    from quadsitl.wire.addresses import free_udp_port
 
     port = free_udp_port()
     sim = subprocess.Popen(

@@ -27,11 +27,11 @@ from quadsitl.bridges.px4_hil import (
     ROUND_US,
     HilPhysics,
 )
+from quadsitl.geo import Home
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import AIRFRAMES, get_airframe
 from quadsitl.physics.fleet import Fleet
-from quadsitl.vehicle.geo import Home
 from quadsitl.wire import fast_codec as FC
 
 

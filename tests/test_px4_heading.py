@@ -19,10 +19,10 @@ import numpy as np
 
 from quadsitl.bridges.fake_px4 import HilSensor
 from quadsitl.bridges.px4_hil import FIELDS_MAG, ROUND_US, HilPhysics
+from quadsitl.geo import Home
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics.fleet import Fleet
 from quadsitl.physics.sensors import environment as E
-from quadsitl.vehicle.geo import Home
 from tests.test_px4_bridge import actuators, received
 
 VEHICLES = 8  # independent sensor draws (instance i: seed i)

@@ -25,10 +25,10 @@ from gcs_tools.demo import free_udp_port
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.identity import AVAILABLE_MODES
 from quadsitl.mavlink.links import Link
-from quadsitl.mavlink.param_protocol import decode_value, encode_raw
 from quadsitl.mavlink.server import MavlinkServer
-from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire.modes import Mode
+from quadsitl.wire.param_values import decode_value, encode_raw
 
 COMMAND_ACK_TIMEOUT = 1.2  # s, QGC's (src/Vehicle/Vehicle.cc): then it resends ...
 COMMAND_RETRIES = 3  # ... this many times

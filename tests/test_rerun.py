@@ -20,9 +20,9 @@ from pymavlink.dialects.v20 import common as mavlink
 from gcs_tools.client import VehicleClient
 from gcs_tools.replay import convert, main
 from gcs_tools.tlog_reader import ReadStats, read_tlog
-from quadsitl.mavlink.links import free_udp_port
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.viz.scene import WIND_ARROW_SCALE
+from quadsitl.wire.addresses import free_udp_port
 from tests.conftest import cli, run_cli, start_sim
 
 

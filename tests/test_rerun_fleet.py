@@ -14,8 +14,8 @@ import rerun.chunk as rrc
 
 from gcs_tools.client import VehicleClient
 from gcs_tools.replay import convert
-from quadsitl.mavlink.links import free_udp_port
 from quadsitl.vehicle.group import grid_offsets
+from quadsitl.wire.addresses import free_udp_port
 from tests.conftest import cli
 from tests.test_rerun import check_attitude, rows_per_entity, scalars, views
 

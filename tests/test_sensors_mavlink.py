@@ -13,9 +13,9 @@ import pytest
 
 from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
+from quadsitl.geo import Home
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics.sensors import environment as E
-from quadsitl.vehicle.geo import Home
 from tests.conftest import cli
 
 HOME = Home()

@@ -8,8 +8,8 @@ import pytest
 from pymavlink import mavutil
 
 from quadsitl.client.motor_client import MotorClient, SimulatorError
-from quadsitl.mavlink.signing import (
-    SignatureCheck,
+from quadsitl.mavlink.signing import SignatureCheck
+from quadsitl.wire.signing import (
     keep_signing_clock,
     key_from_file,
     key_from_passphrase,
@@ -154,7 +154,7 @@ def test_a_forged_frame_does_not_lock_out_the_real_sender():
     check = SignatureCheck(key)
     sender = mav.MAVLink(None, srcSystem=9, srcComponent=1)
     sender.signing.secret_key, sender.signing.sign_outgoing = key, True
-    from quadsitl.mavlink.signing import now_timestamp
+    from quadsitl.wire.signing import now_timestamp
 
     sender.signing.timestamp = now_timestamp()
     forger = mav.MAVLink(None, srcSystem=9, srcComponent=1)
@@ -174,7 +174,7 @@ def test_a_forged_frame_does_not_lock_out_the_real_sender():
 def test_signing_timestamps_follow_the_wall_clock():
     """After a minute of running, a new station must still accept the vehicle's stream."""
     from quadsitl.mavlink.links import Link
-    from quadsitl.mavlink.signing import now_timestamp
+    from quadsitl.wire.signing import now_timestamp
 
     key = key_from_passphrase(PASSPHRASE)
     link = Link("udpin:127.0.0.1:0", "gcs", 1, 1)

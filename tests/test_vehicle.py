@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from gcs_tools.scripted_flight import _segment_distance
+from quadsitl.geo import Home
 from quadsitl.vehicle import mission as M
 from quadsitl.vehicle.controller import ControllerGains, Setpoint
-from quadsitl.vehicle.geo import Home
-from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import Outcome
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire.modes import Mode
 
 
 def _fly(vehicle: Vehicle, seconds: float, every: int = 20) -> np.ndarray:

@@ -37,9 +37,9 @@ from quadsitl.bridges.ardupilot_json import (
     ServoFrame,
     parse_servo_packet,
 )
-from quadsitl.mavlink.links import is_loopback
 from quadsitl.physics.fleet import Fleet
 from quadsitl.physics.wind import Wind
+from quadsitl.wire.addresses import is_loopback
 
 PARAMETER_FOLDER = Path(__file__).resolve().parent / "ardupilot"
 WAIT = 0.2  # wall s, longest sleep in select() (signals, --duration)

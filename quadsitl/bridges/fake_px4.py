@@ -32,9 +32,9 @@ from quadsitl.bridges.px4_hil import (
     PORT,
     ROUND_US,
 )
-from quadsitl.mavlink import mavlink as mav
-from quadsitl.vehicle.geo import Home
+from quadsitl.geo import Home
 from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.units import STANDARD_GRAVITY
 
 STATE_INTERVAL_US = 5_000  # what PX4 asks for HIL_STATE_QUATERNION

@@ -36,13 +36,13 @@ import numpy as np
 
 from quadsitl.bridges.lockstep import step_vehicles
 from quadsitl.bridges.notices import Notices
-from quadsitl.mavlink import mavlink as mav
+from quadsitl.geo import Home
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import Fleet, initial_state
 from quadsitl.physics.sensors import GpsParams, SensorParams, SensorSuite
 from quadsitl.physics.sensors.suite import specific_force
-from quadsitl.vehicle.geo import Home
 from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.fit import FLOAT32_MAX, wire_int
 from quadsitl.wire.lockstep import ARMED_FLAG, LOCKSTEP_FLAG
 from quadsitl.wire.units import STANDARD_GRAVITY, rotor_speed

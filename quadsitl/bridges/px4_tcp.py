@@ -28,12 +28,12 @@ from typing import Any
 from quadsitl.bridges.frame_reader import FrameReader
 from quadsitl.bridges.px4_airframe import parameter_folder
 from quadsitl.bridges.px4_hil import PORT, ROUND_US, HilPhysics
-from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.links import is_loopback
+from quadsitl.geo import Home
 from quadsitl.physics.fleet import Fleet
 from quadsitl.physics.wind import Wind
-from quadsitl.vehicle.geo import Home
 from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.addresses import is_loopback
+from quadsitl.wire.dialect import mavlink as mav
 
 WAIT = 0.2  # wall s, longest sleep in select() (signals, --duration)
 RECEIVE = 65536  # bytes per read, taken when the frames of the last read are all handled

@@ -8,7 +8,7 @@ import select
 import socket
 import time
 
-from quadsitl.mavlink.links import MAX_DATAGRAM
+from quadsitl.wire.addresses import MAX_DATAGRAM
 
 SPIN_SECONDS = 0.002  # poll this long for an answer before sleeping in select()
 

@@ -16,11 +16,11 @@ from typing import Any
 
 from quadsitl.client.datagrams import next_datagram
 from quadsitl.client.motor_client import SimulatorError, refusal
-from quadsitl.mavlink.links import is_loopback
-from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.addresses import is_loopback
 from quadsitl.wire.answer import field_slices
 from quadsitl.wire.dialect import mavlink as mav
+from quadsitl.wire.signing import keep_signing_clock, sign_outgoing
 from quadsitl.wire.statustext import TextJoiner
 
 _TEXT = field_slices(mav.MAVLink_statustext_message)

@@ -26,10 +26,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from quadsitl.client.datagrams import next_datagram
-from quadsitl.mavlink.links import MAX_DATAGRAM, is_loopback
-from quadsitl.mavlink.signing import keep_signing_clock, sign_outgoing
 from quadsitl.physics import layout as L
 from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.addresses import MAX_DATAGRAM, is_loopback
 from quadsitl.wire.answer import ANSWER_IDS, AnswerReader, decode_answer
 from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.lockstep import (
@@ -43,6 +42,7 @@ from quadsitl.wire.lockstep import (
     STAGE_MOTION,
     check_controls,
 )
+from quadsitl.wire.signing import keep_signing_clock, sign_outgoing
 from quadsitl.wire.state import WireState
 from quadsitl.wire.statustext import TextJoiner
 

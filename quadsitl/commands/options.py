@@ -102,7 +102,7 @@ def add_signing_options(parser: argparse.ArgumentParser, what: str) -> None:
 def signing_key(args: argparse.Namespace) -> bytes | None:
     """The key from the options or the environment; a variable that is set but empty is an
     error (an empty secret must never quietly mean "no signing")."""
-    from quadsitl.mavlink.signing import key_from_file, key_from_hex, key_from_passphrase
+    from quadsitl.wire.signing import key_from_file, key_from_hex, key_from_passphrase
 
     if args.signing_key is not None:
         return key_from_file(args.signing_key)

@@ -16,8 +16,8 @@ from quadsitl.commands.options import parse_weather, signing_key
 
 def sim_config(args: argparse.Namespace) -> object:
     """The simulator's SimConfig (quadsitl's own flight software and links)."""
+    from quadsitl.geo import Home
     from quadsitl.mavlink.runner import SimConfig
-    from quadsitl.vehicle.geo import Home
 
     def url(value: str) -> str | None:
         return None if value.lower() == "none" else value
@@ -83,7 +83,7 @@ def parse_motor_faults(items: list[str]) -> dict[int, float]:
 
 def parse_home(value: str | None) -> Any:
     """``--home LAT,LON,ALT`` as a Home (None when not given); ValueError in one line."""
-    from quadsitl.vehicle.geo import Home
+    from quadsitl.geo import Home
 
     if value is None:
         return None

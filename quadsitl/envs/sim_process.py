@@ -24,7 +24,7 @@ import weakref
 from concurrent.futures import Future
 from typing import Any
 
-from quadsitl.mavlink.links import free_udp_port
+from quadsitl.wire.addresses import free_udp_port
 
 PR_SET_PDEATHSIG = 1
 

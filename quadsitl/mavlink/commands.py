@@ -24,10 +24,10 @@ from quadsitl.mavlink.motor_path import MotorPath
 from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.physics.sensors.failures import FAILURE_NAMES, OFF, STUCK
 from quadsitl.physics.sensors.failures import OK as SENSOR_OK
-from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import ACCEPTED, Outcome, Result, Severity
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire.lockstep import FORCE_MAGIC, RESET_STATE, STAGE_AIRFRAME, STAGE_MOTION
+from quadsitl.wire.modes import Mode
 
 # COMPONENT_ARM_DISARM param2 that forces the action: PX4's and ArduPilot's 21196 (what
 # this project's clients send), and 2989, which QGroundControl's "force arm" sends

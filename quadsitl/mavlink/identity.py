@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from quadsitl import __version__
 from quadsitl.mavlink import mavlink as mav
-from quadsitl.vehicle.modes import Mode
+from quadsitl.wire.modes import Mode
 
 
 def software_version(major: int, minor: int, patch: int) -> int:

@@ -1,9 +1,9 @@
 """Links: UDP and TCP endpoints that carry MAVLink to any number of peers.
 
-URLs follow pymavlink: ``udpout:HOST:PORT`` sends to HOST:PORT (where QGroundControl,
-MAVProxy or MAVSDK listen) and also answers anyone else who writes to it;
-``udpin:HOST:PORT`` listens and answers every peer heard from; ``tcpin:HOST:PORT``
-accepts TCP clients.
+URLs follow pymavlink (:mod:`quadsitl.wire.addresses`): ``udpout:HOST:PORT`` sends to
+HOST:PORT (where QGroundControl, MAVProxy or MAVSDK listen) and also answers anyone else
+who writes to it; ``udpin:HOST:PORT`` listens and answers every peer heard from;
+``tcpin:HOST:PORT`` accepts TCP clients.
 
 Loopback unless asked otherwise: a ``udpout`` link to a loopback address binds the
 loopback interface (nobody off this host can reach it), an empty HOST means
@@ -24,7 +24,6 @@ and always gets everything; a TCP client has proved its address by connecting.)
 from __future__ import annotations
 
 import contextlib
-import ipaddress
 import itertools
 import socket
 import time
@@ -32,44 +31,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from quadsitl.mavlink import mavlink
-from quadsitl.mavlink.signing import now_timestamp
 from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.addresses import LOOPBACK, MAX_DATAGRAM, is_loopback, parse_url
 from quadsitl.wire.lockstep import OWNER_SILENCE
+from quadsitl.wire.signing import now_timestamp
 
-LOOPBACK = "127.0.0.1"
 PEER_TIMEOUT = OWNER_SILENCE  # s without an accepted frame before a UDP peer is dropped
-MAX_DATAGRAM = 65535
-
-
-def free_udp_port(host: str = "127.0.0.1") -> int:
-    """A UDP port on ``host`` that nothing uses right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind((host, 0))
-        return int(probe.getsockname()[1])
-
-
-def parse_url(url: str) -> tuple[str, str, int]:
-    """('udpout'|'udpin'|'tcpin', host, port); ValueError naming the problem."""
-    try:
-        kind, host, port_text = url.split(":")
-        port = int(port_text)
-    except ValueError:
-        raise ValueError(
-            f"link {url!r}: expected KIND:HOST:PORT, e.g. udpout:127.0.0.1:14550"
-        ) from None
-    if kind not in ("udpout", "udpin", "tcpin"):
-        raise ValueError(f"link {url!r}: kind must be udpout, udpin or tcpin, got {kind!r}")
-    if not 0 <= port <= 65535:
-        raise ValueError(f"link {url!r}: port {port} out of range")
-    return kind, host or LOOPBACK, port
-
-
-def is_loopback(host: str) -> bool:
-    """True for an address (or name) of this host's loopback interface."""
-    try:
-        return ipaddress.ip_address(socket.gethostbyname(host)).is_loopback
-    except (OSError, ValueError):
-        return False
 
 
 @dataclass

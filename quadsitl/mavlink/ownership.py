@@ -17,8 +17,9 @@ import hmac
 import math
 from typing import Any
 
-from quadsitl.mavlink.signing import NEW_STREAM_SLACK, SIGNED_FLAG, now_timestamp
+from quadsitl.mavlink.signing import NEW_STREAM_SLACK, SIGNED_FLAG
 from quadsitl.wire.lockstep import BUSY_PREFIX, OWNER_SILENCE
+from quadsitl.wire.signing import now_timestamp
 
 REFUSAL_PERIOD = 0.5  # s: at most one refusal text a peer in this time
 

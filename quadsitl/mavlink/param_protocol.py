@@ -17,7 +17,6 @@ as the protocol worked before PARAM_ERROR existed.
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Callable
 from typing import Any
 
@@ -25,57 +24,15 @@ from quadsitl.mavlink import mavlink as mav
 from quadsitl.vehicle.params import PARAMETERS, SPECS, ParamError
 from quadsitl.vehicle.results import Severity
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire.param_values import (
+    decode_value,
+    encode_value,
+    param_name,
+    param_type,
+    type_name,
+)
 
-INTEGER_TYPES = {
-    mav.MAV_PARAM_TYPE_UINT8: "<B",
-    mav.MAV_PARAM_TYPE_INT8: "<b",
-    mav.MAV_PARAM_TYPE_UINT16: "<H",
-    mav.MAV_PARAM_TYPE_INT16: "<h",
-    mav.MAV_PARAM_TYPE_UINT32: "<I",
-    mav.MAV_PARAM_TYPE_INT32: "<i",
-}
 Reply = Callable[[Any], None]
-
-
-def param_type(integer: bool) -> int:
-    """The MAV_PARAM_TYPE of an integer or a real parameter (its only type on the wire)."""
-    return mav.MAV_PARAM_TYPE_INT32 if integer else mav.MAV_PARAM_TYPE_REAL32
-
-
-def type_name(mav_param_type: int) -> str:
-    """'INT32', 'REAL32', ... or the number when it names no type."""
-    entry = mav.enums["MAV_PARAM_TYPE"].get(mav_param_type)
-    return entry.name.removeprefix("MAV_PARAM_TYPE_") if entry else str(mav_param_type)
-
-
-def encode_value(value: float, integer: bool) -> tuple[float, int]:
-    """(float field, MAV_PARAM_TYPE) of a parameter value."""
-    mav_type = param_type(integer)
-    return encode_raw(value, mav_type), mav_type
-
-
-def encode_raw(value: float, param_type: int) -> float:
-    """The float field that carries ``value`` as ``param_type`` (bytewise for integers)."""
-    fmt = INTEGER_TYPES.get(param_type)
-    if fmt is None:
-        return float(value)
-    data = struct.pack(fmt, round(value)).ljust(4, b"\x00")
-    return float(struct.unpack("<f", data)[0])
-
-
-def decode_value(raw: float, param_type: int) -> float:
-    """The number a PARAM_SET (or PARAM_VALUE) carries, by its declared type."""
-    fmt = INTEGER_TYPES.get(param_type)
-    if fmt is None:
-        return float(raw)
-    data = struct.pack("<f", raw)
-    return float(struct.unpack(fmt, data[: struct.calcsize(fmt)])[0])
-
-
-def param_name(raw: Any) -> str:
-    if isinstance(raw, bytes):
-        raw = raw.decode("ascii", "replace")
-    return str(raw).split("\x00", 1)[0].strip()
 
 
 LIST_BURST = 10  # PARAM_VALUEs per tick while sending the list

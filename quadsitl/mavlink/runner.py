@@ -22,9 +22,10 @@ from typing import Protocol
 
 import numpy as np
 
+from quadsitl.geo import Home
 from quadsitl.mavlink.fleet_server import FleetServer
 from quadsitl.mavlink.identity import get_identity
-from quadsitl.mavlink.links import Link, is_loopback, parse_url
+from quadsitl.mavlink.links import Link
 from quadsitl.mavlink.realtime_loop import RealTimeLoop
 from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
@@ -33,12 +34,12 @@ from quadsitl.physics import layout as L
 from quadsitl.physics.wind import Wind
 from quadsitl.vehicle.controller import Autopilot, Setpoint
 from quadsitl.vehicle.episodes import EpisodeOptions
-from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.motor_faults import check_efficiency, check_motor
 from quadsitl.vehicle.param_binding import show_weather
 from quadsitl.vehicle.results import Severity
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire.addresses import is_loopback, parse_url
 from quadsitl.wire.ids import MAX_SYSTEM_ID
 
 

@@ -40,9 +40,9 @@ from quadsitl.mavlink.signing import (
 )
 from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.mavlink.tlog import TlogWriter
-from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import Outcome, Severity
 from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.wire.modes import Mode
 from quadsitl.wire.statustext import split_text
 
 MOTOR_LINK = "hil"  # the link name whose traffic is not logged and has no streams

@@ -1,4 +1,6 @@
-"""MAVLink 2 message signing: keys, checking incoming frames, signing outgoing ones.
+"""MAVLink 2 signing, the server's side: checking incoming frames, keeping the streams'
+timestamps, saying what was rejected. The keys and the signing of what is sent, which
+both ends of the wire do, are :mod:`quadsitl.wire.signing`.
 
 A signed frame ends with 13 bytes: link id (1), timestamp (6, units of 10 µs since
 2015-01-01 00:00 UTC) and the first 6 bytes of SHA-256(key + frame up to and including
@@ -31,78 +33,16 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, ClassVar
 
+from quadsitl.wire.signing import now_timestamp
+
 OPEN_MESSAGES = frozenset({"HEARTBEAT", "RADIO_STATUS"})
 SIGNED_FLAG = 0x01  # MAVLINK_IFLAG_SIGNED, in the incompat flags
-EPOCH_2015 = 1420070400  # s, Unix time of 2015-01-01 00:00 UTC
 NEW_STREAM_SLACK = 60 * 100_000  # one minute, in 10 µs units
 FUTURE_SLACK = 10 * 100_000  # how far ahead of the wall clock a timestamp may be (10 s)
 REASONS = ("unsigned", "bad_signature", "replayed", "ahead")
 STATE_DIR_VARIABLE = "QUADSITL_STATE_DIR"  # where signing timestamps are kept
 SAVE_PERIOD = 1.0  # s between two writes of the timestamps (when they changed)
 REPORT_PERIOD = 10.0  # wall s between two summaries of rejected messages
-
-
-def key_from_passphrase(passphrase: str, source: str = "signing passphrase") -> bytes:
-    """SHA-256 of the passphrase: the key MAVProxy's ``signing setup`` makes."""
-    if not passphrase.strip():
-        raise ValueError(f"{source}: an empty passphrase would turn signing off; give one")
-    return hashlib.sha256(passphrase.encode("utf-8")).digest()
-
-
-def key_from_hex(text: str, source: str = "signing key") -> bytes:
-    """A key written as 64 hexadecimal digits."""
-    try:
-        key = bytes.fromhex(text.strip())
-    except ValueError:
-        key = b""
-    if len(key) != 32:
-        raise ValueError(f"{source} must be 64 hexadecimal digits")
-    return checked_key(key, source)
-
-
-def key_from_file(path: str | Path) -> bytes:
-    """A 32-byte key: the file holds 64 hexadecimal digits, or exactly 32 raw bytes."""
-    try:
-        data = Path(path).read_bytes()
-    except OSError as error:
-        raise ValueError(f"signing key file {path}: {error.strerror or error}") from None
-    text = data.strip()
-    try:
-        if len(text) == 64:
-            return checked_key(bytes.fromhex(text.decode("ascii")), f"signing key file {path}")
-    except (UnicodeDecodeError, ValueError):
-        pass
-    if len(data) == 32:
-        return checked_key(data, f"signing key file {path}")
-    raise ValueError(f"signing key file {path}: expected 64 hex digits or 32 raw bytes")
-
-
-def checked_key(key: bytes, source: str = "signing key") -> bytes:
-    """``key`` if it is usable: 32 bytes, not all zeros (which MAVLink reads as "off")."""
-    if not isinstance(key, (bytes, bytearray)) or len(key) != 32:
-        raise ValueError(f"{source} must be 32 bytes, got {key!r:.40}")
-    if not any(key):
-        raise ValueError(f"{source} is all zeros, which means 'signing off'; use a real key")
-    return bytes(key)
-
-
-def now_timestamp() -> int:
-    """The current signing timestamp (10 µs units since 2015)."""
-    return int((time.time() - EPOCH_2015) * 100_000)
-
-
-def keep_signing_clock(mav: Any) -> None:
-    """Keep a signer's timestamp on the wall clock (pymavlink only adds 1 a message):
-    a receiver rejects a new stream more than a minute behind its own clock."""
-    mav.signing.timestamp = max(mav.signing.timestamp, now_timestamp())
-
-
-def sign_outgoing(mav: Any, key: bytes, link_id: int) -> None:
-    """Make a pymavlink MAVLink object sign everything it sends with ``key``."""
-    mav.signing.secret_key = key
-    mav.signing.link_id = link_id & 0xFF
-    mav.signing.sign_outgoing = True
-    mav.signing.timestamp = now_timestamp()
 
 
 def is_signed(message: Any) -> bool:

@@ -14,10 +14,10 @@ from typing import Any
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.identity import AVAILABLE_MODES, CUSTOM_VERSION, MIDDLEWARE_VERSION
 from quadsitl.mavlink.snapshot import Snapshot
-from quadsitl.vehicle.modes import MAIN_AUTO, MAIN_OFFBOARD, MAIN_POSCTL, Mode
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire.answer import UNUSED_OUTPUTS
 from quadsitl.wire.fit import wire_int
+from quadsitl.wire.modes import MAIN_AUTO, MAIN_OFFBOARD, MAIN_POSCTL, Mode
 
 _encoder = mav.MAVLink(None)
 

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from quadsitl.geo import MAX_LOCAL_DISTANCE
 from quadsitl.physics import layout as L
 from quadsitl.vehicle.controller import Vec
-from quadsitl.vehicle.geo import MAX_LOCAL_DISTANCE
-from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import ACCEPTED, Result, Severity, denied
 from quadsitl.vehicle.view import VehicleView
+from quadsitl.wire.modes import Mode
 
 
 def motor_command(v: VehicleView, rotor_speeds: Vec | None) -> None:

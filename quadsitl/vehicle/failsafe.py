@@ -11,9 +11,9 @@ import math
 from dataclasses import dataclass
 
 from quadsitl.vehicle import external_control as X
-from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.results import Severity
 from quadsitl.vehicle.view import VehicleView
+from quadsitl.wire.modes import Mode
 
 # COM_LOW_BAT_ACT, NAV_DLL_ACT and GF_ACTION values -> the mode flown (None: warn only).
 BATTERY_ACTIONS = {0: None, 2: Mode.LAND, 3: Mode.RTL}

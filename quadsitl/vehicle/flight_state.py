@@ -19,10 +19,10 @@ from quadsitl.vehicle import ground_contact as GC
 from quadsitl.vehicle import guidance as G
 from quadsitl.vehicle.controller import Setpoint, Vec
 from quadsitl.vehicle.mission_runner import MissionRunner
-from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
 from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg
 from quadsitl.vehicle.results import ACCEPTED, LandedState, Result, Severity, denied
 from quadsitl.vehicle.view import VehicleView
+from quadsitl.wire.modes import NEEDS_PILOT, Mode
 
 
 class FlightState:

@@ -17,13 +17,13 @@ from collections.abc import Callable
 
 import numpy as np
 
+from quadsitl.geo import Home
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.sensors import SensorSuite
 from quadsitl.vehicle.controller import Autopilot
 from quadsitl.vehicle.episodes import EpisodeOptions, MotorEpisodes
 from quadsitl.vehicle.estimator import Estimator, EstimatorSlot
-from quadsitl.vehicle.geo import Home
 from quadsitl.vehicle.stepping import Stepping, physics_steps_per_period
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire.ids import MAX_SYSTEM_ID

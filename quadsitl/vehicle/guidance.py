@@ -11,11 +11,11 @@ import math
 
 import numpy as np
 
+from quadsitl.geo import MAX_LOCAL_DISTANCE
 from quadsitl.vehicle.controller import Vec
-from quadsitl.vehicle.geo import MAX_LOCAL_DISTANCE
-from quadsitl.vehicle.modes import STICK_MODES, Mode
 from quadsitl.vehicle.navigator import Activity, Hold, Land, Leg, Limits, Orbit, Sticks
 from quadsitl.vehicle.view import VehicleView
+from quadsitl.wire.modes import STICK_MODES, Mode
 
 LIFT_OFF_HEIGHT = 0.3  # m above the resting height: lower goals keep a landed vehicle idle
 

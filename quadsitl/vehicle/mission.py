@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from quadsitl.vehicle.geo import Home
+from quadsitl.geo import Home
 
 # MAV_CMD values of the items the vehicle flies.
 NAV_WAYPOINT = 16

@@ -19,6 +19,7 @@ from collections import deque
 import numpy as np
 
 from quadsitl import frames
+from quadsitl.geo import MAX_LOCAL_DISTANCE, Home
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet_slot import FleetSlot
@@ -33,14 +34,13 @@ from quadsitl.vehicle.episodes import MotorEpisodes
 from quadsitl.vehicle.estimator import Estimator, EstimatorSlot
 from quadsitl.vehicle.failsafe import Failsafes
 from quadsitl.vehicle.flight_state import FlightState
-from quadsitl.vehicle.geo import MAX_LOCAL_DISTANCE, Home
 from quadsitl.vehicle.mission_runner import MissionRunner
-from quadsitl.vehicle.modes import NEEDS_PILOT, Mode
 from quadsitl.vehicle.motor_faults import MotorFaults
 from quadsitl.vehicle.navigator import Activity, Sticks
 from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
 from quadsitl.vehicle.results import ACCEPTED, Result, Severity, denied
 from quadsitl.vehicle.stepping import Stepping, physics_steps_per_period
+from quadsitl.wire.modes import NEEDS_PILOT, Mode
 
 MOTOR_TIMEOUT = 0.5  # s (simulated) without motor commands: the onboard controller resumes
 STICK_TIMEOUT = 0.5  # s (simulated) without MANUAL_CONTROL: sticks centred (COM_RC_LOSS_T)

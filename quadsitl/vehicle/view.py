@@ -12,17 +12,17 @@ from __future__ import annotations
 from collections import deque
 from typing import Protocol
 
+from quadsitl.geo import Home
 from quadsitl.physics import Airframe, Fleet
 from quadsitl.physics.fleet_slot import FleetSlot
 from quadsitl.vehicle.battery import Battery
 from quadsitl.vehicle.controller import Autopilot, CascadedController, Vec
 from quadsitl.vehicle.estimator import EstimatorSlot
-from quadsitl.vehicle.geo import Home
-from quadsitl.vehicle.modes import Mode
 from quadsitl.vehicle.motor_faults import MotorFaults
 from quadsitl.vehicle.navigator import Activity
 from quadsitl.vehicle.params import ParameterStore
 from quadsitl.vehicle.results import Result
+from quadsitl.wire.modes import Mode
 
 
 class Flight(Protocol):

@@ -28,7 +28,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from quadsitl.vehicle.geo import Home
+from quadsitl.geo import Home
 from quadsitl.viz.flight_view import Sample
 from quadsitl.viz.scene import (
     STATE_PANEL,

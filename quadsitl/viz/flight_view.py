@@ -20,13 +20,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from pymavlink import mavutil
 
 from quadsitl import frames
-from quadsitl.vehicle.geo import Home
-from quadsitl.vehicle.modes import Mode
+from quadsitl.geo import Home
 from quadsitl.viz.scene import WIND_ARROW_SCALE, pose_from_ned, quat_xyzw
 from quadsitl.wire.dialect import mavlink as M
+from quadsitl.wire.modes import Mode, mode_string
 from quadsitl.wire.units import STANDARD_GRAVITY
 
 # M is the project's dialect, not mavutil.mavlink: that one is MAVLink 1's (no ODOMETRY)
@@ -372,4 +371,4 @@ def _mode_name(msg: Any) -> str:
             return Mode.from_custom_mode(msg.custom_mode).name
         except ValueError:
             pass
-    return str(mavutil.mode_string_v10(msg))
+    return mode_string(msg)

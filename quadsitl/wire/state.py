@@ -121,7 +121,7 @@ class WireState:
 
     def global_position(self, origin: Any) -> tuple[float, float, float]:
         """(lat deg, lon deg, alt m AMSL) of the ground-level position; ``origin``: the
-        :class:`~quadsitl.vehicle.geo.Home` of the local frame."""
+        :class:`~quadsitl.geo.Home` of the local frame."""
         north, east, down = self.position_ned
         return origin.to_global(float(east), float(north), float(-down))
 

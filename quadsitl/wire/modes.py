@@ -7,6 +7,7 @@ a generic autopilot, and QGroundControl shows the PX4 names).
 from __future__ import annotations
 
 from enum import Enum
+from typing import Any
 
 # PX4 main modes and AUTO sub modes.
 MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_AUTO = 1, 2, 3, 4
@@ -68,3 +69,11 @@ NEEDS_PILOT = frozenset({Mode.MANUAL, Mode.STABILIZED, Mode.ACRO})
 # Modes flown with joystick input (MANUAL_CONTROL) as velocity commands, holding
 # position with the sticks centred (ALTCTL is flown as POSCTL).
 STICK_MODES = frozenset({Mode.POSCTL, Mode.ALTCTL})
+
+
+def mode_string(heartbeat: Any) -> str:
+    """pymavlink's name of a HEARTBEAT's mode, for an autopilot whose modes are not laid
+    out as PX4's (ArduPilot's, by its vehicle type)."""
+    from pymavlink import mavutil  # here, not above: it loads a dialect of its own (0.2 s)
+
+    return str(mavutil.mode_string_v10(heartbeat))
