@@ -2,7 +2,7 @@
 
 * ``house_files_to_add_a_task``: code files that name the worked-example task
   (``figure_eight``, added as docs/tasks.md says): the files one touches to add a task
-  (target 2: its module and the task list);
+  (target 3: its module, the task list and its env classes' statements);
 * ``house_largest_file_lines``: lines of the largest module of quadsitl/, policies/ and
   gcs_tools/ (target ≤ 400);
 * ``house_import_cycles``: import cycles between modules, ``TYPE_CHECKING`` imports
@@ -157,7 +157,7 @@ def report(name: str, value: float, target: str, ok: bool, details: list[str] = 
 
 def main() -> None:
     files = files_naming(EXAMPLE_TASK)
-    report("house_files_to_add_a_task", len(files), "2", len(files) <= 2, [str(f) for f in files])
+    report("house_files_to_add_a_task", len(files), "3", len(files) <= 3, [str(f) for f in files])
     sizes = {
         path: len(path.read_text(encoding="utf-8").splitlines()) for path in modules().values()
     }

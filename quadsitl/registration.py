@@ -2,10 +2,11 @@
 
 ``TASK_NAMES`` is the one list of quadsitl's tasks: each name is a module of
 ``quadsitl.tasks`` that defines ``TASK`` (a ``TaskSpec``). Everything per task is derived
-from it: the Gymnasium ids (here), the task registry (``quadsitl.tasks.TASKS``), the env
-classes (``quadsitl.envs``) and the trainers' and evaluators' tables (``policies``).
-Adding a task is its module plus its name here (docs/tasks.md). This module imports no
-task, so that ``import quadsitl`` stays light: the envs are built when first made.
+from it: the Gymnasium ids (here), the task registry (``quadsitl.tasks.TASKS``) and the
+trainers' and evaluators' tables (``policies``); the env classes are class statements
+of ``quadsitl.envs.task_envs``, checked against it. Adding a task is its module, its
+name here and its env classes (docs/tasks.md). This module imports no task, so that
+``import quadsitl`` stays light: the envs are built when first made.
 """
 
 from __future__ import annotations
@@ -78,7 +79,7 @@ def register_envs() -> None:
                 continue
             gymnasium.register(
                 id=env_id,
-                entry_point=f"quadsitl.envs.single:{class_name(name, version)}Env",
-                vector_entry_point=f"quadsitl.envs.vector:{class_name(name, version)}VectorEnv",
+                entry_point=f"quadsitl.envs.task_envs:{class_name(name, version)}Env",
+                vector_entry_point=f"quadsitl.envs.task_envs:{class_name(name, version)}VectorEnv",
                 disable_env_checker=False,
             )

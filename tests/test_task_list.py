@@ -1,16 +1,21 @@
-"""The task list is the one place a task is named: a task is its module plus one line.
+"""The task list is the one place a task is named: a task is its module, one line and
+its env classes.
 
 ``files_naming(word)`` counts the files of the project's code that name a task; for a
-task added as docs/tasks.md says, they are its module and the task list, no more.
+task added as docs/tasks.md says, they are its module, the task list and the class
+statements of its envs, no more.
 """
 
 from __future__ import annotations
 
+import importlib
 import re
 from pathlib import Path
 
+import pytest
+
 import quadsitl
-from quadsitl.registration import ENV_IDS, TASK_NAMES, task_env_name
+from quadsitl.registration import ENV_IDS, ENV_IDS_V1, TASK_NAMES, task_env_name
 from quadsitl.tasks import TASKS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -30,11 +35,48 @@ def files_naming(task: str) -> list[Path]:
     )
 
 
-def test_a_task_added_as_documented_is_named_in_two_files():
+def test_a_task_added_as_documented_is_named_in_three_files():
     assert files_naming("figure_eight") == [
+        Path("quadsitl/envs/task_envs.py"),
         Path("quadsitl/registration.py"),
         Path("quadsitl/tasks/figure_eight.py"),
     ]
+
+
+def test_every_env_class_is_a_class_statement_its_entry_point_names():
+    """``grep "class HoverEnv"`` finds each env, and Gymnasium's entry points load it."""
+    import gymnasium as gym
+
+    from quadsitl.envs import VECTOR_VERSION_CLASSES, VERSION_CLASSES
+
+    sources = "".join(p.read_text(encoding="utf-8") for p in (ROOT / "quadsitl").rglob("*.py"))
+    for version, ids in ((0, ENV_IDS), (1, ENV_IDS_V1)):
+        for name, env_id in ids.items():
+            spec = gym.spec(env_id)
+            for tables, entry in (
+                (VERSION_CLASSES, spec.entry_point),
+                (VECTOR_VERSION_CLASSES, spec.vector_entry_point),
+            ):
+                cls = tables[version][name]
+                assert re.search(rf"^class {cls.__name__}\(", sources, re.M), cls.__name__
+                module, _, attribute = str(entry).partition(":")
+                assert getattr(importlib.import_module(module), attribute) is cls
+                assert (cls.task_name, cls.version) == (TASKS[task_name(name)].name, version)
+            assert VERSION_CLASSES[version][name].__doc__.startswith(f"# {env_id}")
+
+
+def test_a_task_without_its_env_classes_is_named_at_import():
+    from quadsitl.envs import task_envs
+
+    class Base:
+        pass
+
+    with pytest.raises(ImportError, match=r"class HoverEnv\(Base, task='hover'\): \.\.\."):
+        task_envs._by_version(Base, "Env")
+
+
+def task_name(env_name: str) -> str:
+    return next(t for t in TASK_NAMES if task_env_name(t) == env_name)
 
 
 def test_every_task_module_is_in_the_task_list():

@@ -1,32 +1,14 @@
 """Gymnasium faces of the task engine: single env, native vector env, SB3 adapter.
 
-Each task's classes (``HoverEnv``, ``HoverVectorEnv``, ``HoverV1Env``, ...) are derived
-from the task list: ``ENV_CLASSES`` and ``VECTOR_CLASSES`` (v0), the ``-v1`` ones in
-``VERSION_CLASSES`` and ``VECTOR_VERSION_CLASSES``, and by name from this package.
+Each task's classes (``HoverEnv``, ``HoverVectorEnv``, ``HoverV1Env``, ...) are class
+statements of :mod:`quadsitl.envs.task_envs`, here by name too; ``ENV_CLASSES`` and
+``VECTOR_CLASSES`` (v0), ``VERSION_CLASSES`` and ``VECTOR_VERSION_CLASSES`` (every
+version) hold them by env name.
 """
 
-from typing import Any
+from quadsitl.envs import task_envs
+from quadsitl.envs.single import QuadEnv
+from quadsitl.envs.task_envs import *  # noqa: F403  (each task's env classes, by name)
+from quadsitl.envs.vector import QuadVectorEnv
 
-from quadsitl.envs.single import ENV_CLASSES, VERSION_CLASSES, QuadEnv
-from quadsitl.envs.vector import VECTOR_CLASSES, VECTOR_VERSION_CLASSES, QuadVectorEnv
-
-
-def __getattr__(name: str) -> Any:
-    """A task's env class by name: ``HoverEnv``, ``HoverVectorEnv``, ``HoverV1Env``, ..."""
-    for versions in (VERSION_CLASSES, VECTOR_VERSION_CLASSES):
-        for classes in versions.values():
-            for cls in classes.values():
-                if cls.__name__ == name:
-                    return cls
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-__all__ = [
-    "ENV_CLASSES",
-    "VECTOR_CLASSES",
-    "VECTOR_VERSION_CLASSES",
-    "VERSION_CLASSES",
-    "QuadEnv",
-    "QuadVectorEnv",
-    *(cls.__name__ for classes in VERSION_CLASSES.values() for cls in classes.values()),
-]
+__all__ = ["QuadEnv", "QuadVectorEnv", *task_envs.__all__]

@@ -16,8 +16,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env import VecEnv
 
-from quadsitl.envs.single import ENV_CLASSES
-from quadsitl.envs.vector import VECTOR_VERSION_CLASSES
+from quadsitl.envs.task_envs import ENV_CLASSES, VECTOR_VERSION_CLASSES
 
 
 class QuadSB3VecEnv(VecEnv):

@@ -1,5 +1,5 @@
-"""One Gymnasium env per task: a TaskEngine with one vehicle; the classes are derived
-from the task list (ENV_CLASSES)."""
+"""One Gymnasium env per task: a TaskEngine with one vehicle. Each task's classes
+(``HoverEnv``, ``HoverV1Env``) are class statements in :mod:`quadsitl.envs.task_envs`."""
 
 from __future__ import annotations
 
@@ -15,8 +15,7 @@ from quadsitl.envs.factory import build_engine
 from quadsitl.envs.mavlink_backend import (
     reset_envs,
 )
-from quadsitl.registration import VERSIONS, class_name
-from quadsitl.tasks import TASKS, TaskEngine, TaskSpec
+from quadsitl.tasks import TASKS, TaskEngine, get_task
 from quadsitl.viz import raster
 
 if TYPE_CHECKING:  # imported when an env records: Rerun takes half a second to import
@@ -44,7 +43,8 @@ RENDER_MODES = ("rgb_array", "rerun")
 
 
 class QuadEnv(gym.Env):
-    """Base of the task envs; each task's subclass (ENV_CLASSES) sets ``task_name``.
+    """Base of the task envs: ``class HoverEnv(QuadEnv, task="hover")`` is the env of
+    ``QuadSITL/Hover-v0``, ``version=1`` of its ``-v1`` (:mod:`quadsitl.envs.task_envs`).
 
     ``backend="inprocess"`` (default) steps the physics here; ``backend="mavlink"`` flies
     a ``quadsitl sim --lockstep`` process over MAVLink with the same task code (see
@@ -59,6 +59,14 @@ class QuadEnv(gym.Env):
     metadata: dict[str, Any] = {"render_modes": list(RENDER_MODES), "render_fps": 20}  # noqa: RUF012
     task_name = "hover"
     version = 0
+
+    def __init_subclass__(cls, task: str | None = None, version: int = 0, **kwargs: Any) -> None:
+        """A task's env: its ``task_name`` and ``version``, its docstring in Gymnasium's
+        template from the task's spec (:mod:`quadsitl.envs.docs`)."""
+        super().__init_subclass__(**kwargs)
+        if task is not None:
+            cls.task_name, cls.version = task, version
+            cls.__doc__ = docs.env_doc(get_task(task), version)
 
     def __init__(
         self, render_mode: str | None = None, rerun_save: str | None = None, **options: Any
@@ -141,34 +149,3 @@ class QuadEnv(gym.Env):
             self.view.close()
             self.view = None
         super().close()
-
-
-def _env_class(task: TaskSpec, version: int) -> type[QuadEnv]:
-    """The env class of a task's id of ``version``: ``HoverEnv`` (v0), ``HoverV1Env`` (v1);
-    its docstring from its spec."""
-    name = f"{class_name(task.env_name, version)}Env"
-    attributes = {
-        "task_name": task.name,
-        "version": version,
-        "__doc__": docs.env_doc(task, version),
-        "__module__": __name__,
-    }
-    return type(name, (QuadEnv,), {**attributes, "__qualname__": name})
-
-
-VERSION_CLASSES: dict[int, dict[str, type[QuadEnv]]] = {
-    version: {t.env_name: _env_class(t, version) for t in TASKS.values()} for version in VERSIONS
-}
-"""Version -> env name (``Hover``) -> env class (``HoverEnv``, ``HoverV1Env``)."""
-ENV_CLASSES = VERSION_CLASSES[0]
-"""Env name (``Hover``) -> v0 env class (``HoverEnv``), one per task of the task list."""
-
-
-def __getattr__(name: str) -> type[QuadEnv]:
-    """Each task's env class by its name (``HoverEnv``, ``HoverV1Env``): the Gymnasium
-    entry points and pickle find them here."""
-    for classes in VERSION_CLASSES.values():
-        for cls in classes.values():
-            if cls.__name__ == name:
-                return cls
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

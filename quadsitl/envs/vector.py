@@ -27,13 +27,14 @@ from quadsitl.envs.factory import build_engine
 from quadsitl.envs.mavlink_backend import (
     reset_envs,
 )
-from quadsitl.envs.single import VERSION_CLASSES, check_no_render, check_open, make_spaces
-from quadsitl.registration import class_name, versioned_ids
+from quadsitl.envs.single import check_no_render, check_open, make_spaces
+from quadsitl.registration import task_env_name, versioned_ids
 from quadsitl.tasks import get_task
 
 
 class QuadVectorEnv(VectorEnv):
-    """N envs of one task; subclasses set ``task_name``.
+    """N envs of one task: ``class HoverVectorEnv(QuadVectorEnv, task="hover")`` is the
+    native vector env of ``QuadSITL/Hover-v0`` (:mod:`quadsitl.envs.task_envs`).
 
     ``backend="mavlink"`` flies each env's vehicle in its own ``quadsitl sim`` process
     (stepped in parallel, system ids 1..N); the other backend options are those of
@@ -47,6 +48,13 @@ class QuadVectorEnv(VectorEnv):
     }
     task_name = "hover"
     version = 0
+
+    def __init_subclass__(cls, task: str | None = None, version: int = 0, **kwargs: Any) -> None:
+        """A task's native vector env: its ``task_name`` and ``version``."""
+        super().__init_subclass__(**kwargs)
+        if task is not None:
+            cls.task_name, cls.version = task, version
+            cls.__doc__ = f"Native vector env of {versioned_ids(version)[task_env_name(task)]}."
 
     def __init__(
         self,
@@ -159,36 +167,4 @@ def _copies(arrays: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
     return tuple(a.copy() for a in arrays)
 
 
-def _vector_class(name: str, task_name: str, version: int) -> type[QuadVectorEnv]:
-    vector_name = f"{class_name(name, version)}VectorEnv"
-    attributes = {
-        "task_name": task_name,
-        "version": version,
-        "__module__": __name__,
-        "__qualname__": vector_name,
-    }
-    doc = f"Native vector env of {versioned_ids(version)[name]}."
-    return type(vector_name, (QuadVectorEnv,), {**attributes, "__doc__": doc})
-
-
-VECTOR_VERSION_CLASSES: dict[int, dict[str, type[QuadVectorEnv]]] = {
-    version: {name: _vector_class(name, cls.task_name, version) for name, cls in classes.items()}
-    for version, classes in VERSION_CLASSES.items()
-}
-"""Version -> env name (``Hover``) -> native vector env class (``HoverVectorEnv``,
-``HoverV1VectorEnv``)."""
-VECTOR_CLASSES = VECTOR_VERSION_CLASSES[0]
-"""Env name (``Hover``) -> v0 native vector env class (``HoverVectorEnv``), one per task."""
-
-
-def __getattr__(name: str) -> type[QuadVectorEnv]:
-    """Each task's vector env class by its name (``HoverVectorEnv``,
-    ``HoverV1VectorEnv``): the Gymnasium vector entry points and pickle find them here."""
-    for classes in VECTOR_VERSION_CLASSES.values():
-        for cls in classes.values():
-            if cls.__name__ == name:
-                return cls
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-__all__ = ["VECTOR_CLASSES", "QuadVectorEnv"]
+__all__ = ["QuadVectorEnv"]
