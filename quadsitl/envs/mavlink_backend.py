@@ -30,8 +30,11 @@ from quadsitl.wire.addresses import parse_url
 from quadsitl.wire.ids import MAX_SYSTEM_ID
 from quadsitl.wire.signing import checked_key
 
-START_TIMEOUT = 60.0  # s for a new simulator process to answer (imports, kernel load; a
-# Ray worker starting on a busy machine took over 30 s)
+START_TIMEOUT = 60.0  # s for a new simulator's vehicles to beat once its link is open (or,
+# where the host cannot tell when it opened, to answer at all)
+START_LIMIT = 600.0  # s a live simulator may take to open its link: a hang guard, not a
+# speed (imports and compiled kernels; on a loaded machine a Ray worker took over 60 s)
+START_POLL = 0.05  # s between looks at whether it has
 MAX_TIMEOUT = 3600.0  # s: longer than this, a stuck simulator looks like a hang
 SIM_PROCESS_BYTES = 200 * 2**20  # memory of one `quadsitl sim` process, measured
 MAX_SIMULATORS = MAX_SYSTEM_ID  # one MAVLink system id each
@@ -333,7 +336,12 @@ class MavlinkBackend:
         self.fleet.connect(self.clients)
 
     def _wait_for_heartbeats(self, index: int) -> None:
+        """Wait until simulator ``index`` (where this backend started it) has opened its
+        link, however long its start takes while it lives, then for its vehicles'
+        heartbeats."""
         process = self.processes[index] if self.processes else None
+        if process is not None:
+            _wait_until_listening(process)
         deadline = time.monotonic() + (START_TIMEOUT if process else self.timeout)
         while True:
             if process is not None and not process.alive:
@@ -372,3 +380,19 @@ class MavlinkBackend:
         for process in self.processes:
             process.stop()
         self.clients, self.processes = [], []
+
+
+def _wait_until_listening(process: SimProcess | RaySimulator) -> None:
+    """Until ``process`` has opened its link; SimulatorError if it dies first or is still
+    starting after START_LIMIT."""
+    started = time.monotonic()
+    while not process.listening:
+        if not process.alive:
+            raise SimulatorError(f"quadsitl sim {process.exit_message()}")
+        if time.monotonic() - started > START_LIMIT:
+            host, port = process.address
+            raise SimulatorError(
+                f"quadsitl sim at {host}:{port} is running but did not open its link within "
+                f"{START_LIMIT:g} s of starting"
+            )
+        time.sleep(START_POLL)

@@ -94,6 +94,9 @@ class SimulatorHost:
     def alive(self) -> bool:
         return self.process.alive
 
+    def listening(self) -> bool:
+        return self.process.listening
+
     def exit_message(self) -> str:
         return self.process.exit_message()
 
@@ -128,7 +131,8 @@ def place_simulators(commands: list[list[str]], env: dict[str, str]) -> list[Ray
 
 class RaySimulator:
     """A simulator placed by Ray (:func:`place_simulators`), with :class:`SimProcess`'s
-    face (``address``, ``alive``, ``exit_message``, ``stop``) for the backend."""
+    face (``address``, ``alive``, ``listening``, ``exit_message``, ``stop``) for the
+    backend."""
 
     def __init__(self, actor: Any, host: str, port: int, node_id: str) -> None:
         self.actor, self.host, self.port, self.node_id = actor, host, port, node_id
@@ -144,6 +148,16 @@ class RaySimulator:
         try:
             return bool(ray.get(self.actor.alive.remote(), timeout=CALL_TIMEOUT))
         except ray.exceptions.RayError:  # the actor, its node or the call is lost
+            return False
+
+    @property
+    def listening(self) -> bool:
+        """Whether its simulator has opened its link (False while that is not known:
+        ``alive`` tells a lost actor)."""
+        ray = self.ray
+        try:
+            return bool(ray.get(self.actor.listening.remote(), timeout=CALL_TIMEOUT))
+        except ray.exceptions.RayError:
             return False
 
     def exit_message(self) -> str:

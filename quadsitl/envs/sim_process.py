@@ -27,6 +27,7 @@ from typing import Any
 from quadsitl.wire.addresses import free_udp_port
 
 PR_SET_PDEATHSIG = 1
+UDP_TABLES = ("/proc/net/udp", "/proc/net/udp6")  # Linux's bound UDP sockets
 
 
 def _die_with_parent() -> None:  # runs in the child between fork and exec
@@ -122,6 +123,14 @@ class SimProcess:
     def alive(self) -> bool:
         return self.process.poll() is None
 
+    @property
+    def listening(self) -> bool:
+        """Whether its lockstep link is open: the simulator has started (imports, the
+        compiled kernels, its vehicles; the link opens last) and answers from now on.
+        True where the host cannot tell (not Linux)."""
+        bound = udp_port_bound(self.port)
+        return True if bound is None else bound
+
     def exit_message(self) -> str:
         """Why the process ended (its exit code and last error line), once it has."""
         if self.alive:
@@ -135,3 +144,19 @@ class SimProcess:
         self._finalizer()
         if self.process.stderr:
             self.process.stderr.close()
+
+
+def udp_port_bound(port: int) -> bool | None:
+    """Whether a socket on this host has bound UDP ``port`` (read from Linux's socket
+    tables, so nothing is bound to find out); None where the tables cannot be read."""
+    wanted = f":{port:04X}"
+    found = False
+    for table in UDP_TABLES:
+        try:
+            with open(table) as rows:
+                next(rows, None)  # the header
+                found = found or any(row.split()[1].endswith(wanted) for row in rows)
+        except OSError:
+            if table == UDP_TABLES[0]:
+                return None
+    return found
