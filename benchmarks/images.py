@@ -1,51 +1,53 @@
 """The Rerun pictures of the documentation, made from real runs (``make images``).
 
-    python benchmarks/images.py [NAME ...]     # PNGs into docs/images/, .rrd beside them
+    python benchmarks/images.py [NAME ...]          # PNGs into build/images/
+    python benchmarks/images.py --docs [NAME ...]   # and copied into docs/images/
 
 Each recording is made the way a user makes it — the mission demo (``quadsitl demo``,
-in still air and in wind with moderate turbulence,
-replayed), a replay of a foreign-style (PX4-like) log, ``quadsitl eval --rerun`` of
-each shipped policy, a 4-vehicle fleet (``quadsitl sim --vehicles 4``, each vehicle
-flying its own mission, its log replayed) — and rendered by the Rerun viewer itself,
-headless, through its control API, a fresh viewer per picture: the recording is
-opened, the loading waited for (the time cursor at the end, where the layout sent with
-the recording puts it), the top bar hidden (no notices over the content), and a
-screenshot taken, saved at 1600x900. Without a GPU the viewer needs a software Vulkan
-driver (Debian: ``mesa-vulkan-drivers``).
+in still air and in wind with moderate turbulence, replayed), a replay of a
+foreign-style (PX4-like) log, ``quadsitl eval --rerun`` of each shipped policy, a
+4-vehicle fleet (``quadsitl sim --vehicles 4``, each vehicle flying its own mission,
+its log replayed) — and rendered by the Rerun viewer itself, headless
+(:mod:`benchmarks.headless_viewer`), a fresh viewer per picture. The flights are
+flown in real time (``--speed 1``), as a user's are: a log's clock is the wall's, and
+a flight four times faster would last ten seconds of it, too short for a time axis to
+carry more than one label. ``python benchmarks/figures.py`` draws the other pictures
+of docs/images (trajectories, learning curves) the same way: into build/images/, and
+into docs/images/ with ``--docs``.
 """
 
 from __future__ import annotations
 
+import argparse
+import shutil
 import subprocess
 import sys
 import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
-
-import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.headless_viewer import HeadlessViewer  # noqa: E402
 from benchmarks.replay import synthesise  # noqa: E402
 from gcs_tools.client import VehicleClient, mav  # noqa: E402
 from gcs_tools.demo import run_demo, start_simulator, stop_simulator  # noqa: E402
 from gcs_tools.replay import convert  # noqa: E402
 from gcs_tools.scripted_flight import Waypoint, mission_items  # noqa: E402
-from quadsitl.viz.viewer import viewer_binary  # noqa: E402
 from quadsitl.wire.addresses import free_udp_port  # noqa: E402
 
-OUT = ROOT / "docs" / "images"
-WINDOW = "1600x900"  # logical points; saved at this size in pixels
+OUT = ROOT / "build" / "images"  # ignored by git: a render never dirties the tree
+DOCS = ROOT / "docs" / "images"  # the tracked pictures, replaced only with --docs
+SPEED = 1.0  # times real time: the flights' (see above)
 POLICIES = ("hover", "land", "random_waypoint", "static_waypoint", "target_follow")
 
 
 def demo_recording(folder: Path, *sim_args: str) -> Path:
     """``quadsitl demo [SIM_ARGS]``: a mission flown through MAVLink, then replayed."""
     logs = folder / ("demo_wind" if sim_args else "demo")
-    if run_demo(speed=4.0, logs=str(logs), sim_args=sim_args) != 0:
+    if run_demo(speed=SPEED, logs=str(logs), sim_args=sim_args) != 0:
         raise RuntimeError("the demo flight failed")
     return next(logs.glob("*.rrd"))
 
@@ -72,7 +74,7 @@ def fleet_recording(folder: Path) -> Path:
     port = free_udp_port()
     sim = start_simulator(
         *("--vehicles", str(len(FLEET_HEIGHTS)), "--spacing", str(FLEET_SPACING)),
-        *("--gcs", f"udpin:127.0.0.1:{port}", "--api", "none", "--speed", "4"),
+        *("--gcs", f"udpin:127.0.0.1:{port}", "--api", "none", "--speed", str(SPEED)),
         *("--logs", str(logs), "--quiet"),
     )
     clients = [
@@ -122,119 +124,6 @@ def eval_recording(folder: Path, task: str) -> Path:
     return out
 
 
-class HeadlessViewer:
-    """The Rerun viewer without a window, driven through its control API."""
-
-    def __init__(self, window: str = WINDOW) -> None:
-        from rerun.experimental import ViewerClient
-
-        executable = viewer_binary()
-        if executable is None:
-            raise RuntimeError("the Rerun viewer executable is missing (rerun-sdk)")
-        port = free_tcp_port()
-        self.errors = tempfile.TemporaryFile("w+")  # noqa: SIM115 (closed in close())
-        self.process = subprocess.Popen(
-            [
-                *(executable, "--headless", "--window-size", window, "--port", str(port)),
-                *("--hide-welcome-screen", "--bind", "127.0.0.1"),
-            ],
-            stdout=subprocess.DEVNULL,
-            stderr=self.errors,  # a file: a pipe nobody reads could fill and stall it
-        )
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                self.client = ViewerClient.connect(f"rerun+http://127.0.0.1:{port}/proxy")
-                self.client.get_state()
-                break
-            except Exception as error:  # not listening yet
-                if self.process.poll() is not None:
-                    self.errors.seek(0)
-                    said = self.errors.read().strip()
-                    last = said.splitlines()[-1] if said else f"exit code {self.process.returncode}"
-                    raise SystemExit(
-                        f"images.py: the headless Rerun viewer did not start ({last}); "
-                        "without a GPU it needs Debian's mesa-vulkan-drivers"
-                    ) from None
-                if time.monotonic() > deadline:
-                    self.close()
-                    message = f"images.py: the headless viewer did not answer: {error}"
-                    raise SystemExit(message) from None
-                time.sleep(0.5)
-
-    def screenshot(self, rrd: Path, png: Path) -> list[str]:
-        """Open ``rrd``, wait until all of it has arrived (the cursor at the end of the
-        time line and the end no longer moving), save the picture; returns the problems
-        the views report."""
-        self.client.open(str(rrd))
-        timeline, end = last_time(rrd)
-        deadline = time.monotonic() + 180
-        while time.monotonic() < deadline:  # the viewer ingests a file over many frames
-            state = self.client.get_state()
-            ends = [t.end for r in state.recordings for t in r.timelines if t.name == timeline]
-            if not state.loading and ends and ends[0] is not None and ends[0] >= end:
-                break
-            time.sleep(0.5)
-        else:
-            raise RuntimeError(f"the viewer did not load all of {rrd} within 180 s")
-        self.client.set_time(timeline, **time_argument(timeline, end))
-        self.client.run_command("ui.toggle_top_panel")  # its notices ("software rasterizer")
-        time.sleep(2.0)  # a few frames: plots and map fitted to the data
-        png.write_bytes(self.client.take_screenshot())
-        shrink_to_window(png)
-        return [
-            f"{view.name}: {report.summary}"
-            for view in self.client.get_state().views
-            for report in view.reports
-        ]
-
-    def close(self) -> None:
-        self.process.terminate()
-        self.process.wait(timeout=10)
-        self.errors.close()
-
-
-def last_time(rrd: Path) -> tuple[str, int]:
-    """(the recording's main timeline — ``time`` or ``step`` —, its last value)."""
-    import rerun.chunk as rrc
-
-    ends: dict[str, int] = {}
-    for chunk in rrc.RrdReader(rrd).store().stream():
-        if chunk.is_static:
-            continue
-        batch = chunk.to_record_batch()
-        for name in ("time", "step"):
-            if name in batch.schema.names:
-                top = max(batch.column(name).cast("int64").to_pylist())
-                ends[name] = max(ends.get(name, top), top)
-    name = "time" if "time" in ends else "step"
-    return name, ends[name]
-
-
-def time_argument(timeline: str, end: int) -> dict[str, Any]:
-    """The cursor at ``end``: a sequence (step) or a timestamp (ns since the epoch)."""
-    return {"sequence": end} if timeline == "step" else {"timestamp": np.datetime64(end, "ns")}
-
-
-def free_tcp_port() -> int:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
-def shrink_to_window(png: Path) -> None:
-    """The viewer renders at 2 pixels per point; the README wants the logical size."""
-    from PIL import Image
-
-    width, height = (int(v) for v in WINDOW.split("x"))
-    image = Image.open(png).convert("RGB")
-    if image.width > width:
-        image = image.resize((width, height), Image.LANCZOS)
-    image.save(png, optimize=True)
-
-
 def recordings(folder: Path) -> dict[str, Callable[[], Path]]:
     """Picture name -> how its recording is made."""
     made: dict[str, Callable[[], Path]] = {
@@ -248,15 +137,19 @@ def recordings(folder: Path) -> dict[str, Callable[[], Path]]:
     return made
 
 
-def main(names: list[str]) -> None:
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("names", nargs="*", help="only these pictures (all without)")
+    parser.add_argument("--docs", action="store_true", help="also copy into docs/images/")
+    args = parser.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         made = recordings(Path(tmp))
-        unknown = set(names) - set(made)
+        unknown = set(args.names) - set(made)
         if unknown:
             raise SystemExit(f"images.py: unknown pictures {sorted(unknown)}; known: {list(made)}")
         for name, make in made.items():
-            if names and name not in names:
+            if args.names and name not in args.names:
                 continue
             rrd = make()
             png = OUT / f"{name}.png"
@@ -268,7 +161,10 @@ def main(names: list[str]) -> None:
             print(f"{png.relative_to(ROOT)}  (from {rrd.name})", flush=True)
             for problem in problems:
                 print(f"  view problem: {problem}")
+            if args.docs:
+                shutil.copyfile(png, DOCS / png.name)
+                print(f"  copied to {(DOCS / png.name).relative_to(ROOT)}", flush=True)
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    main()

@@ -12,6 +12,8 @@ import rerun as rr
 
 from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
 from quadsitl.viz.flight_view import FlightView, Sample
+from quadsitl.viz.plot_fit import PanelFit, fit
+from quadsitl.viz.plot_layout import plot_sizes
 from quadsitl.viz.scene import (
     STATE_PANEL,
     TIMELINE,
@@ -20,6 +22,7 @@ from quadsitl.viz.scene import (
     framing,
     model_scale,
     series_style,
+    shown_panels,
 )
 from quadsitl.viz.viewer import open_recording
 
@@ -54,6 +57,43 @@ class Columns:
         for key in rotors:
             times, values_, levels = self.series[key]
             self.series[key] = (times, list(np.asarray(values_, float) / hover), levels)
+
+    def modes(self) -> list[str]:
+        """The flight modes the log went through, in the order of their first sample."""
+        prefix = f"plots/{STATE_PANEL}/mode/"
+        firsts = {
+            entity.removeprefix(prefix): min(times)
+            for (entity, _), (times, _, _) in self.series.items()
+            if entity.startswith(prefix)
+        }
+        return sorted(firsts, key=firsts.__getitem__)
+
+    def fits(self, shown: list[str]) -> dict[str, PanelFit]:
+        """Each time-series panel's y range and legend corner, fitted to its data for
+        :func:`~quadsitl.viz.scene.arrange`'s grid of the ``shown`` panels, over the
+        whole recording (the state band keeps its own: see ``modes``)."""
+        by_panel: dict[str, list[tuple[str, np.ndarray, np.ndarray]]] = {}
+        starts, ends = [], []
+        for (entity, kind), (times, values, _) in self.series.items():
+            stamps = np.asarray(times, dtype=np.float64)
+            starts.append(stamps.min())
+            ends.append(stamps.max())
+            head, panel, *_ = [*entity.split("/"), ""]
+            if kind == "scalar" and head == "plots" and panel != STATE_PANEL:
+                sample = (entity.rsplit("/", 1)[-1], stamps, np.asarray(values, np.float64))
+                by_panel.setdefault(panel, []).append(sample)
+        fits = {}
+        for panel, size in zip(shown, plot_sizes(len(shown)), strict=True):
+            series = by_panel.get(panel, [])
+            fitted = fit(
+                [(times, values) for _, times, values in series],
+                [name for name, _, _ in series],
+                size,
+                (min(starts), max(ends)),
+            )
+            if fitted is not None:
+                fits[panel] = fitted
+        return fits
 
     def send(self, rec: rr.RecordingStream, member: Member | None = None) -> dict[str, int]:
         """Every series as one column; a fleet's ``member`` under its system id."""
@@ -157,6 +197,8 @@ def send_one(
         state=STATE_PANEL in panels,
         frame=frame,
         map_view=("map/track", "geo") in system.columns.series,
+        fits=system.columns.fits(shown_panels(panels - {STATE_PANEL})),
+        modes=system.columns.modes(),
     )
     rec = open_recording(
         "quadsitl_replay",
@@ -190,11 +232,13 @@ def send_fleet(
         points.append(np.concatenate(local) + offset)
         panels |= system.columns.panels()
     frame = framing(np.concatenate(points))
+    modes = [mode for system in vehicles.values() for mode in system.columns.modes()]
     layout = fleet_blueprint(
         members,
         panels - {STATE_PANEL},
         frame=frame,
         map_view=any(("map/track", "geo") in s.columns.series for s in vehicles.values()),
+        modes=list(dict.fromkeys(modes)),
     )
     rec = open_recording(
         "quadsitl_replay",

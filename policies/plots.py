@@ -17,7 +17,17 @@ matplotlib.use("Agg")  # files only, no display
 import matplotlib.pyplot as plt
 import numpy as np
 
-COLORS = {"gae": "tab:orange", "ppo": "tab:blue", "trpo": "tab:green"}
+from quadsitl.viz import palette
+
+COLORS = {  # each algorithm's colour, from the project's palette
+    "gae": palette.hex_color(palette.ORANGE),
+    "ppo": palette.hex_color(palette.BLUE),
+    "trpo": palette.hex_color(palette.GREEN),
+}
+SERIES = [palette.hex_color(c) for c in palette.SERIES]  # the k-th line of a plot
+SUCCESS_BOUNDS = (0.0, 1.0)  # a success rate's range: its band is clipped to it
+MOVING_PANELS = 3  # episodes drawn, one 3-D panel each, where the goal moves
+Curves = dict[str, list[tuple[np.ndarray, np.ndarray]]]  # algorithm -> (steps, values) a seed
 MARKERS = "osD^v*"
 
 
@@ -49,10 +59,20 @@ def seed_band(
     return grid, ys.mean(0), ys.std(0)
 
 
-def _band(ax, curves: list[tuple[np.ndarray, np.ndarray]], algo: str) -> None:  # type: ignore[no-untyped-def]
+def _band(  # type: ignore[no-untyped-def]
+    ax,
+    curves: list[tuple[np.ndarray, np.ndarray]],
+    algo: str,
+    bounds: tuple[float, float] | None = None,
+) -> None:
+    """The mean over seeds and mean ± std around it, clipped to ``bounds`` (a success
+    rate's band never leaves [0, 1])."""
     grid, mean, std = seed_band(curves)
+    low, high = mean - std, mean + std
+    if bounds is not None:
+        low, high = np.clip(low, *bounds), np.clip(high, *bounds)
     ax.plot(grid, mean, color=COLORS.get(algo), label=f"{algo.upper()} ({len(curves)} seeds)")
-    ax.fill_between(grid, mean - std, mean + std, color=COLORS.get(algo), alpha=0.2)
+    ax.fill_between(grid, low, high, color=COLORS.get(algo), alpha=0.2)
 
 
 def _curves_name(task: str, preset: str) -> str:
@@ -64,7 +84,6 @@ def learning_curves(runs: list[Path], out_dir: Path, overwrite: bool = False) ->
     a second panel of the periodic validation success where the runs evaluated. A PNG
     that already exists is replaced only with ``overwrite`` (else a ValueError naming
     them, before anything is written)."""
-    Curves = dict[str, list[tuple[np.ndarray, np.ndarray]]]
     returns: dict[tuple[str, str], Curves] = defaultdict(lambda: defaultdict(list))
     success: dict[tuple[str, str], Curves] = defaultdict(lambda: defaultdict(list))
     for run in runs:
@@ -87,54 +106,105 @@ def learning_curves(runs: list[Path], out_dir: Path, overwrite: bool = False) ->
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for (task, preset), by_algo in sorted(returns.items()):
-        panels = 2 if success[(task, preset)] else 1
-        fig, axes = plt.subplots(1, panels, figsize=(6.5 * panels, 4.2), squeeze=False)
-        for algo, curves in sorted(by_algo.items()):
-            _band(axes[0, 0], curves, algo)
-        axes[0, 0].set_ylabel("mean episode return (per iteration)")
-        axes[0, 0].set_title(f"{task} — {preset} preset")
-        if panels == 2:
-            for algo, curves in sorted(success[(task, preset)].items()):
-                _band(axes[0, 1], curves, algo)
-            axes[0, 1].set_ylabel("validation success (deterministic)")
-            axes[0, 1].set_ylim(-0.05, 1.05)
-            axes[0, 1].set_title(f"{task} — success on validation starts")
-        for ax in axes[0]:
-            ax.set_xlabel("environment steps")
-            ax.grid(alpha=0.3)
-            ax.legend()
+        fig = curves_figure(task, preset, by_algo, success[(task, preset)])
         path = out_dir / _curves_name(task, preset)
-        fig.tight_layout()
         fig.savefig(path, dpi=110)
         plt.close(fig)
         written.append(path)
     return written
 
 
-def trajectories(task: str, tracks: list[np.ndarray], goals: list[np.ndarray], path: Path) -> Path:
-    """Flown positions (ENU, m) in 3-D and altitude over time, with the goals."""
-    fig = plt.figure(figsize=(10, 4.2))
-    ax3 = fig.add_subplot(1, 2, 1, projection="3d")
-    ax2 = fig.add_subplot(1, 2, 2)
-    for k, (track, goal) in enumerate(zip(tracks, goals, strict=True)):
-        color = plt.cm.viridis(k / max(1, len(tracks) - 1))
-        ax3.plot(*track.T, color=color, lw=1.2)
-        ax3.scatter(*track[0], color=color, marker="o", s=12)
-        ax3.scatter(*goal[-1], color=color, marker="*", s=60)
-        t = np.arange(len(track)) * 0.05
-        ax2.plot(t, np.linalg.norm(track - goal, axis=1), color=color, lw=1.2)
-    ax3.set_xlabel("east (m)")
-    ax3.set_ylabel("north (m)")
-    ax3.set_zlabel("up (m)")
-    ax3.set_title(f"{task}: trajectories (o start, * goal)")
-    ax2.set_xlabel("time (s)")
-    ax2.set_ylabel("distance to goal (m)")
-    ax2.grid(alpha=0.3)
+def curves_figure(task: str, preset: str, returns: Curves, success: Curves) -> Any:
+    """The learning curves of one (task, preset): returns, and where the runs evaluated
+    a second panel of validation success (its bands within [0, 1])."""
+    panels = 2 if success else 1
+    fig, axes = plt.subplots(1, panels, figsize=(6.5 * panels, 4.2), squeeze=False)
+    for algo, curves in sorted(returns.items()):
+        _band(axes[0, 0], curves, algo)
+    axes[0, 0].set_ylabel("mean episode return (per iteration)")
+    axes[0, 0].set_title(f"{task} — {preset} preset")
+    if panels == 2:
+        for algo, curves in sorted(success.items()):
+            _band(axes[0, 1], curves, algo, SUCCESS_BOUNDS)
+        axes[0, 1].set_ylabel("validation success (deterministic)")
+        axes[0, 1].set_ylim(-0.05, 1.05)
+        axes[0, 1].set_title(f"{task} — success on validation starts")
+    for ax in axes[0]:
+        ax.set_xlabel("environment steps")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="best")
     fig.tight_layout()
+    return fig
+
+
+def trajectories(task: str, tracks: list[np.ndarray], goals: list[np.ndarray], path: Path) -> Path:
+    """Flown positions (ENU, m) in 3-D and the distance to the goal over time."""
+    fig = trajectory_figure(task, tracks, goals)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def trajectory_figure(task: str, tracks: list[np.ndarray], goals: list[np.ndarray]) -> Any:
+    """The 3-D tracks (equal scale on every axis: a 2 cm wiggle on a 1.5 m flight looks
+    like one) beside the distance to the goal over time, the k-th episode in the
+    palette's k-th colour. A moving goal (a target): its track dashed grey, and the
+    first MOVING_PANELS episodes only, one 3-D panel each (more in one are a tangle)."""
+    moving = any(np.ptp(np.asarray(goal), axis=0).max() > 1e-6 for goal in goals)
+    shown = list(zip(tracks, goals, strict=True))[: MOVING_PANELS if moving else None]
+    panels = len(shown) if moving else 1
+    fig = plt.figure(figsize=(4.0 * panels + 5.6, 4.4))
+    grid = fig.add_gridspec(1, panels + 1, width_ratios=[1.0] * panels + [1.4])
+    distance = fig.add_subplot(grid[0, panels])
+    target = palette.hex_color(palette.GREY)
+    scenes: list[Any] = []  # the 3-D axes
+    for k, (track, goal) in enumerate(shown):
+        color = SERIES[k % len(SERIES)]
+        if not scenes or moving:
+            scenes.append(fig.add_subplot(grid[0, k if moving else 0], projection="3d"))
+            if moving:
+                scenes[-1].set_title(f"episode {k}", fontsize=10, color=color)
+        scene = scenes[-1]
+        scene.plot(*track.T, color=color, lw=1.2)
+        scene.scatter(*track[0], color=color, marker="o", s=12)
+        if moving:
+            scene.plot(*np.asarray(goal).T, color=target, lw=1.0, ls="--")
+            scene.scatter(*np.asarray(goal)[-1], color=target, marker="*", s=60)
+        else:
+            scene.scatter(*goal[-1], color=color, marker="*", s=60)
+        t = np.arange(len(track)) * 0.05
+        distance.plot(t, np.linalg.norm(track - goal, axis=1), color=color, lw=1.2)
+    for ax in scenes:
+        equal_axes(ax)
+        ax.set_xlabel("east (m)")
+        ax.set_ylabel("north (m)")
+        ax.set_zlabel("up (m)")
+        ax.locator_params(nbins=4)
+    what = (
+        "vehicle solid, target dashed grey; o start, * target at the end"
+        if moving
+        else ("o start, * goal; equal scale on every axis")
+    )
+    fig.suptitle(f"{task}: trajectories ({what})", fontsize=11)
+    distance.set_xlabel("time (s)")
+    distance.set_ylabel(f"distance to the {'target' if moving else 'goal'} (m)")
+    distance.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.subplots_adjust(wspace=0.35)  # room for the 3-D panels' z labels
+    return fig
+
+
+def equal_axes(ax) -> None:  # type: ignore[no-untyped-def]
+    """A 3-D axes' limits the same length on every axis, around what it draws."""
+    lines = [np.asarray(line.get_data_3d()).T for line in ax.get_lines()]
+    points = np.concatenate([p for p in lines if p.size]) if lines else np.zeros((1, 3))
+    centre = (points.min(axis=0) + points.max(axis=0)) / 2
+    half = max(float(np.ptp(points, axis=0).max()) / 2, 0.05) * 1.05
+    ax.set_xlim3d(centre[0] - half, centre[0] + half)
+    ax.set_ylim3d(centre[1] - half, centre[1] + half)
+    ax.set_zlim3d(centre[2] - half, centre[2] + half)
+    ax.set_box_aspect((1.0, 1.0, 1.0))
 
 
 def ladder_plot(ladders: list[Any], path: Path) -> Path:
@@ -158,6 +228,7 @@ def ladder_plot(ladders: list[Any], path: Path) -> Path:
                 np.arange(len(points)) + shift,
                 [100 * p[1] for p in points],
                 marker=MARKERS[j % len(MARKERS)],
+                color=SERIES[j % len(SERIES)],
                 label=lad.policy,
             )
         ax.set_xticks(range(len(points)), [p[0] for p in points])

@@ -133,9 +133,11 @@ def test_a_recorded_flight_converts_with_every_part(flight_log, tmp_path):
         "/world/vehicle/marker",
     ):
         assert rows.get(entity, 0) > 0, entity
-    # Every position sample is one row of altitude and one translation of the vehicle.
-    assert rows["/plots/altitude/altitude"] == result.entities["plots/altitude/altitude"] > 100
-    assert rows["/world/vehicle"] >= 2 * rows["/plots/altitude/altitude"] - 5  # + rotations
+    # Every position sample is one row of altitude and one translation of the vehicle
+    # (beside each series' style, logged once, static).
+    altitude = rows_per_entity(out, static=False)["/plots/altitude/altitude"]
+    assert altitude == result.entities["plots/altitude/altitude"] > 100
+    assert rows["/world/vehicle"] >= 2 * altitude - 5  # + rotations
     assert rows["/events"] >= 4  # armed, took off, landed, disarmed (and mode changes)
     shown = check_panels(
         out,
@@ -174,7 +176,7 @@ def test_log_without_position_messages_still_converts(tmp_path):
     result = convert(log, out)
     assert any("no position" in w for w in result.warnings)
     rows = rows_per_entity(out)
-    assert rows["/plots/attitude/yaw"] == 50
+    assert rows_per_entity(out, static=False)["/plots/attitude/yaw"] == 50
     assert rows["/events"] == 2  # the arming/mode line and the STATUSTEXT
     assert "/world/trajectory" not in rows
     check_attitude(out)
@@ -295,7 +297,8 @@ def test_headless_screenshot_shows_the_flight(flight_log, tmp_path):
     from PIL import Image
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from benchmarks.images import HeadlessViewer
+    from benchmarks.headless_viewer import HeadlessViewer
+    from quadsitl.viz.plot_layout import column_lengths, column_shares
 
     out = tmp_path / "flight.rrd"
     convert(flight_log, out)
@@ -309,15 +312,22 @@ def test_headless_screenshot_shows_the_flight(flight_log, tmp_path):
     image = np.asarray(Image.open(png).convert("RGB"))
     height, width, _ = image.shape
     assert (width, height) == (1600, 900)
-    scene = image[40 : height * 45 // 100, : width // 2]  # the 3-D view, top left
+    shown = views(out)
+    count = sum(kind == "TimeSeries" for kind, _ in shown.values()) - 1  # but the state band
+    assert count > 8, shown  # three columns of plots, filled top to bottom
+    left, right = column_shares(count)
+    split = round(width * left / (left + right))
+    scene = image[40 : height * 45 // 100, :split]  # the 3-D view, top left
     assert colour_pixels(scene, ROTOR_RED) >= 30, "the vehicle is not visible in 3-D"
-    plots = image[40 : height - 40, width // 2 + 10 :]
-    rows, columns = 7, 2  # the mode band, then a grid of panels two wide
-    for r in range(rows):
-        for c in range(columns):
+    top = 40 + (height - 80) // 7  # below the mode band
+    plots = image[top : height - 40, split + 10 :]
+    lengths = column_lengths(count)
+    for c, rows in enumerate(lengths):
+        for r in range(rows):
             cell = plots[
                 r * plots.shape[0] // rows + 25 : (r + 1) * plots.shape[0] // rows - 5,
-                c * plots.shape[1] // columns + 5 : (c + 1) * plots.shape[1] // columns - 5,
+                c * plots.shape[1] // len(lengths) + 5 : (c + 1) * plots.shape[1] // len(lengths)
+                - 5,
             ]
             colours = len(np.unique(cell.reshape(-1, 3), axis=0))
             assert colours > 20, f"plot cell ({r}, {c}) is flat ({colours} colours)"

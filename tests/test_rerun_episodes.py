@@ -35,17 +35,18 @@ def test_render_mode_rerun_records_episodes(tmp_path):
     env.close()
     wait_for_recordings()  # close() hands over; the writer process finishes the file
     rows = rows_per_entity(out, static=False)
-    assert rows["/world/vehicle"] == rows["/plots/altitude/altitude"] == steps
+    assert rows["/world/vehicle"] == rows["/plots/height_above_goal/height"] == steps
     # A waypoint stays put: logged every 10 steps (episodes share the step timeline).
     assert rows["/world/goal"] == rows["/world/trajectory"] < steps / 5
-    assert rows["/plots/reward/reward"] == steps - 2  # no reward at a reset
+    # No reward at a reset, nor at an episode's last step (its outcome event has it).
+    assert rows["/plots/reward/reward"] == steps - 4
     check_panels(
         out,
         {
             "plots/reward",
             "plots/reward_terms",
             "plots/distance_to_goal",
-            "plots/altitude",
+            "plots/height_above_goal",
             "plots/speed",
         },
     )
@@ -70,7 +71,7 @@ def test_episodes_in_wind_show_it(tmp_path):
         env.step(np.zeros(4, np.float32))
     env.close()
     wait_for_recordings()
-    check_panels(out, {"plots/wind", "plots/altitude"})
+    check_panels(out, {"plots/wind", "plots/height_above_goal"})
     speed = scalars(out, "/plots/wind/speed")
     assert len(speed) == 41 and 3.0 < speed.mean() < 7.0 and speed.std() > 0.01
     arrows = rows_per_entity(out, static=False)["/world/wind"]

@@ -1,14 +1,18 @@
 """``render_mode="rerun"`` of the task envs (and ``quadsitl eval --rerun``): episodes in Rerun.
 
-Logged on the ``step`` timeline (one tick per env step), in the task's world frame
-(ENU, metres): the vehicle posed from the physics state (with the episode's path), what the task
-flies to — the goal (a sphere of the task's goal radius), the landing pad (a disc of
-its radius) or the moving target — and the reward, the goal errors the reward is made
-of (position, attitude, velocity, rates), the distance to the goal, altitude and speed,
-and in wind the air's velocity at the vehicle (a panel and an arrow).
-Each episode's outcome (landed, crashed, timed out ...) is an event. Each episode
-starts a new ``episode`` on its own timeline; the layout (blueprint) frames the task's
-start and goal on the first reset.
+Logged on the ``step`` timeline (one tick per env step) and the ``time`` timeline
+(simulated seconds since the episode's start: the plots' axis), in the task's world
+frame (ENU, metres): the vehicle posed from the physics state (with the episode's
+path), what the task flies to — the goal (a sphere of the task's goal radius and a
+labelled pin standing on it), the landing pad (a disc of its radius) or the moving
+target (with its track) — and the reward per step (but an episode's last, whose
+landing bonus or crash penalty would flatten the rest: its outcome event gives it), the
+goal errors the reward is made of (position m, attitude, velocity m/s, rates rad/s),
+the distance to the goal, the height above it and the speed, and in wind the air's
+velocity at the vehicle (a panel and an arrow). Each episode's outcome (landed,
+crashed, timed out ...) is an event. Each episode starts a new ``episode`` on its own
+timeline; the layout (blueprint) frames the task's start and goal on the first reset,
+and is sent again at the end with its plots fitted to the data.
 
 Recording must not slow the env down (within 10 % of its steps per second), so a step
 only copies one row of numbers into a buffer; the buffer is handed to the recording's
@@ -35,7 +39,7 @@ from quadsitl.tasks import TaskEngine
 from quadsitl.tasks import features as F
 from quadsitl.tasks import recording as R
 from quadsitl.tasks import spec as S
-from quadsitl.tasks.recording import C_RETURN, C_STEP
+from quadsitl.tasks.recording import C_RETURN, C_REWARD, C_STEP
 from quadsitl.viz.episode_writer import EpisodeWriter, Event
 from quadsitl.viz.viewer import check_output_path
 
@@ -113,6 +117,7 @@ class EpisodeView:
             task=engine.task.name,
             goal_radius=float(engine.task.goal_radius),
             target=engine.task.advance_goal is not None,  # a moving target
+            period=float(engine.control_period),
         )
 
     def _outcome(self, outcome: str) -> None:
@@ -123,7 +128,7 @@ class EpisodeView:
         level = "INFO" if outcome in ("landed", "timed_out") else "WARN"
         text = (
             f"episode {self.episode}: {outcome.replace('_', ' ')} after {steps} steps, "
-            f"return {episode_return:.1f}"
+            f"return {episode_return:.1f} (last step {float(last[C_REWARD]):.1f})"
         )
         self.events.append((self.episode, steps, text, level))
 

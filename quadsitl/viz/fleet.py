@@ -29,6 +29,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from quadsitl.geo import Home
+from quadsitl.viz import palette
 from quadsitl.viz.flight_view import Sample
 from quadsitl.viz.scene import (
     STATE_PANEL,
@@ -38,18 +39,9 @@ from quadsitl.viz.scene import (
     series_style,
     time_axis,
 )
+from quadsitl.viz.series_colors import mode_color
 
-VEHICLE_COLORS = [
-    [31, 119, 180],
-    [255, 127, 14],
-    [44, 160, 44],
-    [148, 103, 189],
-    [23, 190, 207],
-    [227, 119, 194],
-    [140, 86, 75],
-    [188, 189, 34],
-    [127, 127, 127],
-]  # fmt: skip  (no red: armed and the front rotors are red)
+VEHICLE_COLORS = [list(color) for color in palette.SERIES]  # no red: armed, front rotors
 
 FLEET_ZOOM = 1.25  # the camera this much closer than for one flight: a fleet is compact
 ARMED_BELOW = 0.3  # rows: the armed line's place under the vehicle's mode band
@@ -95,7 +87,8 @@ class Member:
     @property
     def light_color(self) -> list[int]:
         """Its colour, lighter: what it was told to fly (setpoints, mission)."""
-        return [round(c + (255 - c) * 0.55) for c in self.color]
+        r, g, b = self.color
+        return list(palette.lighter((r, g, b)))
 
     def path(self, entity: str) -> str:
         """The fleet's path of a single-vehicle entity (``world/vehicle``,
@@ -182,10 +175,13 @@ def fleet_blueprint(
     map_view: bool = False,
     timeline: str = TIMELINE,
     whole_range: bool = True,
+    modes: Sequence[str] | None = None,
 ) -> rrb.Blueprint:
     """The fleet's layout: the 3-D view framing the fleet (not following a vehicle),
     the map and event log, the state panel with a row per vehicle, and the panels of
-    FLEET_PANELS whose panel is in ``panels`` (those with data)."""
+    FLEET_PANELS whose panel is in ``panels`` (those with data). ``modes``: the flight
+    modes of a finished flight, named with their colours in the state panel's title
+    instead of a legend over the bands."""
     shown = set(panels)
     if "rotors" in shown:
         shown.discard("servo_pwm")
@@ -208,13 +204,15 @@ def fleet_blueprint(
                 plot_legend=rrb.PlotLegend(visible=False),
             )
         )
+    bands = ", ".join(f"{m} {palette.NAMES[mode_color(m)]}" for m in modes or ())
     state_view = rrb.TimeSeriesView(
         origin=f"plots/{STATE_PANEL}",
-        name="mode (band) and armed (red), a row per vehicle: "
+        name=f"mode (band{': ' + bands if bands else ''}) and armed (red), a row per vehicle: "
         + ", ".join(f"{m.row} {m.name}" for m in members[:6])
         + (" ..." if len(members) > 6 else ""),
         axis_x=axis,
         axis_y=rrb.ScalarAxis(range=(0.4, len(members) + 0.4)),
+        plot_legend=rrb.PlotLegend(visible=False) if bands else None,
     )
     return arrange(
         plots,

@@ -8,17 +8,20 @@ NED/FRD values are converted with :mod:`quadsitl.frames` before logging. Entitie
   transform; ``world/trajectory``, ``world/home``, ``world/mission``, ``world/setpoint``;
 * ``plots/altitude`` (m), ``plots/velocity/*`` (m/s, ENU), ``plots/attitude/*`` (deg),
   ``plots/rotors/*`` (rad/s), ``plots/servo_pwm/*`` (µs), ``plots/battery/*`` (V, %)
-  (and ``plots/reward`` for gym episodes) — time series;
+  (and ``plots/reward``, ``plots/height_above_goal`` ... for gym episodes) — time
+  series, each in its colour (:mod:`quadsitl.viz.series_colors`: the series of a
+  panel never share one);
 * ``events`` — flight mode, arming and STATUSTEXT as a text log.
 
-The panels' layout (:func:`blueprint`, :func:`arrange`) is here too; where a recording is
-shown (a viewer, a file, the web viewer) is :mod:`quadsitl.viz.viewer`'s.
+The panels' layout (:func:`blueprint`, :func:`arrange`) is here too, with the plots
+fitted to their data where it is known (:mod:`quadsitl.viz.plot_fit`); where a
+recording is shown (a viewer, a file, the web viewer) is :mod:`quadsitl.viz.viewer`'s.
 """
 
 from __future__ import annotations
 
 import math
-import zlib
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -26,6 +29,10 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from quadsitl import frames
+from quadsitl.viz import palette
+from quadsitl.viz.plot_fit import PanelFit
+from quadsitl.viz.plot_layout import column_shares, plot_grid
+from quadsitl.viz.series_colors import mode_color, series_color
 
 ARM = 0.17  # m, drawn arm length (centre to rotor), about the paper's airframe
 ROTOR_RADIUS = 0.1  # m
@@ -98,15 +105,17 @@ def model_scale(extent: float) -> float:
     return float(np.clip(extent / (15 * 2 * (ARM + ROTOR_RADIUS)), 1.0, 100.0))
 
 
-def setup(rec: rr.RecordingStream, scale: float = 1.0, vehicle: bool = True) -> None:
-    """World coordinates, and (``vehicle``) home and the vehicle model; a fleet logs its
-    vehicles' own (:mod:`quadsitl.viz.fleet`)."""
+def setup(
+    rec: rr.RecordingStream, scale: float = 1.0, vehicle: bool = True, home: bool = True
+) -> None:
+    """World coordinates, and (``vehicle``) the vehicle model and (``home``) its home at
+    the origin; a fleet logs its vehicles' own (:mod:`quadsitl.viz.fleet`)."""
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     if not vehicle:
         return
-    rec.log(
-        "world/home", rr.Points3D([[0.0, 0.0, 0.0]], radii=0.05, colors=[[0, 160, 0]]), static=True
-    )
+    if home:
+        at_origin = rr.Points3D([[0.0, 0.0, 0.0]], radii=0.05, colors=[[0, 160, 0]])
+        rec.log("world/home", at_origin, static=True)
     log_vehicle_model(rec, scale=scale)
 
 
@@ -124,9 +133,10 @@ PANELS = {
     "battery_remaining": "battery remaining (%)",
     "gps": "GPS fix type and satellites",
     "mission_item": "mission item",
-    "reward": "reward",
-    "reward_terms": "goal errors (reward terms)",
+    "reward": "reward per step (the last: in events)",
+    "reward_terms": "goal errors of the reward",
     "distance_to_goal": "distance to goal (m)",
+    "height_above_goal": "height above the goal (m)",
     "speed": "speed (m/s)",
     "wind": "wind at the vehicle (m/s, ENU)",
     "accelerometer": "accelerometer (m/s², body FRD)",
@@ -146,44 +156,34 @@ LIVE_PANELS = (
     "battery_voltage",
 )
 SENSOR_PANELS = ("accelerometer", "gyroscope", "barometer")  # what the sensors read
-EPISODE_PANELS = ("reward", "reward_terms", "distance_to_goal", "altitude", "speed")
-
-
-MODE_COLORS = [
-    [31, 119, 180],
-    [255, 127, 14],
-    [44, 160, 44],
-    [148, 103, 189],
-    [140, 86, 75],
-    [227, 119, 194],
-    [127, 127, 127],
-    [188, 189, 34],
-    [23, 190, 207],
-]  # fmt: skip  (no red: armed is red)
+EPISODE_PANELS = ("reward", "reward_terms", "distance_to_goal", "height_above_goal", "speed")
 
 
 def series_style(entity: str) -> Any | None:
     """How a time series is drawn (logged once, static, beside its first sample): each
-    flight mode a thick band in its own colour, setpoints grey, None: Rerun's default."""
+    flight mode a thick band in its own colour, armed a red line, every other series
+    in its colour (:func:`~quadsitl.viz.series_colors.series_color`); None: nothing to
+    log."""
     name = entity.rsplit("/", 1)[-1]
     if entity.startswith(f"plots/{STATE_PANEL}/mode/"):
-        color = MODE_COLORS[zlib.crc32(name.encode()) % len(MODE_COLORS)]
-        return rr.SeriesLines(colors=[color], widths=[10.0], names=[name])
+        return rr.SeriesLines(colors=[mode_color(name)], widths=[10.0], names=[name])
     if entity == f"plots/{STATE_PANEL}/armed":
-        return rr.SeriesLines(colors=[[200, 30, 30]], widths=[2.0], names=["armed"])
-    if name.endswith("setpoint"):
-        return rr.SeriesLines(colors=[[150, 150, 150]], widths=[1.5], names=[name])
-    return None
+        return rr.SeriesLines(colors=[palette.RED], widths=[2.0], names=["armed"])
+    if not entity.startswith("plots/"):
+        return None
+    width = 1.5 if name.endswith("setpoint") else 2.0
+    return rr.SeriesLines(colors=[series_color(entity)], widths=[width], names=[name])
 
 
-def framing(points: Any) -> tuple[np.ndarray, float]:
-    """(centre, extent in m) of the points a 3-D view should show on open."""
+def framing(points: Any, least: float = 4.0) -> tuple[np.ndarray, float]:
+    """(centre, extent in m, ``least`` or more) of the points a 3-D view should show on
+    open."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     pts = pts[np.isfinite(pts).all(axis=1)]
     if len(pts) == 0:
         return np.array([0.0, 0.0, 1.0]), 6.0
     low, high = pts.min(axis=0), pts.max(axis=0)
-    return (low + high) / 2, max(float(np.linalg.norm(high - low)), 4.0)
+    return (low + high) / 2, max(float(np.linalg.norm(high - low)), least)
 
 
 def map_zoom(extent: float) -> float:
@@ -210,26 +210,39 @@ def blueprint(
     map_view: bool = False,
     timeline: str = TIMELINE,
     whole_range: bool = True,
+    fits: Mapping[str, PanelFit] | None = None,
+    modes: Sequence[str] | None = None,
+    zoom: float = 1.0,
 ) -> rrb.Blueprint:
     """The layout sent with every recording of one vehicle: see :func:`arrange`, with one
     time-series panel per name in ``panels`` (see PANELS; pass only those with data;
-    servo PWM only without rotor speeds) and the flight-state band (``state``)."""
-    shown = set(panels)
-    if "rotors" in shown:  # the same outputs twice: rotor speeds, else PWM
-        shown.discard("servo_pwm")
+    servo PWM only without rotor speeds) and the flight-state band (``state``);
+    ``fits``: panel name -> its y range and legend corner, where the data is known
+    (:mod:`quadsitl.viz.plot_fit`); ``modes``: the flight modes of a finished flight,
+    named with their colours in the band's title (its plot is too short for a legend);
+    ``zoom``: see :func:`arrange`."""
     axis = time_axis(whole_range)
     plots = [
-        rrb.TimeSeriesView(origin=f"plots/{name}", name=PANELS[name], axis_x=axis)
-        for name in PANELS
-        if name in shown
+        time_series(f"plots/{name}", PANELS[name], axis, (fits or {}).get(name))
+        for name in shown_panels(panels)
     ]
     state_view = None
-    if state:
-        state_view = rrb.TimeSeriesView(
-            origin=f"plots/{STATE_PANEL}",
-            name="mode (band) and armed (0/1)",
-            axis_x=axis,
-            axis_y=rrb.ScalarAxis(range=(-0.2, 2.4)),
+    if state and modes:
+        bands = ", ".join(f"{m} {palette.NAMES[mode_color(m)]}" for m in modes)
+        state_view = time_series(
+            f"plots/{STATE_PANEL}",
+            f"mode (band: {bands}) and armed (red: 0/1)",
+            axis,
+            None,
+            axis_y=rrb.ScalarAxis(range=STATE_RANGE),
+            plot_legend=rrb.PlotLegend(visible=False),
+        )
+    elif state:
+        state_view = time_series(
+            f"plots/{STATE_PANEL}",
+            "mode (band) and armed (0/1)",
+            axis,
+            PanelFit(STATE_RANGE, "RightBottom"),
         )
     return arrange(
         plots,
@@ -239,7 +252,30 @@ def blueprint(
         follow=follow,
         map_view=map_view,
         timeline=timeline,
+        zoom=zoom,
     )
+
+
+STATE_RANGE = (-0.2, 2.4)  # the state band's y range: armed 0/1, the mode band at 2
+
+
+def shown_panels(panels: Any) -> list[str]:
+    """The panels of ``panels`` laid out, in PANELS' order: servo PWM only without
+    rotor speeds (the same outputs twice)."""
+    shown = set(panels)
+    if "rotors" in shown:
+        shown.discard("servo_pwm")
+    return [name for name in PANELS if name in shown]
+
+
+def time_series(
+    origin: str, name: str, axis: Any, fit: PanelFit | None, **view: Any
+) -> rrb.TimeSeriesView:
+    """A time-series view, with the y range and legend corner of ``fit`` if given."""
+    if fit is not None:
+        view.setdefault("axis_y", rrb.ScalarAxis(range=fit.y_range))
+        view.setdefault("plot_legend", rrb.PlotLegend(corner=fit.corner))
+    return rrb.TimeSeriesView(origin=origin, name=name, axis_x=axis, **view)
 
 
 def time_axis(whole_range: bool) -> rrb.TimeAxis | None:
@@ -302,13 +338,13 @@ def arrange(
         shares.append(2.0)
     right: list[Any] = [] if state_view is None else [state_view]
     if plots:
-        right.append(rrb.Grid(*plots, grid_columns=2 if len(plots) > 4 else 1))
+        right.append(plot_grid(plots))
     columns: list[Any] = [rrb.Vertical(*left, row_shares=shares)]
     if right:
         shares = [state_share, 6.0]
         columns.append(rrb.Vertical(*right, row_shares=shares) if len(right) == 2 else right[0])
     return rrb.Blueprint(
-        rrb.Horizontal(*columns, column_shares=[1.0, 1.0][: len(columns)]),
+        rrb.Horizontal(*columns, column_shares=list(column_shares(len(plots))[: len(columns)])),
         rrb.TimePanel(timeline=timeline, play_state="following", state="collapsed"),
         collapse_panels=True,
     )

@@ -89,6 +89,7 @@ def open_recording(
     scale: float = 1.0,
     web: bool = False,
     vehicle: bool = True,
+    home: bool = True,
 ) -> rr.RecordingStream:
     """A recording stream saved to ``save`` (an .rrd path), sent to a spawned viewer, or
     (``web``) served with the web viewer on this host (see :func:`serve_web`).
@@ -98,7 +99,8 @@ def open_recording(
     says where: rendering never fails because of the machine it runs on. ``notice``
     takes that message (a command line prints it as one plain line); without it, it is
     a RuntimeWarning (library use). ``scale``: how many times life size the vehicle is
-    drawn (:func:`model_scale`); ``vehicle``: False for a fleet, which draws its own.
+    drawn (:func:`model_scale`); ``vehicle``: False for a fleet, which draws its own;
+    ``home``: False for a task's episodes (their origin is the task's, not a home).
     """
     rec = rr.RecordingStream(name)
     layout = blueprint() if default_blueprint is None else default_blueprint
@@ -124,7 +126,7 @@ def open_recording(
     # Also the active layout: a viewer that showed another recording of the same kind
     # (same application id) would otherwise keep that one's panels.
     rec.send_blueprint(layout, make_active=True, make_default=True)
-    setup(rec, scale, vehicle)
+    setup(rec, scale, vehicle, home)
     return rec
 
 
