@@ -63,10 +63,12 @@ bench-algorithms: venv
 	$(BIN)/python benchmarks/algorithms.py
 	$(BIN)/python benchmarks/algorithms.py --preset paper --tasks hover
 
-# The Rerun pictures of README.md and docs/replay.md, from real runs, rendered headless
-# (without a GPU: Debian's mesa-vulkan-drivers).
+# The pictures of the docs, from real runs: Rerun's, rendered headless (without a GPU:
+# Debian's mesa-vulkan-drivers), and the shipped policies' trajectories. Into
+# build/images/; `make images DOCS=1` also replaces the tracked ones in docs/images/.
 images: venv
-	$(BIN)/python benchmarks/images.py
+	$(BIN)/python benchmarks/images.py $(if $(DOCS),--docs)
+	$(BIN)/python benchmarks/figures.py $(if $(DOCS),--docs)
 
 lint: venv
 	$(BIN)/ruff check .
