@@ -58,10 +58,10 @@ def test_ten_percent_loss_both_ways_changes_nothing_but_the_resend_count(fleet_s
             local.close()
 
 
-def test_a_lost_answer_is_answered_from_the_cache_not_stepped_twice(fleet_sim):
+def test_a_lost_answer_is_answered_again_not_stepped_twice(fleet_sim):
     client, _, hover = _hovering(fleet_sim)
     first = client.step(hover).time_usec
-    # The same round again (as after a lost answer): the cached answer, same time. (A
+    # The same round again (as after a lost answer): answered, same time. (A
     # resend under load may bring older repeats too, counted in ``late``: not asserted.)
     client.time_usec = 0
     again = client.step(hover)
@@ -100,7 +100,7 @@ def test_answers_keep_the_order_of_what_they_answer(fleet_sim):
         if f.msgid in (mav.MAVLINK_MSG_ID_ODOMETRY, mav.MAVLINK_MSG_ID_COMMAND_ACK)
     ]
     assert kinds == [
-        mav.MAVLINK_MSG_ID_ODOMETRY,  # the repeat, answered from the cache
+        mav.MAVLINK_MSG_ID_ODOMETRY,  # the repeat, answered again
         mav.MAVLINK_MSG_ID_COMMAND_ACK,  # the reset
         mav.MAVLINK_MSG_ID_ODOMETRY,  # its state
     ]

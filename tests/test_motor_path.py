@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
 from pymavlink import mavutil
 
+from quadsitl.client.fleet_client import FleetClient
 from quadsitl.client.motor_client import MotorClient, SimulatorError
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
@@ -223,3 +225,60 @@ def test_answers_carry_hil_state_quaternion_unless_turned_off(lockstep_sim):
     assert lean.hil_state is None
     full.close()
     lean.close()
+
+
+def test_the_motor_client_is_the_fleet_client_of_one_vehicle_and_flies_alike(lockstep_sim):
+    """A lone vehicle flown with HIL_ACTUATOR_CONTROLS (a round of one) and with rounds
+    of SET_ACTUATOR_CONTROL_TARGET: the same client, the same flight."""
+    rng = np.random.default_rng(5)
+    controls = np.clip(HOVER + rng.normal(0, 0.05, (20, 4)), 0, 1)
+    motor = lockstep_sim.client()
+    assert isinstance(motor, FleetClient) and motor.n == 1 and motor.target_system == 1
+    motor.arm()
+    motor.reset([1.0, 2.0, -8.0], velocity_ned=[0.5, 0.0, 0.0], rotor_speed=300.0)
+    by_hil = [_as_float32(motor.step(row)) for row in controls]
+    motor.close()  # hands the motor link to the next client
+    fleet = FleetClient("127.0.0.1", lockstep_sim.hil_port, 1, timeout=5.0)
+    fleet.connect()
+    pose = WireState(
+        time_usec=0,
+        position_ned=np.array([[1.0, 2.0, -8.0]]),
+        q_ned_frd=np.array([[1.0, 0.0, 0.0, 0.0]]),
+        velocity_frd=np.zeros((1, 3)),  # the reset takes the velocity NED
+        rates_frd=np.zeros((1, 3)),
+        rotor_speeds=np.full((1, 4), 300.0),
+        contact=None,
+        touchdown_speed=None,
+    )
+    fleet.reset([0], pose, np.array([[0.5, 0.0, 0.0]]))
+    by_round = [_as_float32(fleet.step(row[np.newaxis]).row(0)) for row in controls]
+    fleet.close()
+    np.testing.assert_array_equal(by_round, by_hil)
+
+
+def test_round_answers_on_a_logged_link_are_logged(tmp_path):
+    """Every frame on a link other than the motor link goes to the telemetry log, the
+    answers of rounds flown through it too."""
+    sim = MotorSim("--lockstep", "--logs", str(tmp_path))
+    try:
+        client = FleetClient("127.0.0.1", sim.gcs_port, 1, timeout=5.0)
+        for _ in range(60):  # the process needs a moment to start
+            try:
+                client.connect()
+                break
+            except SimulatorError:
+                assert sim.process.poll() is None
+        state = np.zeros((1, L.STATE_SIZE))
+        state[0, L.I_PZ], state[0, L.QUAT.start] = 10.0, 1.0
+        wire = WireState.from_physics(state, AIRFRAME.gear_height, 0, None, None)
+        client.reset([0], wire, np.zeros((1, 3)))
+        times = {int(client.step(np.full((1, 4), HOVER)).time_usec) for _ in range(20)}
+        client.close()
+    finally:
+        sim.stop()
+    (log,) = Path(tmp_path).glob("*.tlog")
+    reader = mavutil.mavlink_connection(str(log))
+    logged = set()
+    while (msg := reader.recv_match(type="ACTUATOR_OUTPUT_STATUS")) is not None:
+        logged.add(msg.time_usec)
+    assert times <= logged

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.motor_path import MotorPath
+from quadsitl.mavlink.motor_slot import MotorSlot
 from quadsitl.physics import layout as L
 from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.vehicle import Vehicle
@@ -42,31 +42,28 @@ def test_a_vehicle_of_a_group_of_several_is_stepped_with_its_group():
         group.vehicles[1].advance()
 
 
-def _round(path: MotorPath, encoder: mav.MAVLink, controls: float) -> None:
-    """One lockstep HIL_ACTUATOR_CONTROLS of ``controls`` on all four motors, armed."""
-    msg = encoder.hil_actuator_controls_encode(
-        0, [controls] * 4 + [0.0] * 12, ARMED_FLAG, LOCKSTEP_FLAG
-    )
-    msg.pack(encoder)
-    encoder.seq = (encoder.seq + 1) % 256  # as send() does: a new frame, not a resend
-    assert path.command(msg) is None  # accepted, nothing to warn of
+def _round(path: MotorPath, seq: int, controls: float) -> None:
+    """One lockstep HIL_ACTUATOR_CONTROLS of ``controls`` on all four motors, armed (a
+    new frame, sequence number ``seq``, not a resend)."""
+    reply = path.hil_command((255, 190, seq % 256), 0, LOCKSTEP_FLAG, [controls] * 16, ARMED_FLAG)
+    assert reply.rows == [0] and reply.warnings == []  # answered, nothing to warn of
 
 
 def test_lockstep_rounds_of_a_simulators_lone_vehicle_move_its_sensors():
     """The simulator's vehicle is a group of one; its lockstep rounds step the group's
     sensors too, so that the IMU reads the free fall and then the ground."""
     vehicle = VehicleGroup(1, sensor_noise=0.0).vehicles[0]
-    path = MotorPath(vehicle, lockstep=True)
-    encoder = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+    slot = MotorSlot(vehicle)
+    path = MotorPath(vehicle.batch, [slot], lockstep=True)
     assert vehicle.arm().ok
-    assert path.stage_motion([0.0] * 6 + [0.0]).ok  # at rest, rotors stopped
-    assert path.reset([0.0, 0.0, -20.0, 1.0, 0.0, 0.0, 0.0]).ok  # 20 m up
-    for _ in range(25):
-        _round(path, encoder, 0.0)
+    assert slot.stage_motion([0.0] * 6 + [0.0]).ok  # at rest, rotors stopped
+    assert slot.reset([0.0, 0.0, -20.0, 1.0, 0.0, 0.0, 0.0]).ok  # 20 m up
+    for seq in range(25):
+        _round(path, seq, 0.0)
     assert vehicle.time == pytest.approx(0.1)
     assert vehicle.state[L.I_VZ] == pytest.approx(-GRAVITY * 0.1, rel=0.05)  # falling
     np.testing.assert_allclose(vehicle.sensors.accel, 0.0, atol=0.2)  # weightless
-    assert path.reset([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]).ok  # on the ground
-    for _ in range(25):
-        _round(path, encoder, 0.0)
+    assert slot.reset([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]).ok  # on the ground
+    for seq in range(25):
+        _round(path, seq, 0.0)
     np.testing.assert_allclose(vehicle.sensors.accel, [0.0, 0.0, GRAVITY], atol=0.2)

@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike
 
 from quadsitl import frames
 from quadsitl.client.fleet_client import FleetClient
-from quadsitl.client.motor_client import SimulatorError
+from quadsitl.client.fleet_link import SimulatorError
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe
 from quadsitl.physics.fleet import VehicleStates

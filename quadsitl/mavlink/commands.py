@@ -20,7 +20,7 @@ from quadsitl.mavlink import telemetry_pose as pose
 from quadsitl.mavlink import telemetry_status as status
 from quadsitl.mavlink.identity import AVAILABLE_MODES, Identity, available_modes_message
 from quadsitl.mavlink.links import Link
-from quadsitl.mavlink.motor_path import MotorPath
+from quadsitl.mavlink.motor_slot import MotorSlot
 from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.physics.sensors.failures import FAILURE_NAMES, OFF, STUCK
 from quadsitl.physics.sensors.failures import OK as SENSOR_OK
@@ -71,7 +71,7 @@ class CommandHost(Protocol):
     vehicle: Vehicle
     identity: Identity
     encoder: Any  # pymavlink's MAVLink, for the messages sent after the ACK
-    motors: MotorPath
+    motors: MotorSlot  # the vehicle's part of the motor path
     schedules: dict[int, T.Schedule]  # link id -> its telemetry schedule
     without_hil_state: set[int]  # link ids whose motor answers leave HIL_STATE out
     after_ack: list[Any]  # messages to send after the COMMAND_ACK

@@ -1,5 +1,5 @@
 """The MAVLink face of a group of vehicles: one server per vehicle on shared links, and
-lockstep rounds that step them all at once.
+the motor path of them all.
 
 Every link carries every vehicle: each sends its own heartbeat and telemetry with its own
 system id (``--sysid`` … ``--sysid + N − 1``), and a message reaches the vehicle its
@@ -7,76 +7,68 @@ system id (``--sysid`` … ``--sysid + N − 1``), and a message reaches the veh
 not host is counted and refused once in a while with a STATUSTEXT; it never holds up the
 others.
 
-Lockstep rounds (docs/mavlink.md, "A fleet in lockstep"): SET_ACTUATOR_CONTROL_TARGET
-addressed to each vehicle, stamped with the simulated time the round starts at. When
-every vehicle has its command for the round, the group advances one control period in
-one call of the physics and every vehicle's answer goes back together, in as few
-datagrams as fit. A repeat of the last round's command (the client lost the answer) is
-answered from the cache, without stepping again; a command stamped with any other time
-is refused, and answered with the vehicle's current state so the client can see where
-the simulator is.
+Motor commands (SET_ACTUATOR_CONTROL_TARGET to a vehicle; HIL_ACTUATOR_CONTROLS, only
+where there is one vehicle) are routed to the one motor path of the group
+(:mod:`.motor_path`), which holds each round until it is complete, flies it and says
+whom to answer; this module only routes them, owns the links (and who may command on
+the motor link: :mod:`.ownership`) and sends the answers, in as few datagrams as fit.
 """
 
 from __future__ import annotations
 
-import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink import telemetry as T
 from quadsitl.mavlink.links import Link, Peer
-from quadsitl.mavlink.motor_path import LOCKSTEP_IDLE, fly
+from quadsitl.mavlink.motor_path import MotorPath, Reply
 from quadsitl.mavlink.ownership import Ownership, may_take
 from quadsitl.mavlink.server import MOTOR_LINK, MavlinkServer
-from quadsitl.mavlink.signing import is_signed
 from quadsitl.mavlink.tlog import TlogWriter
-from quadsitl.physics.layout import P_GEAR_HEIGHT
 from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.results import Severity
 from quadsitl.wire import fast_codec as FC
-from quadsitl.wire.answer import answer_parts, field_slices
-from quadsitl.wire.lockstep import RELEASE_LOCKSTEP, check_controls
-from quadsitl.wire.state import ROW_BY_ROW, WireState
-from quadsitl.wire.units import to_time_usec
+from quadsitl.wire.answer import field_slices
+from quadsitl.wire.lockstep import RELEASE_LOCKSTEP
 
-FAST_IDS = frozenset({mav.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET})
-_ROUND = field_slices(mav.MAVLink_set_actuator_control_target_message)  # a round command's
-WIRE_FIELDS = ("position_ned", "q_ned_frd", "velocity_frd", "rates_frd", "rotor_speeds")
+ROUND = mav.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET
+HIL = mav.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS
+FAST_IDS = frozenset({ROUND, HIL})  # motor commands, parsed without pymavlink (unsigned)
+_ROUND = field_slices(mav.MAVLink_set_actuator_control_target_message)
+_HIL = field_slices(mav.MAVLink_hil_actuator_controls_message)
 TICK_PERIOD = 0.005  # wall s between two ticks of one vehicle (events, telemetry)
 LOCKSTEP_TICK_PERIOD = 0.02  # the same in lockstep (telemetry capped on the wall clock)
 
 
 class FleetServer:
-    """Routes each link's messages to the vehicles' servers; runs lockstep rounds."""
+    """Routes each link's messages to the vehicles' servers and to their motor path."""
 
     def __init__(
         self, group: VehicleGroup, servers: list[MavlinkServer], tlog: TlogWriter | None
     ) -> None:
         self.group, self.servers, self.tlog = group, servers, tlog
         self.by_system = {server.system_id: i for i, server in enumerate(servers)}
-        self.pending: dict[int, list[float]] = {}  # vehicle index: controls of this round
-        self.previous_round: int | None = None  # µs, start of the last round stepped
-        self.cached: list[list[bytes]] = [[] for _ in servers]  # its answers
-        self.counters = {"unknown_system": 0, "duplicates": 0, "rounds": 0}
+        lockstep = any(server.lockstep for server in servers)
+        self.motors = MotorPath(group.batch, [server.motors for server in servers], lockstep)
+        self.counters = {"unknown_system": 0}
         self._next_tick = 0  # the vehicle ticked next
         self._last_tick: float | None = None  # wall time of the last tick
         self._credit = 0.0  # vehicles owed a tick
         for i, server in enumerate(servers):
             for schedule in server.schedules.values():  # the vehicles' telemetry takes turns
                 schedule.offset = i / len(servers) * T.FASTEST_INTERVAL
-        self._round_wall = -math.inf  # wall time of the last round command
         self.ownership = Ownership()  # of the motor link: one client at a time
         # The messages routed here; the rest go to the vehicle they name (_dispatch).
         self.handlers: dict[int, Callable[[Any, Link, Peer], None]] = {
-            mav.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET: self._on_set_actuator_control_target,
-            mav.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS: self._on_hil_actuator_controls,
+            ROUND: self._on_set_actuator_control_target,
+            HIL: self._on_hil_actuator_controls,
         }
 
     # --- the loop's hooks -------------------------------------------------------------
     def receive(self, link: Link, received_at: float | None = None) -> None:
-        """Dispatch what arrived on ``link`` in order; step a round once it is complete.
+        """Dispatch what arrived on ``link`` in order; a round flies once it is complete.
         The answers go back in the order of what they answer (a client matches a reset's
         answer by what precedes it), together in one datagram or a few."""
         link.hold()
@@ -91,12 +83,9 @@ class FleetServer:
         for message, peer in link.receive(fast):
             if link.name == MOTOR_LINK and not self._admit(message, peer.address, link):
                 continue
-            if isinstance(message, FC.Frame):  # an unsigned round command, parsed fast
+            if isinstance(message, FC.Frame):  # an unsigned motor command, parsed fast
                 link.accept(peer)  # (only when signing is off)
-                values = message.unpack()
-                target = values[_ROUND["target_system"].start]
-                stamp = values[_ROUND["time_usec"].start]
-                self._round_command(target, stamp, values[_ROUND["controls"]][:4], link)
+                self._on_frame(message, link)
                 continue
             if self.tlog is not None and link.name != MOTOR_LINK:
                 self.tlog.record(bytes(message.get_msgbuf()), received_at)
@@ -107,20 +96,6 @@ class FleetServer:
                 for server in self.servers:
                     server.greet()
 
-    def _on_set_actuator_control_target(self, message: Any, link: Link, peer: Peer) -> None:
-        """A round command through pymavlink (signed, or not on the motor link)."""
-        controls = message.controls[:4]
-        self._round_command(message.target_system, message.time_usec, controls, link, message, peer)
-
-    def _on_hil_actuator_controls(self, message: Any, link: Link, peer: Peer) -> None:
-        """One vehicle's motor command: its server flies it as a round of one
-        (:func:`~quadsitl.mavlink.motor_path.fly`); refused where several vehicles share
-        the links (it names none of them)."""
-        if len(self.servers) > 1:
-            self._refuse_unaddressed()
-        else:
-            self._dispatch(message, link, peer)
-
     def tick(self, wall_now: float) -> None:
         """Every vehicle's events, heartbeat and telemetry, the vehicles in turn: each
         is ticked about every TICK_PERIOD of wall time (LOCKSTEP_TICK_PERIOD in
@@ -129,7 +104,8 @@ class FleetServer:
         physics steps. What the vehicles ticked in one call send goes out together, in
         datagrams of at most TELEMETRY_DATAGRAM bytes per link (as PX4 packs them)."""
         n = len(self.servers)
-        period = LOCKSTEP_TICK_PERIOD if self.in_lockstep(wall_now) else TICK_PERIOD
+        lockstep = self.motors.in_lockstep(wall_now)
+        period = LOCKSTEP_TICK_PERIOD if lockstep else TICK_PERIOD
         last = wall_now if self._last_tick is None else self._last_tick
         elapsed = min(max(wall_now - last, 0.0), period)
         self._last_tick = wall_now
@@ -141,23 +117,11 @@ class FleetServer:
             link.hold(FC.TELEMETRY_DATAGRAM)
         try:
             for _ in range(count):
-                self.servers[self._next_tick].tick(wall_now)
+                self.servers[self._next_tick].tick(wall_now, lockstep)
                 self._next_tick = (self._next_tick + 1) % n
         finally:
             for link in links:
                 link.release()
-
-    def in_lockstep(self, wall_now: float) -> bool:
-        """Whether simulated time moves only with motor commands: always with
-        ``--lockstep``, else until LOCKSTEP_IDLE wall seconds after the last one."""
-        motors = self.servers[0].motors
-        return motors.always_lockstep or wall_now - self.last_lockstep_wall < LOCKSTEP_IDLE
-
-    @property
-    def last_lockstep_wall(self) -> float:
-        """Wall time of the last lockstep command (a round, or one vehicle's HIL)."""
-        single = self.servers[0].motors.last_lockstep_wall if len(self.servers) == 1 else -1.0
-        return max(self._round_wall, single)
 
     def slow_telemetry(self, factor: float) -> None:
         """Every vehicle's telemetry streams ``factor`` times less often on every link
@@ -179,11 +143,11 @@ class FleetServer:
         now = time.monotonic()
         fast = isinstance(message, FC.Frame)
         if address == self.ownership.owner and (fast or message.get_type() != "COMMAND_LONG"):
-            self.ownership.heard = now  # the owner's round or answer: the hot path
+            self.ownership.heard = now  # the owner's command or answer: the hot path
             return True
         check = self.servers[0].signing
-        if fast:  # an unsigned round command
-            kind, takes = "SET_ACTUATOR_CONTROL_TARGET", check is None
+        if fast:  # an unsigned motor command
+            kind, takes = mav.mavlink_map[message.msgid].msgname, check is None
         else:
             kind, takes = message.get_type(), may_take(check, message)
         if kind == "COMMAND_LONG" and message.command == RELEASE_LOCKSTEP:
@@ -208,22 +172,58 @@ class FleetServer:
             for server in self.servers:
                 server.dispatch(message, link, peer)
             return
-        index = self.by_system.get(target)
+        index = self._index(target)
+        if index is not None:
+            self.servers[index].dispatch(message, link, peer)
+
+    def _index(self, system_id: int) -> int | None:
+        """The vehicle of ``system_id``; None (counted, said now and then) if none."""
+        index = self.by_system.get(system_id)
         if index is None:
-            self._unknown(target)
-            return
-        self.servers[index].dispatch(message, link, peer)
+            self.counters["unknown_system"] += 1
+            if self.counters["unknown_system"] % 100 == 1:
+                first, last = min(self.by_system), max(self.by_system)
+                self.servers[0].statustext(
+                    Severity.WARNING,
+                    f"refused: no system {system_id} here ({first}..{last})",
+                )
+        return index
 
-    def _unknown(self, system_id: int) -> None:
-        self.counters["unknown_system"] += 1
-        if self.counters["unknown_system"] % 100 == 1:
-            first, last = min(self.by_system), max(self.by_system)
-            self.servers[0].statustext(
-                Severity.WARNING,
-                f"refused: no system {system_id} here ({first}..{last})",
-            )
+    # --- motor commands (motor_path.py) ------------------------------------------------
+    def _on_frame(self, frame: FC.Frame, link: Link) -> None:
+        """An unsigned motor command parsed fast, the lockstep clients' hot path."""
+        values = frame.unpack()
+        if frame.msgid == ROUND:
+            index = self._index(values[_ROUND["target_system"].start])
+            if index is not None:
+                stamp, controls = values[_ROUND["time_usec"].start], values[_ROUND["controls"]]
+                self._answer(link, self.motors.round_command(index, stamp, controls), False)
+        elif self._lone():
+            sender = (frame.sysid, frame.compid, frame.data[4])  # data[4]: its sequence
+            time_usec, flags = values[_HIL["time_usec"].start], values[_HIL["flags"].start]
+            controls, mode = values[_HIL["controls"]], values[_HIL["mode"].start]
+            reply = self.motors.hil_command(sender, time_usec, flags, controls, mode)
+            self._answer_hil(link, reply)
 
-    def _refuse_unaddressed(self) -> None:
+    def _on_set_actuator_control_target(self, message: Any, link: Link, peer: Peer) -> None:
+        """A round command through pymavlink (signed, or not on the motor link)."""
+        index = self._index(message.target_system)
+        if index is not None and self.servers[index].admit(message, link, peer):
+            reply = self.motors.round_command(index, message.time_usec, message.controls)
+            self._answer(link, reply, False)
+
+    def _on_hil_actuator_controls(self, message: Any, link: Link, peer: Peer) -> None:
+        """The lone vehicle's motor command through pymavlink: a round of one."""
+        if self._lone() and self.servers[0].admit(message, link, peer):
+            sender = (message.get_srcSystem(), message.get_srcComponent(), message.get_seq())
+            fields = (message.time_usec, message.flags, message.controls, message.mode)
+            self._answer_hil(link, self.motors.hil_command(sender, *fields))
+
+    def _lone(self) -> bool:
+        """Whether HIL_ACTUATOR_CONTROLS (which names no vehicle) can be flown: refused
+        where several vehicles share the links."""
+        if len(self.servers) == 1:
+            return True
         problem = self.servers[0].motors.reject(
             "unaddressed",
             f"HIL_ACTUATOR_CONTROLS refused: {len(self.servers)} vehicles here; address "
@@ -231,122 +231,22 @@ class FleetServer:
         )
         if problem is not None:
             self.servers[0].statustext(Severity.WARNING, problem)
+        return False
 
-    # --- lockstep rounds --------------------------------------------------------------
-    def _round_command(
-        self,
-        target: int,
-        stamp: int,
-        controls: Any,
-        link: Link,
-        signed: Any = None,
-        peer: Peer | None = None,
-    ) -> None:
-        """One vehicle's command of a round (``signed``: the pymavlink message, whose
-        signature is checked when signing is on); the round runs once it is complete."""
-        index = self.by_system.get(target)
-        if index is None:
-            self._unknown(target)
+    def _answer_hil(self, link: Link, reply: Reply) -> None:
+        """A HIL_ACTUATOR_CONTROLS' answer: full, with HIL_STATE_QUATERNION unless the
+        link's client turned it off."""
+        self._answer(link, reply, True, [self.servers[0].hil_state(link)])
+
+    def _answer(self, link: Link, reply: Reply, full: bool, hil_state: Sequence[bool] = ()) -> None:
+        """Say the reply's warnings, then send its answers, each vehicle's frames joined
+        (a datagram never splits one); logged as every frame is, but on the motor link."""
+        for index, text in reply.warnings:
+            self.servers[index].statustext(Severity.WARNING, text)
+        if not reply.rows:
             return
-        server = self.servers[index]
-        if server.signing is not None and (signed is None or server.signing.verdict(signed)):
-            return
-        if peer is not None and (server.signing is None or is_signed(signed)):
-            link.accept(peer)
-        now = self.round_start
-        if stamp == self.previous_round and stamp != now:
-            self.counters["duplicates"] += 1  # its answer was lost: the same answer again
-            for frames in self.cached[index]:
-                link.send_bytes(frames)
-            return
-        controls = list(controls)
-        problem = check_controls(controls)
-        if problem is None and stamp != now:
-            problem = (
-                "wrong_round",
-                f"motor command refused: stamped {stamp} µs, the round starts at {now} µs",
-            )
-        if problem is not None:
-            reason = server.motors.reject(*problem)
-            if reason is not None:
-                server.statustext(Severity.WARNING, reason)
-            for frames in self._answers(link, [index]):
-                link.send_bytes(frames)
-            return
-        self.pending[index] = controls
-        self._round_wall = time.monotonic()
-        if len(self.pending) == len(self.servers):
-            for frames in self._run_round(link):
-                link.send_bytes(frames)
-
-    @property
-    def round_start(self) -> int:
-        """µs: the simulated time of the group's vehicles (they share a clock)."""
-        return to_time_usec(self.group.vehicles[0].time)
-
-    def _run_round(self, link: Link) -> list[bytes]:
-        started = self.round_start
-        wall = time.monotonic()
-        order = range(len(self.servers))
-        paths = [self.servers[index].motors for index in order]
-        controls = [self.pending[index] for index in order]
-        warnings = fly(paths, controls, [True] * len(paths), self.group.rotor_cmd)
-        for index, warning in zip(order, warnings, strict=True):
-            paths[index].last_lockstep_wall = wall
-            if warning is not None:
-                self.servers[index].statustext(Severity.WARNING, warning)
-        self.pending.clear()
-        self.group.advance()
-        self.previous_round = started
-        self.counters["rounds"] += 1
-        return self._answers(link, list(order))
-
-    def _answers(self, link: Link, rows: list[int]) -> list[bytes]:
-        """The state answers of vehicles ``rows`` (cached as their last answer)."""
-        physics = self.group.physics
-        time_usec = self.round_start
-        gears = physics.params[rows, P_GEAR_HEIGHT]  # each vehicle's airframe's
-        # The state each answer carries: the truth, or what the observation delay shows.
-        states, contact_rows, touchdown_rows = self.group.episodes.observed(rows)
-        if len(rows) <= ROW_BY_ROW:  # a whole-array conversion costs more for a few
-            wires = [
-                WireState.from_physics(state, gear, 0, 0, 0.0)
-                for state, gear in zip(states, gears.tolist(), strict=True)
-            ]
-            columns = [[getattr(w, f).tolist() for w in wires] for f in WIRE_FIELDS]
-        else:
-            batch = WireState.from_physics(states, gears, 0, None, None)
-            columns = [getattr(batch, f).tolist() for f in WIRE_FIELDS]
-        contacts = contact_rows.tolist()
-        touchdowns = touchdown_rows.tolist()
-        out: list[bytes] = []
-        for k, i in enumerate(rows):
-            p, q, v, r, rotors = (column[k] for column in columns)
-            frames = self._answer_frames(
-                link, i, time_usec, (p, q, v, r, rotors), contacts[k], touchdowns[k]
-            )
-            self.cached[i] = frames
-            out += frames
-        return out
-
-    def _answer_frames(
-        self,
-        link: Link,
-        i: int,
-        time_usec: int,
-        state: tuple[list[float], ...],
-        contact: int,
-        touchdown: float,
-    ) -> list[bytes]:
-        """Vehicle i's answer, its frames joined (a datagram never splits it).
-        ``state``: position NED, quaternion, body velocity and rates FRD, rotor speeds."""
-        server = self.servers[i]
-        sysid = server.system_id
-        parts = answer_parts(time_usec, state, contact, touchdown, server.motors.resets, lean=True)
-        signer = link.signing()
-        return [
-            b"".join(
-                FC.pack(cls, values, link.next_seq(sysid), sysid, server.component_id, signer)
-                for cls, values in parts
-            )
-        ]
+        for frames in self.motors.answer(link, reply.rows, full, hil_state):
+            link.send_bytes(b"".join(frames))
+            if self.tlog is not None and link.name != MOTOR_LINK:
+                for frame in frames:
+                    self.tlog.record(frame)

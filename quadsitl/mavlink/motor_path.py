@@ -1,284 +1,183 @@
-"""The motor path: HIL_ACTUATOR_CONTROLS in, the vehicle's state out, lockstep, reset.
+"""The motor path: motor commands in, rounds flown, each vehicle's state out.
 
-PX4 semantics: ``controls[0..3]`` are normalised rotor speed commands in [0, 1]
-(Ω = u·Ω_max, rotor order of the airframe), ``mode`` bit 128 is the armed flag (clear:
-motors stopped), ``flags`` bit 0 asks for lockstep. Each accepted command bypasses the
-onboard controller; in lockstep it advances simulated time by exactly one control
-period. Every command is answered, accepted or not, by the state at full precision,
-stamped with simulated time (see :meth:`MotorPath.state_messages`). A rejected command
-changes nothing: its answer carries the unchanged time.
+A motor command is a vehicle's normalised rotor speeds u in [0, 1] (Ω = u·Ω_max, rotor
+order of the airframe). It comes in one of two messages, both handled here in one way:
 
-Reset for training episodes is two ``COMMAND_LONG``\\s, each ACKed: MAV_CMD_USER_2
-stages velocity, body rates and rotor speed; MAV_CMD_USER_1 sets position and attitude
-and applies what was staged, then answers with the state after its ACK. Before them,
-MAV_CMD_USER_4 may stage the airframe of the episode (seven factors of the preset's
-parameters, :data:`~quadsitl.vehicle.episodes.AIRFRAME_NAMES`); without it the reset
-draws one (``quadsitl sim --randomize``) or flies the preset. A reset also starts the
-vehicle's delay line afresh (:mod:`quadsitl.vehicle.episodes`).
+- SET_ACTUATOR_CONTROL_TARGET, addressed to a vehicle by ``target_system`` and stamped
+  with the simulated time of the round it is for (docs/mavlink.md, "A fleet in
+  lockstep"); a command stamped with any other time is refused;
+- HIL_ACTUATOR_CONTROLS, PX4's message for a lone vehicle (``mode`` bit 128 the armed
+  flag, clear: motors stopped; ``flags`` bit 0 lockstep; ``time_usec`` the time of the
+  state it was computed from, 0 or never going back): a round of one.
 
-Pure: no sockets. The server sends what the methods return.
+:class:`MotorPath` holds the commands of a round until every vehicle has its own, then
+flies them: the onboard controllers are bypassed, and in lockstep the group advances
+exactly one control period in one call of the physics. Every command is answered,
+accepted or not (:meth:`MotorPath.answer`): a refused one changes nothing and is
+answered with the unchanged state, a repeat of a vehicle's last lockstep command (its
+client lost the answer: the same round's stamp, or the same HIL frame) with the state,
+without stepping again. Simulated time moves only with lockstep commands while they
+come (:meth:`MotorPath.in_lockstep`).
+
+Pure: no sockets. The fleet server routes the messages here and sends the answers.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Hashable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
-from quadsitl import frames
-from quadsitl.mavlink import mavlink as mav
+from quadsitl.mavlink.links import Link
+from quadsitl.mavlink.motor_slot import MotorSlot, answer_parts
 from quadsitl.physics import layout as L
-from quadsitl.vehicle import external_control as X
-from quadsitl.vehicle.episodes import check_factors
-from quadsitl.vehicle.results import ACCEPTED, Outcome, Result
-from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.vehicle.stepping import Stepping
 from quadsitl.wire import fast_codec as FC
-from quadsitl.wire.answer import answer_parts
 from quadsitl.wire.lockstep import ARMED_FLAG, LOCKSTEP_FLAG, check_controls
-from quadsitl.wire.state import WireState
-from quadsitl.wire.units import STANDARD_GRAVITY, rotor_speed, to_time_usec
+from quadsitl.wire.units import rotor_speed, to_time_usec
 
 LOCKSTEP_IDLE = 5.0  # wall s without lockstep commands before real time resumes
-# (only when lockstep was asked for by the flag; ``--lockstep`` waits for ever)
-
-_encoder = mav.MAVLink(None)
+# (only when lockstep was asked for by the commands; ``--lockstep`` waits for ever)
 
 
-def _int16(x: float) -> int:
-    return int(max(-32767, min(32767, round(x))))
+class MotorCommand(NamedTuple):
+    """One vehicle's motor command, as its message says it."""
+
+    row: int  # the vehicle, in its batch
+    controls: list[float]  # normalised rotor speeds u of its four rotors
+    armed: bool  # False: the command stops the motors
+    steps: bool  # lockstep: its round advances simulated time one control period
+    key: Hashable  # what a resend of it repeats: the round's stamp, or the HIL frame
+    stamp: int  # µs, its time_usec (0: unstamped)
+    problem: tuple[str, str] | None  # (kind, reason) its message's own rule refuses it for
 
 
-def fly(
-    paths: Sequence[MotorPath],
-    controls: Any,
-    armed: Sequence[bool],
-    rotor_cmd: np.ndarray,
-) -> list[str | None]:
-    """Fly one round of checked motor commands, one per vehicle of ``paths``: the
-    vehicle's HIL_ACTUATOR_CONTROLS (a round of one) or a fleet's round. ``controls``
-    (k, 4) normalised rotor speeds u in [0, 1]; ``armed`` (k,) what each command says;
-    ``rotor_cmd`` (k, 4) rad/s, the vehicles' rotor commands, written here: Ω = u·Ω_max
-    of the airframe, 0 where the command or the vehicle is disarmed. Returns each
-    vehicle's warning worth a STATUSTEXT, or None."""
-    warnings = [path.take(on) for path, on in zip(paths, armed, strict=True)]
-    vehicles = [path.vehicle for path in paths]
-    flying = np.array([on and v.armed for on, v in zip(armed, vehicles, strict=True)])
-    max_speed = np.array([v.airframe.max_rotor_speed for v in vehicles])  # rad/s
-    controls = np.asarray(controls, dtype=np.float64)
-    rotor_cmd[:] = rotor_speed(controls, (max_speed * flying)[:, np.newaxis])
-    return warnings
+class Reply(NamedTuple):
+    """What a command asks of the fleet server."""
+
+    rows: list[int]  # the vehicles to answer (none while the round waits for commands)
+    warnings: list[tuple[int, str]]  # (vehicle, text) worth a STATUSTEXT
 
 
 class MotorPath:
-    """State of the motor path for one vehicle. ``lockstep``: started with --lockstep.
-    The airframes and delays of its episodes are its batch's
-    (:class:`~quadsitl.vehicle.episodes.MotorEpisodes`), in the vehicle's row."""
+    """The motor path of the vehicles of ``batch``, one ``slots`` entry each, in row
+    order. ``lockstep``: started with --lockstep (simulated time waits for commands)."""
 
-    def __init__(
-        self,
-        vehicle: Vehicle,
-        lockstep: bool = False,
-    ) -> None:
-        self.vehicle = vehicle
-        self.episodes, self.row = vehicle.batch.episodes, vehicle.row
-        self.staged_airframe: np.ndarray | None = None
-        self.flown_since_reset = True  # a reset before any command repeats the last one
+    def __init__(self, batch: Stepping, slots: Sequence[MotorSlot], lockstep: bool = False):
+        if [slot.row for slot in slots] != list(range(len(batch.vehicles))):
+            raise ValueError("the motor path needs one slot per vehicle of its batch, in order")
+        self.batch, self.slots = batch, list(slots)
         self.always_lockstep = lockstep
-        self.last_lockstep_wall = -math.inf
-        self.last_command_usec = 0
-        self.resets = 0
-        self.staged: dict[str, Any] | None = None
-        self.counters = {"accepted": 0, "rejected": 0, "while_disarmed": 0, "repeats": 0}
-        self.last_frame: tuple[Any, ...] | None = None  # the last lockstep command applied
-        self._previous_velocity: tuple[float, np.ndarray] | None = None
+        self.last_wall = -math.inf  # wall s of the last lockstep command
+        self.pending: dict[int, MotorCommand] = {}  # vehicle: its command of this round
+        self.rounds = 0  # rounds stepped
+
+    # --- the lockstep clock -----------------------------------------------------------
+    def in_lockstep(self, wall_now: float) -> bool:
+        """Whether simulated time moves only with motor commands: always with
+        ``--lockstep``, else until LOCKSTEP_IDLE wall seconds after the last one."""
+        return self.always_lockstep or wall_now - self.last_wall < LOCKSTEP_IDLE
 
     @property
-    def lockstep(self) -> bool:
-        """True while simulated time moves only with motor commands."""
-        idle = time.monotonic() - self.last_lockstep_wall
-        return self.always_lockstep or idle < LOCKSTEP_IDLE
+    def round_start(self) -> int:
+        """µs: the simulated time of the vehicles (they share a clock)."""
+        return to_time_usec(self.slots[0].vehicle.time)
 
-    # --- motor commands ---------------------------------------------------------------
-    def check(self, msg: Any) -> tuple[str, str] | None:
-        """(kind, reason) why this HIL_ACTUATOR_CONTROLS must be rejected, or None."""
-        problem = check_controls(msg.controls[: L.N_ROTORS])
+    # --- the two messages -------------------------------------------------------------
+    def round_command(self, row: int, stamp: int, controls: Sequence[float]) -> Reply:
+        """SET_ACTUATOR_CONTROL_TARGET to vehicle ``row``, stamped ``stamp`` µs."""
+        now = self.round_start
+        problem = None
+        if stamp != now:
+            reason = f"motor command refused: stamped {stamp} µs, the round starts at {now} µs"
+            problem = ("wrong_round", reason)
+        controls = list(controls[: L.N_ROTORS])
+        return self.command(MotorCommand(row, controls, True, True, stamp, stamp, problem))
+
+    def hil_command(
+        self,
+        sender: tuple[int, int, int],
+        time_usec: int,
+        flags: int,
+        controls: Sequence[float],
+        mode: int,
+    ) -> Reply:
+        """HIL_ACTUATOR_CONTROLS to the lone vehicle from ``sender`` (system, component,
+        sequence number): a round of one. The same frame again is its repeat."""
+        last = self.slots[0].last_stamp
+        problem = None
+        if time_usec and time_usec < last:
+            reason = f"motor command rejected: time {time_usec} µs is before the last command's"
+            problem = ("time_backwards", f"{reason} {last} µs")
+        steps = bool(flags & LOCKSTEP_FLAG) or self.always_lockstep
+        key = (sender, time_usec, flags, tuple(controls), mode)
+        armed, rotors = bool(mode & ARMED_FLAG), list(controls[: L.N_ROTORS])
+        return self.command(MotorCommand(0, rotors, armed, steps, key, time_usec, problem))
+
+    # --- one round --------------------------------------------------------------------
+    def command(self, command: MotorCommand) -> Reply:
+        """Take one vehicle's command: a repeat of its last lockstep command is answered
+        without flying it again; a command with bad controls (or that its message's rule
+        refuses) is counted and answered, changing nothing; any other joins its round,
+        which flies once every vehicle has its command (each vehicle is then answered)."""
+        slot = self.slots[command.row]
+        if command.steps and command.key == slot.last_key:
+            slot.counters["repeats"] += 1
+            self.last_wall = time.monotonic()
+            return Reply([command.row], [])
+        problem = check_controls(command.controls) or command.problem
         if problem is not None:
-            return problem
-        if msg.time_usec and msg.time_usec < self.last_command_usec:
-            return "time_backwards", (
-                f"motor command rejected: time {msg.time_usec} µs is before the last "
-                f"command's {self.last_command_usec} µs"
-            )
-        return None
+            reason = slot.reject(*problem)
+            return Reply([command.row], [] if reason is None else [(command.row, reason)])
+        self.pending[command.row] = command
+        if command.steps:
+            self.last_wall = time.monotonic()
+        if len(self.pending) < len(self.slots):
+            return Reply([], [])
+        return Reply(list(range(len(self.slots))), self._fly())
 
-    def reject(self, kind: str, reason: str) -> str | None:
-        """Count a rejected motor command; the reason, when it is worth a STATUSTEXT (the
-        first of each kind, then every 100th)."""
-        self.counters["rejected"] += 1
-        self.counters[kind] = self.counters.get(kind, 0) + 1
-        return reason if self.counters[kind] % 100 == 1 else None
-
-    def command(self, msg: Any) -> str | None:
-        """Apply one motor command (and step, in lockstep). Returns a problem worth
-        reporting: the first rejection of each kind (then every 100th), or the first
-        command ignored by a disarmed vehicle (then every 1000th). In lockstep, the same
-        frame again (same sender, sequence number and content: a client resending after
-        a lost answer) is answered without stepping again."""
-        lockstep = bool(msg.flags & LOCKSTEP_FLAG) or self.always_lockstep
-        frame = (
-            msg.get_srcSystem(),
-            msg.get_srcComponent(),
-            msg.get_seq(),
-            bytes(msg.get_payload()),
-        )
-        if lockstep and frame == self.last_frame:
-            self.counters["repeats"] += 1
-            self.last_lockstep_wall = time.monotonic()
-            return None
-        problem = self.check(msg)
-        if problem is not None:
-            return self.reject(*problem)
-        controls = [msg.controls[: L.N_ROTORS]]  # a round of one
-        armed = [bool(msg.mode & ARMED_FLAG)]
-        (warning,) = fly([self], controls, armed, self.vehicle.rotor_cmd[np.newaxis])
-        if msg.time_usec:
-            self.last_command_usec = msg.time_usec
-        self.last_frame = frame if lockstep else None
-        if lockstep:
-            self.last_lockstep_wall = time.monotonic()
-            self.vehicle.advance()
-        return warning
-
-    def take(self, armed: bool = True) -> str | None:
-        """Count one checked motor command and hand the rotors to it (the caller sets
-        their speeds: :func:`fly`); ``armed`` False: the command stops the motors.
-        Returns a warning worth a STATUSTEXT, or None."""
-        v = self.vehicle
-        warning = None
-        self.flown_since_reset = True
-        if not v.armed and armed:
-            self.counters["while_disarmed"] += 1
-            if self.counters["while_disarmed"] % 1000 == 1:
-                warning = "motor commands ignored: vehicle disarmed (arm it first)"
-        X.motor_command(v, None)
-        self.counters["accepted"] += 1
-        return warning
-
-    # --- reset ------------------------------------------------------------------------
-    def stage_airframe(self, params: list[float]) -> Result:
-        """MAV_CMD_USER_4: the next reset's airframe, seven factors of the preset's
-        parameters (mass, inertia, thrust, torque, drag, aerodynamic moment
-        coefficients, motor rate), each in [0.1, 10]."""
-        problem = check_factors(params[:7])
-        if problem is not None:
-            return Result(Outcome.DENIED, problem)
-        self.staged_airframe = np.array(params[:7], dtype=np.float64)
-        return ACCEPTED
-
-    def stage_motion(self, params: list[float]) -> Result:
-        """MAV_CMD_USER_2: velocity NED (m/s), body rates FRD (rad/s), rotor speed
-        (rad/s, all four; NaN: hover speed if airborne), used by the next reset."""
-        motion = params[:6]
-        if not all(math.isfinite(x) for x in motion):
-            return Result(Outcome.DENIED, "stage motion denied: NaN or inf")
-        rotor = params[6]
-        if not (math.isnan(rotor) or 0.0 <= rotor <= self.vehicle.airframe.max_rotor_speed):
-            return Result(Outcome.DENIED, f"stage motion denied: rotor speed {rotor} rad/s")
-        self.staged = {"velocity_ned": motion[:3], "rates_frd": motion[3:6], "rotor": rotor}
-        return ACCEPTED
-
-    def reset(self, params: list[float]) -> Result:
-        """MAV_CMD_USER_1: position local NED (m), attitude quaternion w, x, y, z
-        (FRD -> NED); with the staged motion (else at rest)."""
-        if not all(math.isfinite(x) for x in params):
-            return Result(Outcome.DENIED, "reset denied: NaN or inf in position or attitude")
-        q = np.asarray(params[3:7], dtype=np.float64)
-        if np.linalg.norm(q) < 1e-6:
-            return Result(Outcome.DENIED, "reset denied: attitude quaternion is zero")
-        staged = self.staged or {"velocity_ned": [0.0] * 3, "rates_frd": [0.0] * 3}
-        v = self.vehicle
-        q = q / np.linalg.norm(q)
-        velocity_ned = np.asarray(staged["velocity_ned"], dtype=np.float64)
-        velocity_frd = frames.quat_rotate(frames.quat_conjugate(q), velocity_ned)
-        wire = WireState(
-            time_usec=0,
-            position_ned=np.asarray(params[:3], dtype=np.float64),
-            q_ned_frd=q,
-            velocity_frd=velocity_frd,
-            rates_frd=np.asarray(staged["rates_frd"], dtype=np.float64),
-            rotor_speeds=np.zeros(L.N_ROTORS),
-            contact=L.AIRBORNE,
-            touchdown_speed=0.0,
-        )
-        state = wire.to_physics(v.airframe.gear_height)
-        rotor = staged.get("rotor", math.nan)
-        on_ground = state[L.I_PZ] <= v.airframe.gear_height + 1e-6
-        if math.isnan(rotor):
-            rotor = 0.0 if on_ground else v.airframe.hover_rotor_speed
-        state[L.ROTORS] = rotor
-        result = X.reset_state(v, state)
-        if result.ok:
-            self.episodes.new_episode(self.row, self.staged_airframe, self.flown_since_reset)
-            self.flown_since_reset = False
-            self.staged, self.staged_airframe = None, None
-            self.last_frame = None  # a command after a reset is never a repeat
-            self.resets += 1
-            self._previous_velocity = None
-        return result
+    def _fly(self) -> list[tuple[int, str]]:
+        """Fly the round whose commands are all here: Ω = u·Ω_max of each airframe, 0
+        where the command or the vehicle is disarmed; in lockstep, one control period
+        of every vehicle (:meth:`Stepping.advance <quadsitl.vehicle.stepping.Stepping.
+        advance>`). Returns the warnings of the vehicles."""
+        commands = [self.pending[row] for row in range(len(self.slots))]
+        self.pending.clear()
+        warnings = []
+        for command, slot in zip(commands, self.slots, strict=True):
+            warning = slot.take(command.armed)
+            if warning is not None:
+                warnings.append((command.row, warning))
+        vehicles = [slot.vehicle for slot in self.slots]
+        flying = np.array([c.armed and v.armed for c, v in zip(commands, vehicles, strict=True)])
+        max_speed = np.array([v.airframe.max_rotor_speed for v in vehicles])  # rad/s
+        controls = np.array([c.controls for c in commands], dtype=np.float64)
+        self.batch.rotor_cmd[:] = rotor_speed(controls, (max_speed * flying)[:, np.newaxis])
+        for command, slot in zip(commands, self.slots, strict=True):
+            slot.last_key = command.key if command.steps else None
+            if command.stamp:
+                slot.last_stamp = command.stamp
+        if any(command.steps for command in commands):
+            self.batch.advance()
+            self.rounds += 1
+        return warnings
 
     # --- the answer -------------------------------------------------------------------
-    def state_messages(self, hil_state: bool = True) -> list[Any]:
-        """The answer to a motor command or a reset, in this order: HIL_STATE_QUATERNION
-        (PX4's simulator state; integer position/velocity; left out when ``hil_state`` is
-        False, which a client asks for with SET_MESSAGE_INTERVAL −1), ACTUATOR_OUTPUT_STATUS
-        (rotor speeds, rad/s), NAMED_VALUE_INT ``CONTACT`` (0 airborne, 1 on the ground,
-        2 crashed), NAMED_VALUE_FLOAT ``TD_SPEED`` (touchdown speed, m/s; only when not
-        airborne) and last ODOMETRY (float32 pose and body-frame velocity)."""
-        v = self.vehicle
-        time_usec = to_time_usec(v.time)
-        # what the delay line lets the controller see (without delays: the truth)
-        states, contacts, touchdowns = self.episodes.observed([self.row])
-        state, contact, touchdown = states[0], int(contacts[0]), touchdowns[0]
-        wire = WireState.from_physics(
-            state, v.airframe.gear_height, time_usec, contact, float(touchdown)
-        )
-        messages = [self._hil_state_quaternion(wire, state)] if hil_state else []
-        columns = (
-            wire.position_ned.tolist(),
-            wire.q_ned_frd.tolist(),
-            wire.velocity_frd.tolist(),
-            wire.rates_frd.tolist(),
-            wire.rotor_speeds.tolist(),
-        )
-        parts = answer_parts(time_usec, columns, contact, wire.touchdown_speed, self.resets)
-        return messages + [FC.message(cls, values) for cls, values in parts]
-
-    def _hil_state_quaternion(self, wire: WireState, state: np.ndarray) -> Any:
-        v = self.vehicle
-        lat, lon, alt = wire.global_position(v.origin)
-        velocity_ned = frames.enu_to_ned(state[L.VEL])
-        # Specific force (what an accelerometer reads), body FRD, over the last period:
-        # the acceleration minus the simulated gravity.
-        accel_ned = np.array([0.0, 0.0, -v.airframe.gravity])
-        if self._previous_velocity is not None and v.time > self._previous_velocity[0]:
-            t0, v0 = self._previous_velocity
-            accel_ned += (velocity_ned - v0) / (v.time - t0)
-        accel_frd = frames.quat_rotate(frames.quat_conjugate(wire.q_ned_frd), accel_ned)
-        self._previous_velocity = (v.time, velocity_ned)
-        speed = float(np.linalg.norm(velocity_ned)) * 100
-        mg = accel_frd / STANDARD_GRAVITY * 1000
-        return _encoder.hil_state_quaternion_encode(
-            wire.time_usec,
-            list(wire.q_ned_frd),
-            *(float(x) for x in wire.rates_frd),
-            round(lat * 1e7),
-            round(lon * 1e7),
-            round(alt * 1000),
-            *(_int16(x * 100) for x in velocity_ned),
-            min(round(speed), 65535),
-            min(round(speed), 65535),
-            *(_int16(x) for x in mg),
-        )
+    def answer(
+        self, link: Link, rows: list[int], full: bool, hil_state: Sequence[bool] = ()
+    ) -> list[list[bytes]]:
+        """The frames of vehicles ``rows``' answers (:func:`~.motor_slot.answer_parts`)
+        for ``link``: its sequence numbers, its signing."""
+        slots = [self.slots[row] for row in rows]
+        signer = link.signing()
+        return [
+            [
+                FC.pack(cls, values, link.next_seq(slot.system_id), slot.system_id,
+                        slot.component_id, signer)
+                for cls, values in parts
+            ]
+            for slot, parts in zip(slots, answer_parts(slots, full, hil_state), strict=True)
+        ]  # fmt: skip

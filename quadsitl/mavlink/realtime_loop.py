@@ -116,11 +116,11 @@ class RealTimeLoop:
             now = time.monotonic()
             if end is not None and now >= end:
                 break
-            if self.server.in_lockstep(now):
+            if self.server.motors.in_lockstep(now):
                 start, steps = now, 0  # real time resumes from here when lockstep ends
                 # Poll while commands are flowing (waking from sleep costs more than a
                 # round trip); sleep once the client pauses.
-                busy = now - self.server.last_lockstep_wall < LOCKSTEP_SPIN
+                busy = now - self.server.motors.last_wall < LOCKSTEP_SPIN
                 wait = 0.0 if busy else LOCKSTEP_WAIT
                 if now - last_tick >= LOCKSTEP_TICK:
                     self._govern(now, lockstep=True)

@@ -30,7 +30,7 @@ from quadsitl.mavlink.commands import Command, Commands
 from quadsitl.mavlink.identity import IDENTITIES, Identity
 from quadsitl.mavlink.links import Link, Peer
 from quadsitl.mavlink.mission_protocol import MissionProtocol, Origin
-from quadsitl.mavlink.motor_path import MotorPath
+from quadsitl.mavlink.motor_slot import MotorSlot
 from quadsitl.mavlink.param_protocol import ParamProtocol
 from quadsitl.mavlink.signing import (
     SignatureCheck,
@@ -78,7 +78,8 @@ class MavlinkServer:
         self.echo = echo  # prints vehicle events for the user
         self.encoder = mav.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self.schedules = {id(link): T.Schedule(streams=link.name != MOTOR_LINK) for link in links}
-        self.motors = MotorPath(vehicle, lockstep)
+        self.lockstep = lockstep  # --lockstep: the motor path's (:mod:`.motor_path`)
+        self.motors = MotorSlot(vehicle, system_id, component_id)  # this vehicle's part
         self.without_hil_state: set[int] = set()  # links whose answers leave it out
         self.signing: SignatureCheck | None = None
         self.signing_notices = SigningNotices(lambda text: self.statustext(Severity.WARNING, text))
@@ -97,7 +98,6 @@ class MavlinkServer:
         self.counters = {"ignored": 0, "bad_values": 0}
         self.handlers: dict[int, Handler] = {  # message id: its handler
             mav.MAVLINK_MSG_ID_HEARTBEAT: self._on_heartbeat,
-            mav.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS: self._on_hil_actuator_controls,
             mav.MAVLINK_MSG_ID_SETUP_SIGNING: self._on_setup_signing,
             mav.MAVLINK_MSG_ID_PING: self._on_ping,
             mav.MAVLINK_MSG_ID_TIMESYNC: self._on_timesync,
@@ -192,11 +192,8 @@ class MavlinkServer:
             if peer is not None and self.signing is None:
                 link.accept(peer)
             return
-        if self.signing is not None and self.signing.verdict(message) is not None:
-            self.signing_notices.rejected(self.signing, time.monotonic())
+        if not self.admit(message, link, peer):
             return
-        if peer is not None and (self.signing is None or is_signed(message)):
-            link.accept(peer)
         to_sender = self.to_sender.get(message.get_msgId())
         handler = self.handlers.get(message.get_msgId())
         try:
@@ -209,9 +206,19 @@ class MavlinkServer:
             self.counters["bad_values"] += 1
             self.statustext(Severity.WARNING, f"rejected {message.get_type()}: {error}")
 
-    def tick(self, wall_now: float) -> None:
+    def admit(self, message: Any, link: Link, peer: Peer | None) -> bool:
+        """Whether ``message`` passes signing (when on; a rejection is counted and said);
+        one that passes makes ``peer`` live (it hears this link's telemetry)."""
+        if self.signing is not None and self.signing.verdict(message) is not None:
+            self.signing_notices.rejected(self.signing, time.monotonic())
+            return False
+        if peer is not None and (self.signing is None or is_signed(message)):
+            link.accept(peer)
+        return True
+
+    def tick(self, wall_now: float, lockstep: bool = False) -> None:
         """After the physics: events, heartbeat (wall clock), telemetry (sim clock; in
-        lockstep also never faster than its rate on the wall clock)."""
+        ``lockstep`` also never faster than its rate on the wall clock)."""
         v = self.vehicle
         while v.events:
             severity, text = v.events.popleft()
@@ -231,7 +238,7 @@ class MavlinkServer:
         self.params.tick()
         if self.signing is not None:
             self.signing_notices.tick(self.signing, wall_now)
-        wall_cap = wall_now if self.motors.lockstep else None
+        wall_cap = wall_now if lockstep else None
         snapshot: Snapshot | None = None
         for link in self.links:
             due = self.schedules[id(link)].due(v.time, wall_cap)
@@ -276,13 +283,7 @@ class MavlinkServer:
         if self.signing is not None and self.signing.timestamps is not None:
             self.signing.timestamps.save()
 
-    # --- motor path ---------------------------------------------------------------------
-    def _on_hil_actuator_controls(self, msg: Any, link: Link) -> None:
-        problem = self.motors.command(msg)
-        if problem is not None:
-            self.statustext(Severity.WARNING, problem)
-        self.send_together(self.motors.state_messages(self.hil_state(link)), link)
-
+    # --- signing ----------------------------------------------------------------------
     def _on_setup_signing(self, msg: Any, link: Link) -> None:
         """A new key from a ground station (MAVProxy's ``signing setup``). Once signing is
         on, only a message signed with the current key gets here; all zeros: off."""
@@ -293,6 +294,7 @@ class MavlinkServer:
         self.statustext(Severity.NOTICE, "signing " + ("off" if not any(key) else "key set"))
 
     def hil_state(self, link: Link) -> bool:
+        """Whether motor answers on ``link`` carry HIL_STATE_QUATERNION."""
         return id(link) not in self.without_hil_state
 
     # --- heartbeat, ping, time --------------------------------------------------------

@@ -18,18 +18,16 @@ from quadsitl.vehicle.view import VehicleView
 from quadsitl.wire.modes import Mode
 
 
-def motor_command(v: VehicleView, rotor_speeds: Vec | None) -> None:
-    """Rotor speeds (rad/s, finite, within [0, Ω_max]; the caller checks) from an
-    external controller: the onboard controller is bypassed until the commands stop
-    for MOTOR_TIMEOUT, the mode changes, or :meth:`release_motors`. A disarmed vehicle
-    keeps its rotors stopped. ``None``: the caller writes ``v.rotor_cmd`` itself."""
+def motor_command(v: VehicleView) -> None:
+    """A motor command from an external controller, whose rotor speeds the caller writes
+    to ``v.rotor_cmd`` (rad/s; a disarmed vehicle's rotors stay stopped): the onboard
+    controller is bypassed until the commands stop for MOTOR_TIMEOUT, the mode changes,
+    or :meth:`release_motors`."""
     if not v.motor_control:
         v.motor_control = True
         v.flight.take_motors()
         v.event(Severity.INFO, "external motor control")
     v.motor_command_time = v.time
-    if rotor_speeds is not None:
-        v.rotor_cmd[:] = rotor_speeds if v.armed else 0.0
 
 
 def release_motors(v: VehicleView, reason: str) -> None:
