@@ -16,15 +16,12 @@ sends a frame at least once a second, re-sending when unanswered).
 
 from __future__ import annotations
 
-import errno
 import math
 import select
-import signal
 import socket
-import sys
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -37,12 +34,20 @@ from quadsitl.bridges.ardupilot_json import (
     ServoFrame,
     parse_servo_packet,
 )
-from quadsitl.physics.fleet import Fleet
-from quadsitl.physics.wind import Wind
+from quadsitl.bridges.serve import (
+    WAIT,
+    BridgeConfig,
+    Say,
+    bridge_fleet,
+    check_ports,
+    open_ports,
+    say_on_stderr,
+    say_weather,
+    serve_until_stopped,
+)
 from quadsitl.wire.addresses import is_loopback
 
 PARAMETER_FOLDER = Path(__file__).resolve().parent / "ardupilot"
-WAIT = 0.2  # wall s, longest sleep in select() (signals, --duration)
 DATAGRAM = 2048  # bytes, more than the largest servo frame (72)
 # s: a frame sent again sooner than this after our answer to it crossed that answer on
 # the way (ArduPilot sends again only after 1 s without one); answering it twice would
@@ -70,17 +75,10 @@ def parameter_file(airframe: str) -> Path | None:
 
 
 @dataclass
-class ArduPilotConfig:
+class ArduPilotConfig(BridgeConfig):
     """What ``quadsitl sim --flight-stack ardupilot`` is told; see ``quadsitl sim --help``."""
 
-    vehicles: int = 1  # ArduPilot instances, one vehicle each, one batched physics
-    airframe: str = "iris"
-    bind: str = "127.0.0.1"  # address the sockets listen on
     port: int = PORT  # of instance 0; instance i listens on port + 10 i
-    duration: float | None = None  # wall seconds, None: until a signal
-    quiet: bool = False
-    wind: Wind | None = None  # the weather every vehicle flies in (None: still air)
-    wind_seed: int = 0
 
 
 class ArduPilotJsonServer:
@@ -103,27 +101,12 @@ class ArduPilotJsonServer:
     ) -> None:
         self.physics, self.silence = physics, silence
         self.notices = physics.notices
-        self.sockets: list[socket.socket] = []
         self.ports = [port + PORT_STRIDE * i for i in range(physics.fleet.n)]
+        self.sockets = open_ports(self.ports, bind, tcp=False, stack="ArduPilot")
         self.addresses: list[Any] = [None] * physics.fleet.n  # each one's bound peer
         self.heard = [-math.inf] * physics.fleet.n  # monotonic s of its peer's last frame
         self.refused = [0] * physics.fleet.n  # frames from other senders, refused
         self.answered = [-math.inf] * physics.fleet.n  # monotonic s of each one's last answer
-        try:
-            for index, number in enumerate(self.ports):
-                sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                self.sockets.append(sock)
-                try:
-                    sock.bind((bind, number))
-                except OSError as error:
-                    why = "is in use" if error.errno == errno.EADDRINUSE else f"({error})"
-                    raise OSError(
-                        f"UDP port {number} (ArduPilot instance {index}) on {bind} {why}"
-                    ) from None
-                sock.setblocking(False)
-        except OSError:
-            self.close()
-            raise
         self._index = {sock.fileno(): i for i, sock in enumerate(self.sockets)}
         self._sent_at = 0.0  # perf_counter s of the last answer (one instance)
         self.turnaround = TURNAROUND_CAP  # s, moving average: our answer to its next frame
@@ -217,6 +200,8 @@ class ArduPilotJsonServer:
         return arrived
 
     def close(self) -> None:
+        """Say what was counted and not said; close the sockets."""
+        self.notices.flush()
         for sock in self.sockets:
             sock.close()
 
@@ -237,22 +222,11 @@ def _readable(sock: socket.socket) -> bool:
     return True
 
 
-def run_ardupilot(config: ArduPilotConfig, say: Callable[[str], None] | None = None) -> int:
+def run_ardupilot(config: ArduPilotConfig, say: Say | None = None) -> int:
     """Serve ArduPilot instances until a signal or ``config.duration``; the exit status."""
-    if not 1 <= config.vehicles <= 1000:
-        raise ValueError(f"--vehicles must be 1 .. 1000, got {config.vehicles}")
-    last_port = config.port + PORT_STRIDE * (config.vehicles - 1)
-    if not config.port >= 1 or last_port > 65535:
-        raise ValueError(f"ports {config.port} .. {last_port} are not all valid UDP ports")
-    if say is None:
-
-        def say(text: str) -> None:
-            print(f"quadsitl sim: {text}", file=sys.stderr, flush=True)
-
-    fleet = Fleet(config.vehicles, config.airframe, dt=1.0 / 1200)
-    if config.wind is not None:
-        fleet.set_wind(config.wind, seed=config.wind_seed)
-    physics = JsonPhysics(fleet, notice=say)
+    check_ports(config, PORT_STRIDE, "UDP")
+    say = say or say_on_stderr
+    physics = JsonPhysics(bridge_fleet(config, dt=1.0 / 1200), notice=say)
     server = ArduPilotJsonServer(physics, config.bind, config.port)
     if not is_loopback(config.bind):
         say(
@@ -261,39 +235,23 @@ def run_ardupilot(config: ArduPilotConfig, say: Callable[[str], None] | None = N
             f"ArduPilot has been silent {SILENCE:g} s), and each 40-byte frame is answered "
             "with ~300 bytes to the address it claims (docs/security.md)"
         )
-    stopping: list[int] = []
-    previous = [signal.signal(s, lambda n, _: stopping.append(n)) for s in _SIGNALS]
-    try:
-        if not config.quiet:
-            _banner(config, physics, server, lambda text: print(text, flush=True))
-        started = time.monotonic()
-        end = None if config.duration is None else started + config.duration
-        while not stopping and (end is None or time.monotonic() < end):
-            server.serve(WAIT if end is None else max(0.0, min(WAIT, end - time.monotonic())))
-        physics.notices.flush()
-        wall = time.monotonic() - started
+
+    def summary(wall: float) -> str:
         simulated = max(peer.time_s for peer in physics.peers)
         frames = sum(peer.frames for peer in physics.peers)
-        print(
+        return (
             f"quadsitl sim: {frames} frames answered in {wall:.1f} s; "
-            f"the longest-flying vehicle flew {simulated:.1f} s of physics",
-            flush=True,
+            f"the longest-flying vehicle flew {simulated:.1f} s of physics"
         )
-    finally:
-        for s, handler in zip(_SIGNALS, previous, strict=True):
-            signal.signal(s, handler)
-        server.close()
-    return 0
 
-
-_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+    return serve_until_stopped(config, server, partial(_banner, config, physics, server), summary)
 
 
 def _banner(
     config: ArduPilotConfig,
     physics: JsonPhysics,
     server: ArduPilotJsonServer,
-    out: Callable[[str], None],
+    out: Say,
 ) -> None:
     """Say where each instance connects and how to start ArduCopter against it."""
     frame_name, _ = ARDUPILOT_QUAD_FRAMES[physics.frame_types[0]]
@@ -317,6 +275,4 @@ def _banner(
         )
     if parm is None:
         out(f"  (no parameter file ships for {config.airframe}; see docs/autopilots.md)")
-    weather = None if config.wind is None or config.wind.calm else config.wind.describe()
-    if weather is not None:
-        out(f"  weather: {weather}")
+    say_weather(config, out)

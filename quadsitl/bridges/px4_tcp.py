@@ -13,11 +13,8 @@ move theirs. This module only moves bytes, prints and stops.
 from __future__ import annotations
 
 import contextlib
-import errno
 import select
-import signal
 import socket
-import sys
 import time
 from collections import deque
 from collections.abc import Callable
@@ -28,31 +25,32 @@ from typing import Any
 from quadsitl.bridges.frame_reader import FrameReader
 from quadsitl.bridges.px4_airframe import parameter_folder
 from quadsitl.bridges.px4_hil import PORT, ROUND_US, HilPhysics
+from quadsitl.bridges.serve import (
+    WAIT,
+    BridgeConfig,
+    Say,
+    bridge_fleet,
+    check_ports,
+    open_ports,
+    say_on_stderr,
+    say_weather,
+    serve_until_stopped,
+)
 from quadsitl.geo import Home
-from quadsitl.physics.fleet import Fleet
-from quadsitl.physics.wind import Wind
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.addresses import is_loopback
 from quadsitl.wire.dialect import mavlink as mav
 
-WAIT = 0.2  # wall s, longest sleep in select() (signals, --duration)
 RECEIVE = 65536  # bytes per read, taken when the frames of the last read are all handled
 FRAMES_PER_TURN = 64  # frames of one connection handled in one turn (bounds a flood's work)
 SEND_LIMIT = 4 << 20  # bytes queued for a PX4 that does not read: it is dropped
 
 
 @dataclass
-class Px4Config:
+class Px4Config(BridgeConfig):
     """What ``quadsitl sim --flight-stack px4`` is told; see ``quadsitl sim --help``."""
 
-    vehicles: int = 1  # PX4 instances, one vehicle each, one batched physics
-    airframe: str = "iris"
-    bind: str = "127.0.0.1"  # address the ports listen on
     port: int = PORT  # of instance 0; instance i listens on port + i
-    duration: float | None = None  # wall seconds, None: until a signal
-    quiet: bool = False
-    wind: Wind | None = None  # the weather every vehicle flies in (None: still air)
-    wind_seed: int = 0
     home: Home | None = None  # where the GPS puts the vehicles (None: PX4's Zurich field)
     sensor_noise: float = 1.0  # scale of the sensor models' noise
 
@@ -102,25 +100,8 @@ class Px4TcpServer:
     def __init__(self, physics: HilPhysics, bind: str = "127.0.0.1", port: int = PORT) -> None:
         self.physics = physics
         self.ports = [port + i for i in range(physics.fleet.n)]
-        self.listeners: list[socket.socket] = []
+        self.listeners = open_ports(self.ports, bind, tcp=True, stack="PX4")
         self.connections: list[Connection | None] = [None] * physics.fleet.n
-        try:
-            for index, number in enumerate(self.ports):
-                sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-                self.listeners.append(sock)
-                try:
-                    sock.bind((bind, number))
-                    sock.listen(1)
-                except OSError as error:
-                    why = "is in use" if error.errno == errno.EADDRINUSE else f"({error})"
-                    raise OSError(
-                        f"TCP port {number} (PX4 instance {index}) on {bind} {why}"
-                    ) from None
-                sock.setblocking(False)
-        except OSError:
-            self.close()
-            raise
         self._clock = time.monotonic()  # wall s of the next round on the server's clock
 
     def serve(self, timeout: float = WAIT) -> int:
@@ -224,56 +205,30 @@ class Px4TcpServer:
             sock.close()
 
 
-def run_px4(config: Px4Config, say: Callable[[str], None] | None = None) -> int:
+def run_px4(config: Px4Config, say: Say | None = None) -> int:
     """Serve PX4 instances until a signal or ``config.duration``; the exit status."""
-    if not 1 <= config.vehicles <= 1000:
-        raise ValueError(f"--vehicles must be 1 .. 1000, got {config.vehicles}")
-    last_port = config.port + config.vehicles - 1
-    if not config.port >= 1 or last_port > 65535:
-        raise ValueError(f"ports {config.port} .. {last_port} are not all valid TCP ports")
-    if say is None:
-
-        def say(text: str) -> None:
-            print(f"quadsitl sim: {text}", file=sys.stderr, flush=True)
-
-    fleet = Fleet(config.vehicles, config.airframe)
-    if config.wind is not None:
-        fleet.set_wind(config.wind, seed=config.wind_seed)
-    physics = HilPhysics(fleet, config.home, config.sensor_noise, notice=say)
+    check_ports(config, 1, "TCP")
+    say = say or say_on_stderr
+    physics = HilPhysics(bridge_fleet(config), config.home, config.sensor_noise, notice=say)
     server = Px4TcpServer(physics, config.bind, config.port)
     if not is_loopback(config.bind):
         say(
             f"warning: the PX4 simulator ports on {config.bind} can be reached from other "
             "hosts: anyone there can fly the vehicles (docs/security.md)"
         )
-    stopping: list[int] = []
-    previous = [signal.signal(s, lambda n, _: stopping.append(n)) for s in _SIGNALS]
-    try:
-        if not config.quiet:
-            _banner(config, server, lambda text: print(text, flush=True))
-        started = time.monotonic()
-        end = None if config.duration is None else started + config.duration
-        while not stopping and (end is None or time.monotonic() < end):
-            server.serve(WAIT if end is None else max(0.0, min(WAIT, end - time.monotonic())))
-        wall = time.monotonic() - started
+
+    def summary(wall: float) -> str:
         rounds = sum(peer.rounds for peer in physics.peers)
         simulated = max(peer.time_us for peer in physics.peers) / 1e6
-        print(
+        return (
             f"quadsitl sim: {rounds} sensor rounds in {wall:.1f} s; the vehicle flying "
-            f"longest since its PX4 connected has flown {simulated:.1f} s of physics",
-            flush=True,
+            f"longest since its PX4 connected has flown {simulated:.1f} s of physics"
         )
-    finally:
-        for s, handler in zip(_SIGNALS, previous, strict=True):
-            signal.signal(s, handler)
-        server.close()
-    return 0
+
+    return serve_until_stopped(config, server, partial(_banner, config, server), summary)
 
 
-_SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
-
-def _banner(config: Px4Config, server: Px4TcpServer, out: Callable[[str], None]) -> None:
+def _banner(config: Px4Config, server: Px4TcpServer, out: Say) -> None:
     """Say where each instance connects and how to start PX4 against it."""
     folder = parameter_folder(config.airframe)
     out(
@@ -291,9 +246,7 @@ def _banner(config: Px4Config, server: Px4TcpServer, out: Callable[[str], None])
         out(f"  vehicle {index}: TCP {config.bind}:{port}  <-  {start}")
     if folder is None:
         out(f"  (no PX4 parameter file ships for {config.airframe}; see docs/autopilots.md)")
-    weather = None if config.wind is None or config.wind.calm else config.wind.describe()
-    if weather is not None:
-        out(f"  weather: {weather}")
+    say_weather(config, out)
 
 
 def _failure(error: OSError) -> str:
