@@ -18,8 +18,8 @@ from typing import Any
 
 from policies.algos import ALGORITHMS
 from quadsitl.envs.mavlink_backend import fleet_sizes
+from quadsitl.perturbations.randomization import DEFAULT_AIRFRAME_SPREAD
 from quadsitl.tasks import TASKS
-from quadsitl.tasks.randomization import DEFAULT_AIRFRAME_SPREAD
 
 BACKENDS = ("inprocess", "mavlink")
 TASK_NAMES = tuple(TASKS)  # the tasks' registry, in its order

@@ -14,9 +14,9 @@ import pytest
 from pymavlink import mavutil
 
 from gcs_tools.client import VehicleClient
+from quadsitl.perturbations.motor_faults import MotorFaults
 from quadsitl.physics import PAPER, Fleet
 from quadsitl.physics import layout as L
-from quadsitl.vehicle.motor_faults import MotorFaults
 from tests.conftest import cli, free_udp_port, refused_here
 
 mav = mavutil.mavlink

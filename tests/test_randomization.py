@@ -10,11 +10,11 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import quadsitl  # noqa: F401  (registers the ids)
+from quadsitl.perturbations.randomization import AIRFRAME_COLUMNS, DEFAULT_AIRFRAME_SPREAD
 from quadsitl.physics import PAPER
 from quadsitl.physics import layout as L
 from quadsitl.registration import ENV_IDS
 from quadsitl.tasks import features as F
-from quadsitl.tasks.randomization import AIRFRAME_COLUMNS, DEFAULT_AIRFRAME_SPREAD
 
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
 

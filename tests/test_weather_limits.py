@@ -18,9 +18,9 @@ from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink import telemetry as T
 from quadsitl.mavlink.snapshot import Snapshot
 from quadsitl.mavlink.telemetry_status import build_heartbeat
+from quadsitl.perturbations.randomization import WindDraw
 from quadsitl.physics import layout as L
 from quadsitl.physics.wind import MAX_GUST_SPEED, MAX_SIGMA_W, MAX_WIND_SPEED, Gust, Wind
-from quadsitl.tasks.randomization import WindDraw
 from quadsitl.vehicle.params import SPECS
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire import fast_codec as FC

@@ -155,7 +155,7 @@ def flight_stack_config(args: argparse.Namespace) -> Any:
 def parse_episodes(delay: str | None, randomize: bool, scale: str | None, seed: int) -> Any:
     """``--delay``, ``--randomize``, ``--airframe-scale`` and ``--seed`` as
     EpisodeOptions (None: none given); a one-line ValueError for what does not parse."""
-    from quadsitl.tasks.randomization import airframe_scale_row
+    from quadsitl.perturbations.randomization import airframe_scale_row
     from quadsitl.vehicle.episodes import EpisodeOptions
 
     if delay is None and not randomize and scale is None:

@@ -21,11 +21,11 @@ from quadsitl.envs.memory import available_bytes
 from quadsitl.envs.ray_simulators import LOCAL, RaySimulator, join_ray, place_simulators
 from quadsitl.envs.remote_fleet import RemoteFleet
 from quadsitl.envs.sim_process import SimProcess
+from quadsitl.perturbations import faults as FT
+from quadsitl.perturbations.delay import DELAY_KINDS, Delay
+from quadsitl.perturbations.randomization import Randomization
 from quadsitl.physics import AIRFRAMES, get_airframe
 from quadsitl.tasks import TaskEngine, TaskOptions, TaskSpec
-from quadsitl.tasks import faults as FT
-from quadsitl.tasks.delay import DELAY_KINDS, Delay
-from quadsitl.tasks.randomization import Randomization
 from quadsitl.wire.addresses import parse_url
 from quadsitl.wire.ids import MAX_SYSTEM_ID
 from quadsitl.wire.signing import checked_key

@@ -31,10 +31,10 @@ from numpy.typing import ArrayLike
 from quadsitl import frames
 from quadsitl.client.fleet_client import FleetClient
 from quadsitl.client.fleet_link import SimulatorError
+from quadsitl.perturbations.randomization import AIRFRAME_COLUMNS
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe
 from quadsitl.physics.fleet import VehicleStates
-from quadsitl.tasks.randomization import AIRFRAME_COLUMNS
 from quadsitl.wire.state import ROW_BY_ROW, WireState
 
 FLYING_ALTITUDE = 20.0  # m: where the task origin of tasks without a ground is flown

@@ -29,13 +29,13 @@ from quadsitl.mavlink.links import Link
 from quadsitl.mavlink.realtime_loop import RealTimeLoop
 from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.mavlink.tlog import TlogWriter
+from quadsitl.perturbations.motor_faults import check_efficiency, check_motor
 from quadsitl.physics import Airframe, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.wind import Wind
 from quadsitl.vehicle.controller import Autopilot, Setpoint
 from quadsitl.vehicle.episodes import EpisodeOptions
 from quadsitl.vehicle.group import VehicleGroup
-from quadsitl.vehicle.motor_faults import check_efficiency, check_motor
 from quadsitl.vehicle.param_binding import show_weather
 from quadsitl.vehicle.results import Severity
 from quadsitl.vehicle.vehicle import Vehicle

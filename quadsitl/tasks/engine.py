@@ -17,23 +17,23 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from quadsitl.frames import quat_from_euler
+from quadsitl.perturbations import faults as FT
+from quadsitl.perturbations.delay import Delay, DelayLine
+from quadsitl.perturbations.randomization import Randomization, airframe_scale_row
+from quadsitl.perturbations.sensor_faults import SensorFaults
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.sensors.observation import ObservationNoise
 from quadsitl.physics.wind import Wind
 from quadsitl.tasks import error_integral as EI
-from quadsitl.tasks import faults as FT
 from quadsitl.tasks import features as F
 from quadsitl.tasks import proximity
 from quadsitl.tasks import recording as R
 from quadsitl.tasks import spec as S
 from quadsitl.tasks.batch import StepBatch
-from quadsitl.tasks.delay import Delay, DelayLine
 from quadsitl.tasks.fleet_like import FleetLike
 from quadsitl.tasks.observation_layout import observation_size
 from quadsitl.tasks.options import TaskOptions
-from quadsitl.tasks.randomization import Randomization, airframe_scale_row
-from quadsitl.tasks.sensor_faults import SensorFaults
 from quadsitl.tasks.step_end import StepEnd, not_recording, set_recording
 from quadsitl.tasks.step_kernels import close_step, take_action
 

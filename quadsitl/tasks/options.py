@@ -9,17 +9,17 @@ from typing import Any
 
 import numpy as np
 
-from quadsitl.physics import get_airframe
-from quadsitl.physics.wind import Wind
-from quadsitl.tasks import faults as FT
-from quadsitl.tasks import proximity
-from quadsitl.tasks.delay import Delay
-from quadsitl.tasks.randomization import (
+from quadsitl.perturbations import faults as FT
+from quadsitl.perturbations.delay import Delay
+from quadsitl.perturbations.randomization import (
     AIRFRAME_COLUMNS,
     Randomization,
     airframe_scale_row,
     check_spread,
 )
+from quadsitl.physics import get_airframe
+from quadsitl.physics.wind import Wind
+from quadsitl.tasks import proximity
 
 # Time steps a simulation can sensibly take: finer than 0.1 ms costs seconds per env
 # step for nothing (RK4 at 0.01 s is already accurate, docs/physics.md); coarser than
@@ -64,10 +64,10 @@ class TaskOptions:
             :class:`~quadsitl.physics.wind.Wind` or a dict of its fields (e.g.
             ``{"speed": 6, "from_deg": 270, "turbulence": "moderate"}``); None: still
             air. Each episode's turbulence is drawn from the env's own generator.
-        delay: observation and actuation delay (:mod:`quadsitl.tasks.delay`): a dict
+        delay: observation and actuation delay (:mod:`quadsitl.perturbations.delay`): a dict
             ``{"observation": s, "action": s}``, each seconds (held in whole physics
             steps) or a (low, high) range drawn per episode; None: none.
-        randomize: domain randomisation (:mod:`quadsitl.tasks.randomization`): True or
+        randomize: domain randomisation (:mod:`quadsitl.perturbations.randomization`): True or
             "default" for every documented default, or a dict naming what to draw.
         airframe_scale: exact airframe scales, the same every episode, e.g.
             ``{"mass": 1.3}`` for a vehicle 30 % heavier.
@@ -76,8 +76,8 @@ class TaskOptions:
         faults: a motor that fails during every episode: ``{"motor": 2, "efficiency":
             0.6, "at": 1.0}`` (motor 1-4, thrust fraction 0..1, s into the episode), a
             sensor that sticks: ``{"sensor": "gps", "at": 2.0}``
-            (:mod:`quadsitl.tasks.sensor_faults`), or a list of them
-            (:mod:`quadsitl.tasks.faults`); None: healthy motors and sensors.
+            (:mod:`quadsitl.perturbations.sensor_faults`), or a list of them
+            (:mod:`quadsitl.perturbations.faults`); None: healthy motors and sensors.
         sensor_noise: noise scale of the observation as the sensors would measure it
             (position and velocity as the GPS, rates as the gyroscope, attitude as an
             estimator: :mod:`quadsitl.physics.sensors.observation`); 0: the exact state.

@@ -3,8 +3,8 @@ airframe each vehicle flies (exact scales, drawn per reset, or set by the client
 its actuation and observation delay, the same for a lone vehicle's lockstep commands
 and for a fleet's lockstep rounds.
 
-The draws are the task envs' own (:mod:`quadsitl.tasks.randomization`,
-:mod:`quadsitl.tasks.delay`): vehicle i draws from ``numpy.random.default_rng(seed + i)``
+The draws are the task envs' own (:mod:`quadsitl.perturbations.randomization`,
+:mod:`quadsitl.perturbations.delay`): vehicle i draws from ``numpy.random.default_rng(seed + i)``
 when the simulator starts and again at each reset (MAV_CMD_USER_1), first its airframe,
 then its delays (observation, then action), as env i of a vector env seeded ``seed``
 does per episode. Delays are whole physics steps:
@@ -26,16 +26,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from quadsitl.physics import layout as L
-from quadsitl.physics.fleet import Fleet
-from quadsitl.tasks.delay import Delay, DelayLine
-from quadsitl.tasks.randomization import (
+from quadsitl.perturbations.delay import Delay, DelayLine
+from quadsitl.perturbations.randomization import (
     AIRFRAME_COLUMNS,
     DEFAULT_AIRFRAME_SPREAD,
     MAX_SCALE,
     Randomization,
     airframe_scale_row,
 )
+from quadsitl.physics import layout as L
+from quadsitl.physics.fleet import Fleet
 
 MAX_DELAY_SECONDS = 1.0  # a controller a second behind its vehicle flies nothing
 OBSERVED_SIZE = L.STATE_SIZE + 2  # what an answer carries: state, contact, touchdown speed

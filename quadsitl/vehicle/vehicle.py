@@ -20,6 +20,7 @@ import numpy as np
 
 from quadsitl import frames
 from quadsitl.geo import MAX_LOCAL_DISTANCE, Home
+from quadsitl.perturbations.motor_faults import MotorFaults
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet_slot import FleetSlot
@@ -35,7 +36,6 @@ from quadsitl.vehicle.estimator import Estimator, EstimatorSlot
 from quadsitl.vehicle.failsafe import Failsafes
 from quadsitl.vehicle.flight_state import FlightState
 from quadsitl.vehicle.mission_runner import MissionRunner
-from quadsitl.vehicle.motor_faults import MotorFaults
 from quadsitl.vehicle.navigator import Activity, Sticks
 from quadsitl.vehicle.params import AIRFRAME_NAMES, PARAMETERS, ParameterStore
 from quadsitl.vehicle.results import ACCEPTED, Result, Severity, denied

@@ -13,12 +13,12 @@ from collections import deque
 from typing import Protocol
 
 from quadsitl.geo import Home
+from quadsitl.perturbations.motor_faults import MotorFaults
 from quadsitl.physics import Airframe, Fleet
 from quadsitl.physics.fleet_slot import FleetSlot
 from quadsitl.vehicle.battery import Battery
 from quadsitl.vehicle.controller import Autopilot, CascadedController, Vec
 from quadsitl.vehicle.estimator import EstimatorSlot
-from quadsitl.vehicle.motor_faults import MotorFaults
 from quadsitl.vehicle.navigator import Activity
 from quadsitl.vehicle.params import ParameterStore
 from quadsitl.vehicle.results import Result

@@ -17,11 +17,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from quadsitl.perturbations import sensor_faults as SF
+from quadsitl.perturbations.motor_faults import check_efficiency, check_motor
+from quadsitl.perturbations.sensor_faults import SensorFault
 from quadsitl.physics import layout as L
-from quadsitl.tasks import sensor_faults as SF
 from quadsitl.tasks.fleet_like import FleetLike
-from quadsitl.tasks.sensor_faults import SensorFault
-from quadsitl.vehicle.motor_faults import check_efficiency, check_motor
 
 FIELDS = ("motor", "efficiency", "at")
 

@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
+from quadsitl.perturbations.delay import Delay
 from quadsitl.physics import layout as L
 from quadsitl.physics.wind import MAX_WIND_SPEED, Wind
-from quadsitl.tasks.delay import Delay
 
 # Parameter columns each airframe scale acts on.
 AIRFRAME_COLUMNS: dict[str, list[int]] = {
