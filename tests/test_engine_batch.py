@@ -7,8 +7,10 @@ from __future__ import annotations
 import gymnasium as gym
 import numba
 import numpy as np
+import pytest
 
 import quadsitl  # noqa: F401  (registers the envs)
+from quadsitl.physics import layout as L
 from quadsitl.tasks.batch import FIELDS
 
 
@@ -95,3 +97,38 @@ def test_the_step_end_holds_the_arrays_the_engine_reads_and_the_recorders_buffer
         assert np.shares_memory(array, expected), name
     assert engine.episode_return[0] != 0.0 and engine.reward[0] == reward
     env.close()
+
+
+def test_each_struct_is_made_from_its_one_list_of_fields_by_name():
+    """The fields of StepBatch and StepEnd are listed once (their FIELDS): a struct is
+    given them by name, in any order, and a missing or unknown one is refused."""
+    from quadsitl.tasks import step_end
+    from quadsitl.tasks.batch import StepBatch
+
+    n = 2
+    arrays = {
+        "state": np.zeros((n, L.STATE_SIZE)),
+        "params": np.zeros((n, L.N_PARAMS)),
+        "contact": np.zeros(n, np.int8),
+        "goal": np.zeros((n, 6)),
+        "action": np.zeros((n, 4)),
+        "steps": np.zeros(n, np.int64),
+        "max_steps": 7,
+        "obs": np.zeros((n, 34), np.float32),
+        "dist": np.zeros((n, 4)),
+        "prev_dist": np.zeros((n, 4)),
+        "tilt": np.zeros(n),
+        "reward": np.arange(n, dtype=np.float64),
+        "outcome": np.zeros(n, np.int8),
+    }
+    assert set(arrays) == set(FIELDS)
+    batch = StepBatch(**dict(reversed(arrays.items())))
+    for name, value in zip(FIELDS, held(batch), strict=True):
+        if name == "max_steps":
+            assert value == 7
+        else:
+            assert np.shares_memory(value, arrays[name]), name
+    with pytest.raises(TypeError, match="fields"):
+        StepBatch(**{k: v for k, v in arrays.items() if k != "tilt"})
+    with pytest.raises(TypeError, match="fields"):
+        step_end.StepEnd(dist=arrays["dist"])

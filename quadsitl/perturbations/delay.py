@@ -24,7 +24,7 @@ delay is what the policy sees and when its commands act, not the task.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -100,7 +100,7 @@ class Delay:
                 )
 
 
-ObserveRows = Callable[[NDArray[np.int64]], NDArray[np.floating]]
+_NONE = np.zeros(0, np.int64)  # no env's observation is taken at a period's end here
 
 
 class DelayLine:
@@ -154,17 +154,15 @@ class DelayLine:
         self.observations[rows] = first_obs[:, None, :]
         self.commands[rows] = np.reshape(hover, (-1, 1, 1))
 
-    def step(
-        self,
-        fleet: Any,
-        rotor_cmd: NDArray[np.float64],
-        steps: NDArray[np.int64],
-        observe_rows: ObserveRows,
-    ) -> None:
-        """One control period of ``fleet``: ``rotor_cmd`` is the command given at this
-        step (``steps``: each env's step count, this one included); the commands in force
-        follow the action delay, and the observations taken inside the period (of envs
-        whose observation delay is not a whole number of periods) are kept."""
+    def pieces(
+        self, rotor_cmd: NDArray[np.float64], steps: NDArray[np.int64]
+    ) -> Iterator[tuple[NDArray[np.float64], int, NDArray[np.int64]]]:
+        """One control period in the pieces it is stepped in: ``rotor_cmd`` is the
+        command given at this step (``steps``: each env's step count, this one
+        included). Each piece is (the commands in force, as the action delay has them,
+        physics steps to take, the envs whose observation is taken once they are taken:
+        :meth:`keep` it). Whoever holds the vehicles steps them: the line keeps only
+        commands and observations."""
         s, depth = self.substeps, self.commands.shape[1]
         envs = self._envs
         self.commands[envs, steps % depth] = rotor_cmd
@@ -182,12 +180,13 @@ class DelayLine:
         for end in (*self._pieces, s):
             # Physics steps j in [start, end) lie on one side of every env's switch.
             command = current if start >= longest else _pick(lag_steps > start, previous, current)
-            fleet.step(command, n_substeps=end - start)
-            if end < s:
-                rows = np.flatnonzero(take_at == end)
-                if rows.size:
-                    self.taken[rows] = observe_rows(rows)
+            taken = np.flatnonzero(take_at == end) if end < s else _NONE
+            yield command, end - start, taken
             start = end
+
+    def keep(self, rows: NDArray[np.int64], observed: NDArray[np.floating]) -> None:
+        """The observations of envs ``rows`` taken inside the period (see :meth:`pieces`)."""
+        self.taken[rows] = observed
 
     def delay_observations(self, obs: NDArray[np.floating], steps: NDArray[np.int64]) -> None:
         """Replace the step's true observations ``obs`` (in place) by the delayed ones."""

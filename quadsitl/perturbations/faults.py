@@ -12,16 +12,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from quadsitl.perturbations import sensor_faults as SF
 from quadsitl.perturbations.motor_faults import check_efficiency, check_motor
 from quadsitl.perturbations.sensor_faults import SensorFault
 from quadsitl.physics import layout as L
-from quadsitl.tasks.fleet_like import FleetLike
 
 FIELDS = ("motor", "efficiency", "at")
 
@@ -83,14 +82,6 @@ def parse_faults(option: Any) -> tuple[MotorFault | SensorFault, ...]:
     return tuple(faults)
 
 
-def heal(fleet: FleetLike, rows: NDArray[np.int64]) -> None:
-    """Every motor of the vehicles in ``rows`` healthy again (a new episode)."""
-    mask = np.zeros(len(fleet.state), bool)
-    mask[rows] = True
-    if (fleet.params[mask][:, L.P_ROTOR_EFFICIENCY] != 1.0).any():
-        fleet.set_motor_efficiency(np.ones(L.N_ROTORS), mask=mask)
-
-
 def motor_faults(faults: tuple[MotorFault | SensorFault, ...]) -> tuple[MotorFault, ...]:
     return tuple(f for f in faults if isinstance(f, MotorFault))
 
@@ -99,18 +90,54 @@ def sensor_faults(faults: tuple[MotorFault | SensorFault, ...]) -> tuple[SensorF
     return tuple(f for f in faults if isinstance(f, SensorFault))
 
 
-def strike(
-    fleet: FleetLike,
-    faults: tuple[MotorFault | SensorFault, ...],
-    steps: NDArray[np.int64],
-    active: NDArray[np.bool_],
-    control_period: float,
-) -> None:
-    """Fail the motors whose time has come in the envs stepping now (``steps``: each
-    env's step count, this step included)."""
-    for fault in motor_faults(faults):
-        due = active & (steps == fault.first_step(control_period))
-        if due.any():
-            efficiency = fleet.params[due][:, L.P_ROTOR_EFFICIENCY].copy()
-            efficiency[:, fault.motor - 1] = fault.efficiency
-            fleet.set_motor_efficiency(efficiency, mask=due)
+class Motors(Protocol):
+    """What motor faults need of a fleet: its parameters, and a way to set its motors'
+    efficiencies (:class:`quadsitl.physics.fleet.Fleet` is one)."""
+
+    params: NDArray[np.float64]
+
+    def set_motor_efficiency(
+        self, efficiency: ArrayLike, mask: ArrayLike | None = None
+    ) -> None: ...
+
+
+class FailingMotors:
+    """The motor faults of N envs' episodes: healthy at each start (:meth:`heal`), a
+    motor failed when its time has come (:meth:`strike`)."""
+
+    def __init__(
+        self, fleet: Motors, faults: tuple[MotorFault, ...], control_period: float
+    ) -> None:
+        self.fleet = fleet
+        self.faults = faults
+        self.first_steps = [fault.first_step(control_period) for fault in faults]
+
+    def heal(self, rows: NDArray[np.int64]) -> None:
+        """Every motor of the vehicles in ``rows`` healthy again (a new episode)."""
+        fleet = self.fleet
+        mask = np.zeros(len(fleet.params), bool)
+        mask[rows] = True
+        if (fleet.params[mask][:, L.P_ROTOR_EFFICIENCY] != 1.0).any():
+            fleet.set_motor_efficiency(np.ones(L.N_ROTORS), mask=mask)
+
+    def strike(self, steps: NDArray[np.int64], active: NDArray[np.bool_]) -> None:
+        """Fail the motors whose time has come in the envs stepping now (``steps``: each
+        env's step count, this step included)."""
+        fleet = self.fleet
+        for fault, first in zip(self.faults, self.first_steps, strict=True):
+            due = active & (steps == first)
+            if due.any():
+                efficiency = fleet.params[due][:, L.P_ROTOR_EFFICIENCY].copy()
+                efficiency[:, fault.motor - 1] = fault.efficiency
+                fleet.set_motor_efficiency(efficiency, mask=due)
+
+
+class Healthy:
+    """No motor fault: nothing to heal or fail (what :class:`FailingMotors` is without
+    the option)."""
+
+    def heal(self, rows: NDArray[np.int64]) -> None:
+        pass
+
+    def strike(self, steps: NDArray[np.int64], active: NDArray[np.bool_]) -> None:
+        pass

@@ -1,12 +1,16 @@
 """The batched task engine: N vehicles flying one task; it knows no task.
 
-Each step: the actions become rotor commands (Eq. 19), the physics steps, the task's
-compiled ``evaluate`` writes observation, reward and outcome, and the engine keeps the
-episode counters (truncation, time within the goal radius, returns); the compiled ends
-of a step around ``evaluate`` are in ``step_kernels.py``. Resetting a subset
-of envs by mask and the episode metrics are here too. The single gym env, the native
-vector env and the SB3 adapter are faces of this class; it knows nothing of Gymnasium's
-reset conventions (the faces do that).
+Each step: the actions become rotor commands (Eq. 19), the motor faults due strike, the
+physics steps (through the actuation delay, if any), the task's compiled ``evaluate``
+writes observation, reward and outcome, the stages chosen when the engine was made do
+their parts (:mod:`.stages`: proximity reward, sensors, observation delay, hidden
+position, integral; an option that is off is a stage that does nothing), and the engine
+keeps the episode counters (truncation, time within the goal radius, returns); the
+compiled ends of a step around ``evaluate`` are in ``step_kernels.py``. A reset draws
+each new episode's start and world, and its first observation goes through the same
+stages. Resetting a subset of envs by mask and the episode metrics are here too. The
+single gym env, the native vector env and the SB3 adapter are faces of this class; it
+knows nothing of Gymnasium's reset conventions (the faces do that).
 """
 
 from __future__ import annotations
@@ -16,7 +20,6 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from quadsitl.frames import quat_from_euler
 from quadsitl.perturbations import faults as FT
 from quadsitl.perturbations.delay import Delay, DelayLine
 from quadsitl.perturbations.randomization import Randomization, airframe_scale_row
@@ -25,15 +28,15 @@ from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.physics.sensors.observation import ObservationNoise
 from quadsitl.physics.wind import Wind
-from quadsitl.tasks import error_integral as EI
 from quadsitl.tasks import features as F
-from quadsitl.tasks import proximity
 from quadsitl.tasks import recording as R
 from quadsitl.tasks import spec as S
+from quadsitl.tasks import stages as G
 from quadsitl.tasks.batch import StepBatch
 from quadsitl.tasks.fleet_like import FleetLike
 from quadsitl.tasks.observation_layout import observation_size
 from quadsitl.tasks.options import TaskOptions
+from quadsitl.tasks.starts import draw_starts
 from quadsitl.tasks.step_end import StepEnd, not_recording, set_recording
 from quadsitl.tasks.step_kernels import close_step, take_action
 
@@ -51,6 +54,8 @@ class TaskEngine:
         action: (N, 4) the latest actions, float64.
         steps: (N,) env steps taken in the current episode.
         outcome: (N,) spec outcome code of the episode (RUNNING until it ends).
+        delay: the delay line (None: no delay) and observation_noise: the sensors'
+            noise (None: none), to look at: the stages use them.
     """
 
     def __init__(
@@ -90,53 +95,58 @@ class TaskEngine:
         self.action_low = -self.hover_speed / options.beta
         self.action_high = (self.airframe.max_rotor_speed - self.hover_speed) / options.beta
         self.obs_size = observation_size(task, options)
-        # The option observe_integral's last observation values (error_integral.py).
-        self.integral = (
-            EI.ErrorIntegral(num_envs, options.control_period) if options.observe_integral else None
-        )
-        self.obs, self.dist, self.tilt = F.empty_buffers(num_envs, self.obs_size)
+        self._allocate(num_envs)
+        # Whatever state the task keeps per env beyond the goal (its own typed object).
+        self.task_state = task.new_state(num_envs) if task.new_state is not None else None
+        self._build_stages(options)
+
+    def _allocate(self, n: int) -> None:
+        """The engine's arrays, and the structs that hand them to compiled code, built
+        once: the engine writes into these arrays, it never rebinds them (batch.py)."""
+        self.obs, self.dist, self.tilt = F.empty_buffers(n, self.obs_size)
         self.prev_dist = np.zeros_like(self.dist)
-        self.goal = np.zeros((num_envs, 6))
-        self.action = np.zeros((num_envs, L.N_ROTORS))
-        self.rotor_cmd = np.zeros((num_envs, L.N_ROTORS))
-        self.reward = np.zeros(num_envs)
-        self.terminated = np.zeros(num_envs, bool)
-        self.truncated = np.zeros(num_envs, bool)
-        self.steps = np.zeros(num_envs, np.int64)
-        self.outcome = np.zeros(num_envs, np.int8)
-        self.time_within = np.zeros(num_envs)
-        self.reach_time = np.full(num_envs, math.nan)
-        self.episode_return = np.zeros(num_envs)
+        self.goal = np.zeros((n, 6))
+        self.action = np.zeros((n, L.N_ROTORS))
+        self.rotor_cmd = np.zeros((n, L.N_ROTORS))
+        self.reward = np.zeros(n)
+        self.terminated = np.zeros(n, bool)
+        self.truncated = np.zeros(n, bool)
+        self.steps = np.zeros(n, np.int64)
+        self.outcome = np.zeros(n, np.int8)
+        self.time_within = np.zeros(n)
+        self.reach_time = np.full(n, math.nan)
+        self.episode_return = np.zeros(n)
         # A recorder's buffer (recording.py): see record(); rows written by the last
         # step, negated once the recorded env's episode ended.
         self.recording: NDArray[np.float64] | None = None
         self.recorded = 0
-        self.rngs = [np.random.default_rng() for _ in range(num_envs)]
-        self._all = np.ones(num_envs, bool)
-        fleet = self.fleet  # the arrays evaluate() reads and writes, held once (batch.py)
-        self._batch = StepBatch(
-            fleet.state,
-            fleet.params,
-            fleet.contact,
-            self.goal,
-            self.action,
-            self.steps,
-            self.max_steps,
-            self.obs,
-            self.dist,
-            self.prev_dist,
-            self.tilt,
-            self.reward,
-            self.outcome,
+        self.rngs = [np.random.default_rng() for _ in range(n)]
+        self._all = np.ones(n, bool)
+        self._action_shape = (n, L.N_ROTORS)
+        fleet = self.fleet
+        self._batch = StepBatch(  # what the task's evaluate() reads and writes
+            state=fleet.state,
+            params=fleet.params,
+            contact=fleet.contact,
+            goal=self.goal,
+            action=self.action,
+            steps=self.steps,
+            max_steps=self.max_steps,
+            obs=self.obs,
+            dist=self.dist,
+            prev_dist=self.prev_dist,
+            tilt=self.tilt,
+            reward=self.reward,
+            outcome=self.outcome,
         )
-        self._end = StepEnd(  # the arrays close_step() reads and writes, held once
+        self._end = StepEnd(  # what close_step() reads and writes
             dist=self.dist,
             prev_dist=self.prev_dist,
             reward=self.reward,
             outcome=self.outcome,
             steps=self.steps,
             max_steps=self.max_steps,
-            goal_radius=task.goal_radius,
+            goal_radius=self.task.goal_radius,
             control_period=self.control_period,
             time_within=self.time_within,
             reach_time=self.reach_time,
@@ -148,24 +158,39 @@ class TaskEngine:
             wind_state=fleet.wind_state,
             recording=not_recording(),
         )
-        self._action_shape = (num_envs, L.N_ROTORS)
-        # Whatever state the task keeps per env beyond the goal (its own typed object).
-        self.task_state = task.new_state(num_envs) if task.new_state is not None else None
-        noise = options.sensor_noise
-        self.observation_noise = ObservationNoise(num_envs, noise) if noise > 0 else None
-        failing = FT.sensor_faults(options.faults)
-        self.sensor_faults = (
-            SensorFaults(failing, num_envs, options.control_period) if failing else None
-        )
-        delay = Delay.parse(options.delay)  # fixed, or drawn by randomize (not both)
+
+    def _build_stages(self, o: TaskOptions) -> None:
+        """The stages around the task, once (:mod:`.stages`): the motor faults before the
+        physics, the physics (delayed or not), and the stages after ``evaluate``; an
+        option that is off gives a stage that does nothing."""
+        n, period, failing = self.n, self.control_period, FT.sensor_faults(o.faults)
+        self._motors: FT.FailingMotors | FT.Healthy = FT.Healthy()
+        if o.faults:
+            self._motors = FT.FailingMotors(self.fleet, FT.motor_faults(o.faults), period)
+        sensing = G.Truth(self.task.observe, self.fleet, self.goal, self.obs_size)
+        self.observation_noise = ObservationNoise(n, o.sensor_noise) if o.sensor_noise else None
+        if self.observation_noise is not None or failing:
+            noise = self.observation_noise or G.Exact()
+            faults = SensorFaults(failing, n, period)
+            sensing = G.Sensors(sensing, noise, faults, self.obs, self.steps, period)
+        delay = Delay.parse(o.delay)  # fixed, or drawn by randomize (not both)
         if delay is None and self.randomization is not None:
             delay = self.randomization.delay
         self.delay: DelayLine | None = None
+        self._physics = G.Undelayed(self.fleet, self.substeps)
         if delay is not None:
-            delay.check_episode(self.max_steps * self.control_period)
-            self.delay = DelayLine(
-                delay, num_envs, options.physics_dt, self.substeps, self.obs_size
-            )
+            delay.check_episode(self.max_steps * period)
+            self.delay = DelayLine(delay, n, o.physics_dt, self.substeps, self.obs_size)
+            self._physics = G.Delayed(self.delay, sensing, self.obs, self.steps, self.hover_speed)
+        nothing, proximity = G.Stage(), o.proximity_reward
+        self._stages = (  # in the order they run after evaluate (stages.py)
+            G.ProximityReward(self.reward, self.dist, proximity) if proximity else nothing,
+            sensing,
+            self._physics,
+            nothing if o.observe_position else G.HiddenPosition(self.obs),
+            G.Integral(self.obs, period) if o.observe_integral else nothing,
+        )
+        self._advance_goal = self.task.advance_goal or _goal_stays
 
     # --- seeding and reset ---------------------------------------------------------
     def seed(self, seeds: list[int | None]) -> None:
@@ -173,86 +198,57 @@ class TaskEngine:
         self.rngs = [np.random.default_rng(s) for s in seeds]
 
     def reset_envs(self, mask: NDArray[np.bool_]) -> None:
-        """Start new episodes in the selected envs (their generators draw the start)."""
+        """Start new episodes in the selected envs (their generators draw the start,
+        then the world), and observe them through the stages."""
         rows = np.flatnonzero(mask)
         if rows.size == 0:
             return
-        o, randomization = self.options, self.randomization
-        # Half-widths of the start noise, in the order drawn: position, attitude,
-        # velocity, rates (three values each). ``low + (high − low)·u`` is what
-        # ``rng.uniform(low, high)`` computes, from the same draws, without its checks.
-        spread = np.repeat(
-            [
-                o.init_position_noise,
-                o.init_attitude_noise,
-                o.init_velocity_noise,
-                o.init_rate_noise,
-            ],
-            3,
-        )
-        start, goal = self.task.start, self.task.goal  # fixed, or drawn per episode
-        starts = np.empty((rows.size, 3))
-        starts[:] = 0.0 if callable(start) else start
-        goals = np.empty((rows.size, 6))
-        goals[:] = 0.0 if callable(goal) else goal
-        draws = []
-        for k, i in enumerate(rows):
-            rng = self.rngs[i]
-            if callable(start):
-                starts[k] = start(rng)
-            draws.append(rng.random(12))
-            if callable(goal):
-                goals[k] = goal(rng)
-        if randomization is not None and randomization.airframe:
-            rngs = [self.rngs[i] for i in rows]
-            self.fleet.params[rows] = randomization.draw_airframes(rngs, self.base_params)
-        drawn_wind = randomization.wind if randomization is not None else None
-        if isinstance(o.wind, Wind) or drawn_wind is not None:  # each env's own turbulence
-            weathers, seeds = [], []
-            for i in rows:
-                weathers.append(drawn_wind.draw(self.rngs[i]) if drawn_wind else o.wind)
-                seeds.append(int(self.rngs[i].integers(2**62)))
-            # The weather first: the reset below starts it from each vehicle's new state.
-            self.fleet.set_wind(weathers, seeds, mask, restart=False)  # type: ignore[arg-type]
-        noise = -spread + (spread - -spread) * np.array(draws)
-        states = np.zeros((rows.size, L.STATE_SIZE))
-        states[:, L.POS] = starts + noise[:, 0:3]
-        if self.task.goal_from_start:
-            goals[:, 0:3] += states[:, L.POS]
-        self.goal[rows] = goals
-        states[:, L.QUAT] = quat_from_euler(noise[:, 3], noise[:, 4], noise[:, 5])
-        states[:, L.VEL] = noise[:, 6:9]
-        states[:, L.RATES] = noise[:, 9:12]
-        hover = self.fleet.hover_rotor_speed[rows]  # of each vehicle's (randomised) airframe
+        rngs = [self.rngs[i] for i in rows]
+        states, self.goal[rows] = draw_starts(self.task, self.options, rngs)
+        self._draw_world(rows, mask)
+        # Each vehicle's rotors at its own (drawn) airframe's hover speed.
+        hover = self.fleet.hover_rotor_speed[rows]
         states[:, L.ROTORS] = np.minimum(hover, self.fleet.params[rows, L.P_OMEGA_MAX])[:, None]
         self.fleet.reset(states, mask=mask)
-        if o.faults:
-            FT.heal(self.fleet, rows)
-        if self.delay is not None:
-            self.delay.draw(rows, self.rngs)
+        self._motors.heal(rows)
         self.steps[rows] = 0
         self.outcome[rows] = S.RUNNING
         self.time_within[rows] = 0.0
         self.reach_time[rows] = math.nan
         self.episode_return[rows] = 0.0
-        if self.integral is not None:
-            self.integral.reset(rows)
-        if self.observation_noise is not None:
-            self.observation_noise.reset(rows, [self.rngs[i] for i in rows])
-        if self.sensor_faults is not None:
-            self.sensor_faults.reset(rows)
+        for stage in self._stages:
+            stage.start(rows, self.rngs)
         if self.task.on_reset is not None:
             self.task.on_reset(self, rows)
         self.observe(rows if rows.size < self.n else None)
+        for stage in self._stages:
+            stage.reset(rows)
         # The first reward of an episode measures progress from its own start, not from
         # where the previous episode ended (the authors' code got this wrong).
         self.prev_dist[rows] = self.dist[rows]
-        if self.delay is not None:
-            self.delay.reset(rows, self.obs[rows], self.hover_speed)
+
+    def _draw_world(self, rows: NDArray[np.int64], mask: NDArray[np.bool_]) -> None:
+        """What each new episode of ``rows`` flies in, drawn by its env's generator (by
+        ``randomize``, or the options' turbulence): its airframe, its weather, then its
+        delays."""
+        randomization, wind = self.randomization, self.options.wind
+        if randomization is not None and randomization.airframe:
+            rngs = [self.rngs[i] for i in rows]
+            self.fleet.params[rows] = randomization.draw_airframes(rngs, self.base_params)
+        drawn_wind = randomization.wind if randomization is not None else None
+        if isinstance(wind, Wind) or drawn_wind is not None:  # each env's own turbulence
+            weathers, seeds = [], []
+            for i in rows:
+                weathers.append(drawn_wind.draw(self.rngs[i]) if drawn_wind else wind)
+                seeds.append(int(self.rngs[i].integers(2**62)))
+            # The weather first: the reset that follows starts it from each vehicle's
+            # new state.
+            self.fleet.set_wind(weathers, seeds, mask, restart=False)  # type: ignore[arg-type]
+        self._physics.draw(rows, self.rngs)
 
     def observe(self, rows: NDArray[np.int64] | None = None) -> None:
-        """Recompute the observation and goal distances of the vehicles as they are (of
-        those in ``rows``, or all)."""
+        """The task's observation and goal distances of the vehicles as they are (of
+        those in ``rows``, or all): the truth, before any stage."""
         fleet, observe = self.fleet, self.task.observe
         if rows is None:
             observe(fleet.state, fleet.params, self.goal, self.obs, self.dist, self.tilt)
@@ -260,31 +256,6 @@ class TaskEngine:
             obs, dist, tilt = self.obs[rows], self.dist[rows], self.tilt[rows]
             observe(fleet.state[rows], fleet.params[rows], self.goal[rows], obs, dist, tilt)
             self.obs[rows], self.dist[rows], self.tilt[rows] = obs, dist, tilt
-        if self.observation_noise is not None:
-            self._observe_noisy(np.arange(self.n) if rows is None else rows, 0.0)
-        F.hide_position(self.obs, self.options.observe_position)
-        if self.integral is not None:
-            self.integral.write(self.obs, rows)
-
-    def _observe_noisy(self, rows: NDArray[np.int64], elapsed: float) -> None:
-        """Overwrite the observation of ``rows`` with that of their sensed state, the
-        sensors' slow errors moved on by ``elapsed`` s (the distances and tilt, which
-        rewards and endings read, stay the truth's)."""
-        self.obs[rows] = self._observation_of(rows, elapsed)
-
-    def _observation_of(self, rows: NDArray[np.int64], elapsed: float = 0.0) -> NDArray[np.float32]:
-        """The observation of the vehicles of ``rows`` as they are now (a copy): as the
-        sensors measure it, with ``sensor_noise`` (a delayed observation too)."""
-        fleet, count = self.fleet, rows.size
-        obs = np.empty((count, self.obs_size), np.float32)
-        dist, tilt = np.empty((count, F.N_DIST)), np.empty(count)
-        state = fleet.state[rows]
-        if self.observation_noise is not None:
-            state = self.observation_noise.perturb(state, rows, elapsed)
-        if self.sensor_faults is not None:
-            state = self.sensor_faults.apply(state, rows, self.steps[rows])
-        self.task.observe(state, fleet.params[rows], self.goal[rows], obs, dist, tilt)
-        return obs
 
     # --- stepping ------------------------------------------------------------------
     def step(
@@ -303,17 +274,7 @@ class TaskEngine:
             reward (N,), terminated (N,), truncated (N,): the engine's own arrays,
             overwritten by the next step (copy them to keep them).
         """
-        raw = np.asarray(action)
-        if raw.dtype.kind not in "fiu":  # float, signed or unsigned integer
-            raise ValueError(f"action must hold real numbers, got dtype {raw.dtype}")
-        raw = raw.astype(np.float64, copy=False)  # float16, float32, integers: one kernel
-        if raw.shape != self._action_shape:
-            if self.n == 1 and raw.shape == (L.N_ROTORS,):
-                raw = raw.reshape(self._action_shape)
-            else:
-                raise ValueError(
-                    f"action must have shape ({self.n}, {L.N_ROTORS}), got {raw.shape}"
-                )
+        raw = self._checked(action)
         if active is None:
             active = self._all
         bad = take_action(
@@ -329,27 +290,30 @@ class TaskEngine:
         )
         if bad >= 0:
             raise ValueError(f"action of env {bad} is not finite: {raw[bad]}")
-        fleet = self.fleet
-        if self.options.faults:
-            FT.strike(fleet, self.options.faults, self.steps, active, self.control_period)
-        if self.delay is None:
-            fleet.step(self.rotor_cmd, n_substeps=self.substeps)
-        else:
-            self.delay.step(fleet, self.rotor_cmd, self.steps, self._observation_of)
-        if self.task.advance_goal is not None:
-            self.task.advance_goal(self, active)
+        self._motors.strike(self.steps, active)
+        self._physics.fly(self.rotor_cmd)
+        self._advance_goal(self, active)
         self.task.evaluate(self._batch)
-        if self.options.proximity_reward is not None:
-            proximity.add(self.reward, self.dist[:, F.D_POS], self.options.proximity_reward)
-        if self.observation_noise is not None or self.sensor_faults is not None:
-            self._observe_noisy(np.arange(self.n), self.control_period)
-        if self.delay is not None:
-            self.delay.delay_observations(self.obs, self.steps)
-        F.hide_position(self.obs, self.options.observe_position)
-        if self.integral is not None:
-            self.integral.accumulate(self.obs)
+        for stage in self._stages:
+            stage.step()
         self.recorded = close_step(self._end)
         return self.reward, self.terminated, self.truncated
+
+    def _checked(self, action: ArrayLike) -> NDArray[np.float64]:
+        """``action`` as (N, 4) float64 (a view where it is one); ValueError where it
+        holds no real numbers or has the wrong shape."""
+        raw = np.asarray(action)
+        if raw.dtype.kind not in "fiu":  # float, signed or unsigned integer
+            raise ValueError(f"action must hold real numbers, got dtype {raw.dtype}")
+        raw = raw.astype(np.float64, copy=False)  # float16, float32, integers: one kernel
+        if raw.shape != self._action_shape:
+            if self.n == 1 and raw.shape == (L.N_ROTORS,):
+                raw = raw.reshape(self._action_shape)
+            else:
+                raise ValueError(
+                    f"action must have shape ({self.n}, {L.N_ROTORS}), got {raw.shape}"
+                )
+        return raw
 
     def record(self, buffer: NDArray[np.float64]) -> None:
         """From the next step on, each step writes the recorded env's row into ``buffer``
@@ -402,3 +366,7 @@ class TaskEngine:
                 self.fleet.contact[rows] != L.AIRBORNE, self.fleet.touchdown_speed[rows], np.nan
             ),
         }
+
+
+def _goal_stays(engine: TaskEngine, active: NDArray[np.bool_]) -> None:
+    """A task whose goal does not move during an episode (no ``advance_goal``)."""

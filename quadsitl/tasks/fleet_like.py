@@ -3,8 +3,8 @@ reset, a step, and the weather, ground effect and motor faults it sets.
 
 :class:`quadsitl.physics.fleet.Fleet` (the in-process physics) is one, and so is the
 MAVLink backend's :class:`quadsitl.envs.remote_fleet.RemoteFleet`, whose vehicles step
-in simulator processes; the engine (``engine.py``) and the motor faults (``faults.py``)
-are written against this protocol, not against either.
+in simulator processes; the engine (``engine.py``) and its stages (``stages.py``) are
+written against this protocol, not against either.
 """
 
 from __future__ import annotations

@@ -75,44 +75,10 @@ structref.define_proxy(StepEnd, StepEndType, list(FIELDS))
 
 
 @numba.njit(cache=True)
-def _new_step_end(
-    dist,
-    prev_dist,
-    reward,
-    outcome,
-    steps,
-    max_steps,
-    goal_radius,
-    control_period,
-    time_within,
-    reach_time,
-    episode_return,
-    terminated,
-    truncated,
-    state,
-    goal,
-    wind_state,
-    recording,
-):  # pragma: no cover - compiled (cached: no compiling at each start)
-    return StepEnd(
-        dist,
-        prev_dist,
-        reward,
-        outcome,
-        steps,
-        max_steps,
-        goal_radius,
-        control_period,
-        time_within,
-        reach_time,
-        episode_return,
-        terminated,
-        truncated,
-        state,
-        goal,
-        wind_state,
-        recording,
-    )
+def _new_step_end(*fields):  # pragma: no cover - compiled (cached: no compiling at each start)
+    """A StepEnd of ``fields`` in the order of FIELDS (numba's constructor, which
+    ``define_proxy`` made from FIELDS, takes them so)."""
+    return StepEnd(*fields)
 
 
 @numba.njit(cache=True)

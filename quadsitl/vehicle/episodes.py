@@ -166,7 +166,11 @@ class MotorEpisodes:
         if n_substeps != self.substeps:
             raise ValueError(f"a delayed period is {self.substeps} physics steps, not {n_substeps}")
         self.periods += 1
-        self.line.step(self.physics, rotor_cmd, self.periods, self._truth)
+        line = self.line
+        for command, count, taken in line.pieces(rotor_cmd, self.periods):
+            self.physics.step(command, n_substeps=count)
+            if taken.size:
+                line.keep(taken, self._truth(taken))
         seen = self._truth(np.arange(self.physics.n))
         self.line.delay_observations(seen, self.periods)
         self.seen = seen
