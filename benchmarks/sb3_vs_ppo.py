@@ -148,6 +148,8 @@ def main() -> None:
             contenders[name] = train_sb3(args.task, args.seconds, zoo, Path(tmp) / name)
         for name, policy in contenders.items():
             result = evaluate(policy, config, episodes=EPISODES)
+            if name == next(iter(contenders)):
+                print(f"metric: {result.metric_name}")
             metric = f"{result.metric_mean:.3f} {result.metric_unit}"
             print(
                 f"{name:<22} {result.success_rate:>8.0%} {result.mean_return:>10.1f} "
