@@ -11,6 +11,8 @@ import sys
 import tempfile
 import time
 from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -20,6 +22,8 @@ from gymnasium.vector import AutoresetMode
 from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
 from quadsitl.client.motor_client import MotorClient, SimulatorError
+from quadsitl.envs.mavlink_backend import START_LIMIT, START_POLL
+from quadsitl.envs.sim_process import UDP_TABLES, udp_port_bound
 
 # The signing timestamps that simulators keep across restarts go to this session's own
 # folder (inherited by every simulator process), never to the user's state folder.
@@ -56,6 +60,80 @@ def fly_both(local, remote, rng: np.random.Generator, steps: int, scale: float) 
     return ended
 
 
+def wait_until_listening(process: subprocess.Popen[Any], *ports: int) -> None:
+    """Until the simulator ``process`` has opened its links: bound every UDP port in
+    ``ports`` (its udpin links) or, with none named (udpout links only, each bound to a
+    port of the system's choosing), a UDP socket of its own. A simulator opens its links
+    last, after its imports and compiled kernels, which a loaded machine stretches past
+    any fixed deadline: a test's heartbeat wait starts from here. Fails at once, with the
+    process's output, if it exits first; kills it and fails if it is still starting after
+    START_LIMIT (a hang). Returns at once where the host cannot tell (not Linux)."""
+    started = time.monotonic()
+    while True:
+        if process.poll() is not None:
+            pytest.fail(
+                f"quadsitl sim exited with code {process.returncode} before opening its "
+                f"links: {_last_words(process)}",
+                pytrace=False,
+            )
+        if _links_open(process.pid, ports):
+            return
+        if time.monotonic() - started > START_LIMIT:
+            process.kill()
+            pytest.fail(
+                f"quadsitl sim did not open its links within {START_LIMIT:g} s of starting: "
+                f"{_last_words(process)}",
+                pytrace=False,
+            )
+        time.sleep(START_POLL)
+
+
+def _links_open(pid: int, ports: tuple[int, ...]) -> bool:
+    if not os.path.exists(UDP_TABLES[0]):
+        return True  # cannot tell: no waiting
+    if ports:
+        return all(udp_port_bound(port) is not False for port in ports)
+    try:
+        return bool(socket_addresses(pid, ("udp", "udp6")))
+    except OSError:  # it has just exited: the next look says so
+        return False
+
+
+def _last_words(process: subprocess.Popen[Any]) -> str:
+    """The end of what an ended process wrote to its pipes (stdout, stderr)."""
+    said = [
+        text.decode(errors="replace") if isinstance(text, bytes) else text
+        for text in process.communicate(timeout=30)
+        if text
+    ]
+    return "\n".join(said).strip()[-2000:] or "(no output)"
+
+
+def socket_addresses(
+    pid: int, tables: tuple[str, ...] = ("udp", "tcp", "udp6", "tcp6")
+) -> list[str]:
+    """Local addresses (hex, as /proc/net shows them) of every socket of ``pid`` in the
+    /proc/net ``tables`` (bound ones: a socket is listed once it has an address)."""
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        try:
+            target = os.readlink(fd)
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[len("socket:[") : -1])
+    addresses = []
+    for table in tables:
+        path = Path(f"/proc/{pid}/net/{table}")
+        if not path.exists():  # udp6, tcp6 without IPv6
+            continue
+        for line in path.read_text().splitlines()[1:]:
+            fields = line.split()
+            if fields[9] in inodes:
+                addresses.append(fields[1].split(":")[0])
+    return addresses
+
+
 class RunningSim:
     def __init__(self, process: subprocess.Popen[str], port: int, log_dir: str) -> None:
         self.process, self.port, self.log_dir = process, port, log_dir
@@ -81,11 +159,13 @@ def start_sim(log_dir: str, speed: float = 5.0) -> RunningSim:
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(process, port)
     return RunningSim(process, port, log_dir)
 
 
 class MotorSim:
-    """``quadsitl sim`` with a motor link and a ground-station link, both udpin."""
+    """``quadsitl sim`` with a motor link and a ground-station link, both udpin; made
+    once both are open."""
 
     def __init__(self, *options: str) -> None:
         self.hil_port, self.gcs_port = free_udp_port(), free_udp_port()
@@ -96,12 +176,11 @@ class MotorSim:
             stderr=subprocess.STDOUT,
             text=True,
         )
+        wait_until_listening(self.process, self.hil_port, self.gcs_port)
 
     def client(self, **kwargs: object) -> MotorClient:
         client = MotorClient("127.0.0.1", self.hil_port, **kwargs)  # type: ignore[arg-type]
-        # The process needs a moment to start: on a fresh checkout of a loaded machine it
-        # compiles the physics first (over 20 s seen with one core kept busy).
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 60  # for its vehicles to answer, the link being open
         while True:
             try:
                 client.connect()

@@ -16,7 +16,7 @@ from gcs_tools.demo import free_udp_port
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.links import PEER_TIMEOUT, Link
 from quadsitl.wire.signing import sign_outgoing
-from tests.conftest import cli
+from tests.conftest import cli, wait_until_listening
 
 PASSPHRASE = "amplification test"
 QUIET_SECONDS = 3.0  # how long a silent peer is listened to
@@ -51,6 +51,7 @@ def _start(port: int, *options: str) -> subprocess.Popen[str]:
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(sim, port)
     probe = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=250)
     key = _key() if "--signing-passphrase" in options else None
     if key is not None:
@@ -60,7 +61,7 @@ def _start(port: int, *options: str) -> subprocess.Popen[str]:
         while not probe.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5):
             if time.monotonic() > deadline:
                 _stop(sim)  # never leave a simulator running behind a failed test
-                raise AssertionError("the simulator did not start within 60 s")
+                raise AssertionError("the simulator did not answer within 60 s")
             probe.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
     finally:
         probe.close()

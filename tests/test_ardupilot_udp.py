@@ -21,7 +21,7 @@ from quadsitl.bridges.ardupilot_udp import ArduPilotJsonServer
 from quadsitl.bridges.fake_ardupilot import FakeArduPilot, HoverController
 from quadsitl.physics.airframe import get_airframe
 from quadsitl.physics.fleet import Fleet
-from tests.conftest import refused_here
+from tests.conftest import refused_here, wait_until_listening
 
 START_TIMEOUT = 60.0  # s for the process to open its ports (numba loads its cache)
 
@@ -134,6 +134,7 @@ def test_a_frame_sent_before_the_simulator_listens_is_sent_again_and_answered() 
     fake.send([1000] * 4)  # nobody listens: lost
     command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", "ardupilot"]
     process = subprocess.Popen([*command, "--flight-stack-port", str(port)], text=True)
+    wait_until_listening(process, port)  # the frame sent before stays lost
     try:
         k = fake.receive(attempts=int(START_TIMEOUT / 0.6))
         assert fake.resends >= 1 and k.timestamp == pytest.approx(1 / 1200)

@@ -13,7 +13,7 @@ from pymavlink.dialects.v20 import common as mav
 
 from quadsitl.mavlink import degrade as D
 from quadsitl.mavlink import telemetry as T
-from tests.conftest import cli
+from tests.conftest import cli, wait_until_listening
 
 
 @pytest.mark.parametrize("vehicles", [1, 3])
@@ -37,13 +37,14 @@ def test_a_loop_short_of_time_slows_its_telemetry_and_says_so(vehicles: int):
         stderr=subprocess.PIPE,
         text=True,
     )
+    wait_until_listening(process)  # its udpout link
     parser = mav.MAVLink(None)
     parser.robust_parsing = True
     texts: list[str] = []
     attitude_ms: list[int] = []  # time_boot_ms of the ATTITUDEs after the warning
     heartbeats = 0
     try:
-        listener.recv(65535)  # it is up (the first datagram may wait for numba's cache)
+        listener.recv(65535)  # it is up
         deadline = time.monotonic() + 20
         window_end = None
         while time.monotonic() < (window_end or deadline):

@@ -12,6 +12,7 @@ from pathlib import Path
 from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
 from quadsitl.client.motor_client import MotorClient
+from tests.conftest import wait_until_listening
 
 ENTRYPOINT = Path(__file__).resolve().parents[1] / "docker" / "entrypoint.sh"
 
@@ -35,6 +36,7 @@ def test_entrypoint_starts_a_simulator_that_answers(tmp_path):
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(process, hil, station)
     try:
         client = VehicleClient(f"udpout:127.0.0.1:{station}")
         heartbeat = client.connect(timeout=30)

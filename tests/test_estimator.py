@@ -23,7 +23,7 @@ from quadsitl.vehicle.group import VehicleGroup
 from quadsitl.vehicle.params import ParamError
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire.state import WireState
-from tests.conftest import cli
+from tests.conftest import cli, wait_until_listening
 
 
 def _errors(v: Vehicle) -> tuple[float, float]:
@@ -144,6 +144,7 @@ def test_odometry_over_udp_carries_the_estimate_and_its_covariance():
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(process, port)
     client = VehicleClient(f"udpout:127.0.0.1:{port}")
     try:
         client.connect(timeout=30)

@@ -28,7 +28,7 @@ from quadsitl.physics import PAPER
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS, TaskEngine, TaskOptions
 from quadsitl.tasks import features as F
-from tests.conftest import cli, run_cli
+from tests.conftest import cli, run_cli, wait_until_listening
 
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "policies" / "checkpoints"
 PARITY = 1e-5  # max abs difference of the actions, any two forms
@@ -278,6 +278,7 @@ def test_ground_station_mission_flown_by_an_exported_autopilot(form, tmp_path):
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(sim, port)
     client = VehicleClient(f"udpout:127.0.0.1:{port}")
     try:
         client.connect(timeout=40)

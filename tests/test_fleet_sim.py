@@ -17,7 +17,7 @@ import pytest
 from gcs_tools.client import VehicleClient, Waypoint, mav
 from gcs_tools.scripted_flight import mission_items
 from quadsitl.wire import fast_codec as FC
-from tests.conftest import cli, free_udp_port, refused_here
+from tests.conftest import cli, free_udp_port, refused_here, wait_until_listening
 
 VEHICLES = 4
 
@@ -34,6 +34,7 @@ def fleet():
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(process, port)
     clients = [VehicleClient(f"udpout:127.0.0.1:{port}", target=11 + i) for i in range(VEHICLES)]
     try:
         yield clients
@@ -194,8 +195,9 @@ def test_a_fleets_telemetry_comes_at_its_rates_in_datagrams_that_fit_a_network()
         stderr=subprocess.PIPE,
         text=True,
     )
+    wait_until_listening(process)  # its udpout link
     try:
-        listener.recv(65535)  # it is up (the first datagram may wait for numba's cache)
+        listener.recv(65535)  # it is up
         listener.settimeout(0.5)
         attitudes: dict[int, list[int]] = {}  # system id: time_boot_ms of each ATTITUDE
         heartbeats: set[int] = set()

@@ -13,7 +13,7 @@ from gcs_tools.mission_file import read_mission
 from gcs_tools.scripted_flight import planned_path
 from quadsitl.geo import Home
 from quadsitl.wire.addresses import free_udp_port
-from tests.conftest import cli, refused_here, run_cli
+from tests.conftest import cli, refused_here, run_cli, wait_until_listening
 
 MISSIONS = Path(__file__).resolve().parent.parent / "docs" / "missions"
 
@@ -26,6 +26,7 @@ def test_a_qgroundcontrol_plan_flies_against_a_running_sim():
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(sim)  # its udpout link
     try:
         flown = run_cli(
             "fly", str(MISSIONS / "square.plan"), "--connect", f"udpin:127.0.0.1:{port}"
@@ -58,6 +59,7 @@ def test_fly_signs_for_a_vehicle_with_signing_on(tmp_path):
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(sim)  # its udpout link
     connect = ("--connect", f"udpin:127.0.0.1:{port}", "--timeout", "60")
     try:
         unsigned = run_cli("fly", str(mission), *connect)

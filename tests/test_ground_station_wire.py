@@ -19,7 +19,7 @@ import quadsitl
 from gcs_tools.demo import free_udp_port
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.wire.param_values import decode_value, encode_raw
-from tests.conftest import cli
+from tests.conftest import cli, wait_until_listening
 
 
 class Station:
@@ -98,12 +98,15 @@ class Station:
 
 
 def _start(port: int, *options: str) -> subprocess.Popen[str]:
-    return subprocess.Popen(
+    """A simulator whose only link listens on ``port``; returns once that is open."""
+    sim = subprocess.Popen(
         cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --logs none --speed 4", *options),
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(sim, port)
+    return sim
 
 
 def _stop(sim: subprocess.Popen[str]) -> str:

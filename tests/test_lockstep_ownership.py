@@ -22,15 +22,22 @@ from quadsitl.envs.sim_process import SimProcess
 from quadsitl.mavlink.ownership import Ownership
 from quadsitl.mavlink.runner import SimConfig
 from quadsitl.wire.lockstep import OWNER_SILENCE, RESET_STATE, STAGE_MOTION
-from tests.conftest import OBS_TOLERANCE, REWARD_TOLERANCE, fly_both, refused_here
+from tests.conftest import (
+    OBS_TOLERANCE,
+    REWARD_TOLERANCE,
+    fly_both,
+    refused_here,
+    wait_until_listening,
+)
 
 RATES = ["--physics-rate", "100", "--control-rate", "20", "--gcs", "none", "--api", "none"]
 
 
 def _started(vehicles: int) -> SimProcess:
-    """A simulator of ``vehicles`` that is up (a client has connected and closed,
-    handing it back): a loaded machine may take long to start one."""
+    """A simulator of ``vehicles`` that is up (its link open, then a client has
+    connected and closed, handing it back)."""
     sim = SimProcess(["--vehicles", str(vehicles), *RATES])
+    wait_until_listening(sim.process, sim.port)
     probe = FleetClient("127.0.0.1", sim.port, vehicles)
     deadline = time.monotonic() + 90
     while True:

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from gcs_tools.demo import free_udp_port
-from tests.conftest import cli
+from tests.conftest import cli, wait_until_listening
 
 pytestmark = pytest.mark.slow
 MAVPROXY = shutil.which("mavproxy.py") or str(Path(sys.executable).parent / "mavproxy.py")
@@ -29,6 +29,7 @@ def test_mavproxy_detects_reads_parameters_arms_takes_off_and_lands(tmp_path):
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(sim)  # its udpout link
     # MAVProxy reads commands from stdin; each waits for the vehicle to get there.
     script = [
         (8, "arm throttle"),

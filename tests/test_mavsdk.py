@@ -37,7 +37,7 @@ from mavsdk.plugins.param import ParamError  # noqa: E402
 
 import quadsitl  # noqa: E402
 from gcs_tools.demo import free_udp_port  # noqa: E402
-from tests.conftest import cli  # noqa: E402
+from tests.conftest import cli, wait_until_listening  # noqa: E402
 
 SPEED = 4.0  # simulator speed factor
 NAN = math.nan
@@ -165,6 +165,7 @@ def test_mavsdk_flies_takeoff_goto_missions_and_return(identity, tmp_path):
             stderr=subprocess.STDOUT,
             text=True,
         )
+        wait_until_listening(sim)  # its udpout link
         try:
             asyncio.run(asyncio.wait_for(_fly(port, identity), 240))
         finally:
@@ -260,6 +261,7 @@ def test_mavsdk_streams_odometry_and_imu_refuses_wrong_types_and_fences(tmp_path
             stderr=subprocess.STDOUT,
             text=True,
         )
+        wait_until_listening(sim)  # its udpout link
         try:
             asyncio.run(asyncio.wait_for(_streams_params_version_fence(port), 120))
         finally:

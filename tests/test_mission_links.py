@@ -23,7 +23,7 @@ from pymavlink import mavutil
 from gcs_tools.demo import free_udp_port
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.links import Link
-from tests.conftest import cli
+from tests.conftest import cli, wait_until_listening
 from tests.test_ground_station_wire import _item, _stop
 
 GCS_IDS = (255, 190)  # what QGroundControl and MAVProxy use by default
@@ -143,6 +143,7 @@ def setup(request: pytest.FixtureRequest) -> Iterator[Setup]:
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(sim, *set(ports))
     try:
         yield Setup(sim, ports, target)
     finally:

@@ -21,7 +21,7 @@ from policies import checkpoint
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.mavlink.runner import SimConfig, Simulator
 from quadsitl.mavlink.tlog import TlogWriter
-from tests.conftest import cli, interrupt, refused_here
+from tests.conftest import cli, interrupt, refused_here, wait_until_listening
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "checkpoints" / "hover.pt"
@@ -155,6 +155,7 @@ def test_a_log_folder_that_disappears_stops_the_log_not_the_vehicle(tmp_path):
         stderr=subprocess.PIPE,
         text=True,
     )
+    wait_until_listening(process, port)
     client = VehicleClient(f"udpout:127.0.0.1:{port}")
     try:
         client.connect(timeout=30)

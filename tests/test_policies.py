@@ -26,7 +26,7 @@ from policies.rollout import compute_gae, make_vector_env
 from policies.train import train
 from quadsitl.physics import PAPER
 from quadsitl.physics import layout as L
-from tests.conftest import cli, refused_here, run_cli
+from tests.conftest import cli, refused_here, run_cli, wait_until_listening
 
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "policies" / "checkpoints"
 
@@ -363,6 +363,7 @@ def test_ground_station_mission_flown_by_the_policy_autopilot(tmp_path):
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(sim, port)
     client = VehicleClient(f"udpout:127.0.0.1:{port}")
     try:
         client.connect(timeout=40)

@@ -20,7 +20,7 @@ from quadsitl.physics import layout as L
 from quadsitl.tasks import features as F
 from quadsitl.vehicle.controller import Setpoint
 from quadsitl.wire.addresses import free_udp_port
-from tests.conftest import cli, run_cli
+from tests.conftest import cli, run_cli, wait_until_listening
 
 HOVER = checkpoint.SHIPPED / "hover.pt"
 
@@ -123,6 +123,7 @@ def _fly(
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(sim)  # its udpout link
     try:
         flown = run_cli("fly", str(mission), "--connect", f"udpin:127.0.0.1:{port}", *fly_args)
     finally:

@@ -29,6 +29,7 @@ from quadsitl.mavlink.server import MavlinkServer
 from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire.modes import Mode
 from quadsitl.wire.param_values import decode_value, encode_raw
+from tests.conftest import wait_until_listening
 
 COMMAND_ACK_TIMEOUT = 1.2  # s, QGC's (src/Vehicle/Vehicle.cc): then it resends ...
 COMMAND_RETRIES = 3  # ... this many times
@@ -147,6 +148,7 @@ def qgc() -> Iterator[Station]:
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
+    wait_until_listening(sim)  # its udpout link
     station = Station(port)
     try:
         station.wait("HEARTBEAT", 30)

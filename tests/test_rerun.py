@@ -23,7 +23,7 @@ from gcs_tools.tlog_reader import ReadStats, read_tlog
 from quadsitl.mavlink.tlog import TlogWriter
 from quadsitl.viz.scene import WIND_ARROW_SCALE
 from quadsitl.wire.addresses import free_udp_port
-from tests.conftest import cli, run_cli, start_sim
+from tests.conftest import cli, run_cli, start_sim, wait_until_listening
 
 
 def rows_per_entity(rrd: Path, static: bool = True) -> dict[str, int]:
@@ -375,6 +375,7 @@ def test_web_viewer_in_a_real_browser(tmp_path):
         text=True,
         env=env,
     )
+    wait_until_listening(sim, port)
     page = client = None
     try:
         ready, _, _ = select.select([sim.stdout], [], [], 60)

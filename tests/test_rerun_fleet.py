@@ -16,7 +16,7 @@ from gcs_tools.client import VehicleClient
 from gcs_tools.replay import convert
 from quadsitl.vehicle.group import grid_offsets
 from quadsitl.wire.addresses import free_udp_port
-from tests.conftest import cli
+from tests.conftest import cli, wait_until_listening
 from tests.test_rerun import check_attitude, rows_per_entity, scalars, views
 
 SYSTEMS = (1, 2, 3)
@@ -43,6 +43,7 @@ def fleet_flight(tmp_path_factory) -> tuple[Path, Path]:
         stderr=subprocess.PIPE,
         text=True,
     )
+    wait_until_listening(sim, port)
     clients = [VehicleClient(f"udpout:127.0.0.1:{port}", target=s) for s in SYSTEMS]
     try:
         for client, height in zip(clients, HEIGHTS, strict=True):

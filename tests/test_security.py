@@ -14,7 +14,7 @@ from gcs_tools.demo import free_udp_port
 from policies import checkpoint
 from policies.config import make_config
 from policies.networks import ActorCritic
-from tests.conftest import interrupt, run_cli, start_quiet_sim
+from tests.conftest import interrupt, run_cli, socket_addresses, start_quiet_sim
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "checkpoints" / "hover.pt"
@@ -101,31 +101,12 @@ def test_saved_checkpoints_hold_only_data(tmp_path):
 
 
 # --- 2, 3. loopback by default; an empty secret is an error ---------------------------
-def _socket_addresses(pid: int) -> list[str]:
-    """Local addresses (hex, as /proc/net shows them) of every inet socket of ``pid``."""
-    inodes = set()
-    for fd in Path(f"/proc/{pid}/fd").iterdir():
-        try:
-            target = os.readlink(fd)
-        except OSError:
-            continue
-        if target.startswith("socket:["):
-            inodes.add(target[len("socket:[") : -1])
-    addresses = []
-    for table in ("udp", "tcp", "udp6", "tcp6"):
-        for line in Path(f"/proc/{pid}/net/{table}").read_text().splitlines()[1:]:
-            fields = line.split()
-            if fields[9] in inodes:
-                addresses.append(fields[1].split(":")[0])
-    return addresses
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_default_simulator_binds_only_loopback_and_says_signing_is_off():
     process = start_quiet_sim()
     try:
         banner = process.stdout.readline()  # printed once the links are open
-        addresses = _socket_addresses(process.pid)
+        addresses = socket_addresses(process.pid)
     finally:
         _out, err = interrupt(process)
     assert "signing off" in banner

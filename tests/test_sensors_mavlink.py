@@ -16,7 +16,7 @@ from gcs_tools.demo import free_udp_port
 from quadsitl.geo import Home
 from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics.sensors import environment as E
-from tests.conftest import cli
+from tests.conftest import cli, wait_until_listening
 
 HOME = Home()
 PRESSURE_AT_REST = float(E.isa_pressure(np.array([HOME.altitude]))[0]) / 100  # hPa
@@ -35,6 +35,7 @@ def _collect(noise: float) -> dict[str, list]:
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(process, port)
     client = VehicleClient(f"udpout:127.0.0.1:{port}")
     try:
         client.connect(timeout=30)

@@ -454,7 +454,7 @@ def _hover_lean(*options: str) -> tuple[np.ndarray, str]:
     import subprocess
 
     from gcs_tools.client import VehicleClient
-    from tests.conftest import cli, free_udp_port
+    from tests.conftest import cli, free_udp_port, wait_until_listening
 
     port = free_udp_port()
     process = subprocess.Popen(
@@ -463,6 +463,7 @@ def _hover_lean(*options: str) -> tuple[np.ndarray, str]:
         stderr=subprocess.STDOUT,
         text=True,
     )
+    wait_until_listening(process, port)
     client = VehicleClient(f"udpout:127.0.0.1:{port}")
     try:
         client.connect(timeout=60)
@@ -507,7 +508,7 @@ def test_ground_station_sees_and_sets_the_weather():
     import subprocess
 
     from gcs_tools.client import VehicleClient
-    from tests.conftest import cli, free_udp_port
+    from tests.conftest import cli, free_udp_port, wait_until_listening
 
     port = free_udp_port()
     process = subprocess.Popen(
@@ -519,6 +520,7 @@ def test_ground_station_sees_and_sets_the_weather():
         stderr=subprocess.STDOUT,
         text=True,
     )  # fmt: skip
+    wait_until_listening(process, port)
     client = VehicleClient(f"udpout:127.0.0.1:{port}")
     try:
         client.connect(timeout=60)
