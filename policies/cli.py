@@ -14,6 +14,17 @@ from policies.ladder import AXES
 
 
 def add_parsers(commands: argparse._SubParsersAction) -> None:
+    """Add the policy commands, in the order ``quadsitl --help`` lists them."""
+    _add_train_parser(commands)
+    _add_eval_parser(commands)
+    _add_robustness_parser(commands)
+    _add_plot_parser(commands)
+    _add_sweep_parser(commands)
+    export_cli.add_parser(commands)
+
+
+def _add_train_parser(commands: argparse._SubParsersAction) -> None:
+    """Add ``quadsitl train``: task, algorithm, preset, backend, step budget and run folder."""
     train = commands.add_parser(
         "train",
         help="train a policy (GAE, PPO or TRPO) on a task",
@@ -88,6 +99,9 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
     )
     train.add_argument("--quiet", action="store_true", help="no progress bar")
 
+
+def _add_eval_parser(commands: argparse._SubParsersAction) -> None:
+    """Add ``quadsitl eval``: deterministic episodes of one checkpoint or its export."""
     evaluate = commands.add_parser(
         "eval",
         help="evaluate a checkpoint with deterministic episodes",
@@ -129,6 +143,9 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         help="record the first env's episodes in Rerun (a viewer, or the file RRD)",
     )
 
+
+def _add_robustness_parser(commands: argparse._SubParsersAction) -> None:
+    """Add ``quadsitl robustness``: the robustness ladder over policies."""
     robustness = commands.add_parser(
         "robustness",
         help="the robustness ladder: success under turbulence, wind, delay, mass, a weak "
@@ -161,6 +178,9 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         help="folder for the tables and the plot, made if missing (default: robustness)",
     )
 
+
+def _add_plot_parser(commands: argparse._SubParsersAction) -> None:
+    """Add ``quadsitl plot``: learning curves of run folders."""
     plot = commands.add_parser(
         "plot",
         help="learning curves (mean ± std over seeds) of run folders",
@@ -173,6 +193,9 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         "--force", action="store_true", help="replace PNGs that already exist in the folder"
     )
 
+
+def _add_sweep_parser(commands: argparse._SubParsersAction) -> None:
+    """Add ``quadsitl sweep``: a grid or search over training runs on Ray Tune."""
     sweep = commands.add_parser(
         "sweep",
         help="a grid or search over training runs on Ray Tune (docs/distributed.md)",
@@ -224,7 +247,6 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         help="after training, test each run's best checkpoint on N deterministic episodes "
         "and add the algorithms-comparison table to the results (default: 0, no test)",
     )
-    export_cli.add_parser(commands)
 
 
 def _count(low: int):  # type: ignore[no-untyped-def]

@@ -10,12 +10,24 @@ from quadsitl.commands.options import add_signing_options, add_weather_options
 
 
 def add_sim_parser(commands: argparse._SubParsersAction) -> None:
+    """Add ``quadsitl sim`` and its options, in the order ``--help`` lists them."""
     sim = commands.add_parser(
         "sim",
         help="run the simulated vehicle in real time, speaking MAVLink over UDP/TCP",
         description="Run the simulated quadrotor as a MAVLink vehicle. Ground stations "
         "connect on the --gcs link, MAVSDK-style API clients on the --api link.",
     )
+    _add_link_options(sim)
+    _add_world_options(sim)
+    _add_vehicle_options(sim)
+    _add_flight_stack_options(sim)
+    _add_run_options(sim)
+    _add_viewer_options(sim)
+
+
+def _add_link_options(sim: argparse.ArgumentParser) -> None:
+    """The links: ground station, API, motor-command, lockstep, signing, extra links,
+    system ids and the number of vehicles."""
     sim.add_argument(
         "--gcs",
         default="udpout:127.0.0.1:14550",
@@ -66,6 +78,11 @@ def add_sim_parser(commands: argparse._SubParsersAction) -> None:
         "complete MAVLink vehicle on every link (with --flight-stack: the aircraft of one "
         "autopilot instance each) (default: 1)",
     )
+
+
+def _add_world_options(sim: argparse.ArgumentParser) -> None:
+    """The world the vehicles fly in: weather, sensor noise, motor failures, delay,
+    airframe randomisation and the seed of the draws."""
     add_weather_options(sim)
     sim.add_argument(
         "--sensor-noise",
@@ -117,6 +134,10 @@ def add_sim_parser(commands: argparse._SubParsersAction) -> None:
         help="what the flight software flies on and reports: the true state, or the onboard "
         "EKF's estimate from the sensors (the EKF2_EN parameter; default: truth)",
     )
+
+
+def _add_vehicle_options(sim: argparse.ArgumentParser) -> None:
+    """The vehicle: estimator, fleet spacing, autopilot identity, home and airframe."""
     sim.add_argument(
         "--spacing",
         type=float,
@@ -144,6 +165,10 @@ def add_sim_parser(commands: argparse._SubParsersAction) -> None:
         default=None,
         help="airframe preset (default: paper; with --flight-stack: iris)",
     )
+
+
+def _add_flight_stack_options(sim: argparse.ArgumentParser) -> None:
+    """Being only the aircraft of a real autopilot (ArduPilot or PX4)."""
     sim.add_argument(
         "--flight-stack",
         choices=FLIGHT_STACKS,
@@ -167,6 +192,11 @@ def add_sim_parser(commands: argparse._SubParsersAction) -> None:
         help="address the autopilot ports listen on (default: 127.0.0.1; 0.0.0.0 lets "
         "autopilots on other hosts in)",
     )
+
+
+def _add_run_options(sim: argparse.ArgumentParser) -> None:
+    """The run: physics and control rates, speed, log folder, parameters, duration and
+    a trained autopilot policy."""
     sim.add_argument(
         "--physics-rate",
         type=float,
@@ -212,6 +242,10 @@ def add_sim_parser(commands: argparse._SubParsersAction) -> None:
         "(e.g. policies/checkpoints/random_waypoint.pt, or its export: a .onnx file or a C .h "
         "header with its .contract.json)",
     )
+
+
+def _add_viewer_options(sim: argparse.ArgumentParser) -> None:
+    """The Rerun viewer and printing of vehicle events."""
     sim.add_argument(
         "--rerun",
         action="store_true",
