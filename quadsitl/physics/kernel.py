@@ -6,8 +6,7 @@ scratch (value k of vehicle j at ``s[k * B + j]``) so that the compiler vectoris
 each RK4 stage across vehicles. The row length B is a compile-time constant on purpose:
 with it the compiler can tell the rows apart and vectorises the derivative (4× over 2-D
 scratch, whose row length is only known at run time). This module holds the RK4 step
-over blocks (:func:`_rk4_step`, one for still air and for the world, which it takes as a
-compile-time flag; scratch, substeps, the weather first); the derivative and the ground
+over blocks (scratch, substeps, the weather first); the derivative and the ground
 contact it inlines are in :mod:`quadsitl.physics.kernel_dynamics`. The same source is
 compiled once per block size (:func:`compile_step`): ``batch_step`` and ``single_step``
 agree bit for bit, and ``tests/test_physics_equivalence.py`` holds them to the reference
@@ -61,214 +60,212 @@ def _axpy(out, x, a, y, m, B):  # pragma: no cover - compiled
             out[k * B + j] = x[k * B + j] + a * y[k * B + j]
 
 
-# The block's scratch, in rows of B values: state, previous state, RK4 temp, k1..k4,
-# parameters, commands, sums; the world's block arrays after them (wind parameters, wind
-# state, the wind step's scratch, the random streams), in the same allocation: slices of
-# one array at constant offsets are provably apart, so the loops that read one and write
-# another vectorise (separate arrays defeated the compiler).
-SCRATCH_ROWS = 7 * L.STATE_SIZE + L.N_PARAMS + L.N_ROTORS + SUMS_ROWS
-WORLD_ROWS = SCRATCH_ROWS + L.N_WIND_PARAMS + L.N_WIND_STATE + wind_kernel.N_SCRATCH + 1
-
-
-@_inline
-def _cut(scratch, B):  # pragma: no cover - compiled
-    """The block arrays of the RK4 step, cut from ``scratch``: (s, prev, tmp, k1, k2,
-    k3, k4, p, cmd, sums)."""
-    z = L.STATE_SIZE * B
-    params_end = 7 * z + L.N_PARAMS * B
-    commands_end = params_end + L.N_ROTORS * B
-    return (
-        scratch[0:z], scratch[z : 2 * z], scratch[2 * z : 3 * z],
-        scratch[3 * z : 4 * z], scratch[4 * z : 5 * z], scratch[5 * z : 6 * z],
-        scratch[6 * z : 7 * z], scratch[7 * z : params_end],
-        scratch[params_end:commands_end], scratch[commands_end : SCRATCH_ROWS * B],
-    )  # fmt: skip
-
-
-@_inline
-def _cut_world(scratch, B):  # pragma: no cover - compiled
-    """The weather's block arrays, cut from ``scratch`` after the RK4 step's: (wind
-    parameters, wind state, the wind step's scratch, the random streams as uint64);
-    empty where ``scratch`` holds only the RK4 step's."""
-    w_state = (SCRATCH_ROWS + L.N_WIND_PARAMS) * B
-    w_scratch = w_state + L.N_WIND_STATE * B
-    streams = (WORLD_ROWS - 1) * B
-    return (
-        scratch[SCRATCH_ROWS * B : w_state],
-        scratch[w_state:w_scratch],
-        scratch[w_scratch:streams],
-        scratch[streams : WORLD_ROWS * B].view(np.uint64),
-    )
-
-
-@_inline
-def _load_block(state, params, commands, first, m, s, p, cmd, B):  # pragma: no cover
-    """Vehicles first..first+m−1 into the block's rows: state, parameters, commands."""
-    for j in range(m):
-        for k in range(L.STATE_SIZE):
-            s[k * B + j] = state[first + j, k]
-        for k in range(L.N_PARAMS):
-            p[k * B + j] = params[first + j, k]
-        for k in range(L.N_ROTORS):
-            cmd[k * B + j] = commands[(first + j) * L.N_ROTORS + k]
-
-
-@_inline
-def _load_weather(wind_params, wind_state, streams, first, m, wp, ws, rng, B):  # pragma: no cover
-    """The weather of vehicles first..first+m−1 into the block's rows."""
-    for j in range(m):
-        for k in range(L.N_WIND_PARAMS):
-            wp[k * B + j] = wind_params[first + j, k]
-        for k in range(L.N_WIND_STATE):
-            ws[k * B + j] = wind_state[first + j, k]
-        rng[j] = streams[first + j]
-
-
-@_inline
-def _pad_block(s, p, cmd, wp, ws, rng, m, B):  # pragma: no cover - compiled
-    """A short block padded with copies of its first vehicle (finite values, computed
-    and never written back): the weather's loops then run over the whole block, a count
-    the compiler knows, and vectorise (1.5x the speed of loops to m, measured; the RK4
-    loops are faster to m, so they stay so). Returns whether the block is calm: no
-    turbulence in it, so that its weather skips the filters."""
-    for j in range(m, B):
-        for k in range(L.STATE_SIZE):
-            s[k * B + j] = s[k * B]
-        for k in range(L.N_PARAMS):
-            p[k * B + j] = p[k * B]
-        for k in range(L.N_ROTORS):
-            cmd[k * B + j] = cmd[k * B]
-        for k in range(L.N_WIND_PARAMS):
-            wp[k * B + j] = wp[k * B]
-        for k in range(L.N_WIND_STATE):
-            ws[k * B + j] = ws[k * B]
-        rng[j] = rng[0]
-    calm = True
-    for j in range(B):
-        calm = calm and not wp[L.W_SIGMA_W * B + j] > 0.0
-    return calm
-
-
-@_inline
-def _store_block(state, wind_state, streams, s, ws, rng, first, m, B, weather):  # pragma: no cover
-    """The block's first m states (and, with ``weather``, their weather) back into rows
-    first..first+m−1."""
-    for j in range(m):
-        for k in range(L.STATE_SIZE):
-            state[first + j, k] = s[k * B + j]
-        if weather:
-            for k in range(L.N_WIND_STATE):
-                wind_state[first + j, k] = ws[k * B + j]
-            streams[first + j] = rng[j]
-
-
-@_inline
-def advance(
-    state, params, rotor_cmd, contact, touchdown_speed, dt, n_substeps,
-    wind_params, wind_state, streams, scratch, B, world,
-):  # fmt: skip  # pragma: no cover - compiled
-    """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place, in blocks
-    of B, each step RK4 with the quaternion normalised, the rotor speeds clipped to
-    [0, Ω_max] and ground contact. ``world`` (compile-time) builds the world: the
-    derivative reads each rotor's efficiency and ground effect, and the air, which the
-    step of each vehicle's weather (``wind_params`` (n, N_WIND_PARAMS), ``wind_state``
-    (n, N_WIND_STATE), random ``streams`` (n,) uint64; no rows: still air) writes
-    first; without it, the arithmetic of still air and healthy rotors far from the
-    ground, the weather's arrays unread. ``scratch``: SCRATCH_ROWS × B values, WORLD_ROWS
-    × B (zeros) for the world.
-
-    Returns -1, or the index of the first vehicle with a non-finite command, in which
-    case nothing was changed."""
-    commands = rotor_cmd.ravel()  # (n, 4), or (4,) for one vehicle: 4 per vehicle
-    bad = first_invalid_command(commands)
-    if bad >= 0:
-        return bad
-    weather = world and wind_params.shape[0] > 0
-    s, prev, tmp, k1, k2, k3, k4, p, cmd, sums = _cut(scratch, B)
-    wp, ws, wscratch, rng = _cut_world(scratch, B)
-    size, sixth = L.STATE_SIZE, dt / 6.0
-    for first in range(0, state.shape[0], B):
-        m = min(B, state.shape[0] - first)
-        _load_block(state, params, commands, first, m, s, p, cmd, B)
-        calm = True
-        if weather:
-            _load_weather(wind_params, wind_state, streams, first, m, wp, ws, rng, B)
-        if world:
-            calm = _pad_block(s, p, cmd, wp, ws, rng, m, B)
-        for _ in range(n_substeps):
-            for j in range(m):  # a crashed vehicle keeps its pose: remember it
-                if contact[first + j] == L.CRASHED:
-                    for k in range(size):
-                        prev[k * B + j] = s[k * B + j]
-            if weather:
-                wind_kernel.advance_block(s, p, wp, ws, rng, wscratch, sums, B, B, dt, calm)
-            if world:
-                rotor_factors(s, p, sums, m, B)
-            derivative(s, p, cmd, k1, m, sums, B, world)
-            _axpy(tmp, s, 0.5 * dt, k1, m, B)
-            derivative(tmp, p, cmd, k2, m, sums, B, world)
-            _axpy(tmp, s, 0.5 * dt, k2, m, B)
-            derivative(tmp, p, cmd, k3, m, sums, B, world)
-            _axpy(tmp, s, dt, k3, m, B)
-            derivative(tmp, p, cmd, k4, m, sums, B, world)
-            for k in range(size):
-                for j in range(m):
-                    i = k * B + j
-                    s[i] = s[i] + sixth * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-            for j in range(m):
-                qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
-                qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
-                norm = math.sqrt(qw**2 + qx**2 + qy**2 + qz**2)
-                for k in range(L.I_QW, L.I_QZ + 1):
-                    s[k * B + j] /= norm
-                omega_max = p[L.P_OMEGA_MAX * B + j]
-                for k in range(L.I_ROTOR0, size):
-                    s[k * B + j] = min(max(s[k * B + j], 0.0), omega_max)
-            ground_contact(prev, s, p, contact, touchdown_speed, first, m, B)
-        _store_block(state, wind_state, streams, s, ws, rng, first, m, B, weather)
-    return -1
-
-
 def compile_step(B: int, release_gil: bool, wind: bool = False):
     """The kernel's ``step`` for blocks of ``B`` vehicles (B is a compile-time constant).
 
     A batch uses ``B = BLOCK`` and releases the GIL while it computes; a single vehicle
     uses ``B = 1`` (straight-line code, scratch of a few hundred bytes) and keeps the GIL,
-    since releasing it would cost more than the step. Same source, same arithmetic: both
-    builds are :func:`advance`. ``wind`` (compile-time too) builds the world (the
-    weather's arrays, each rotor's efficiency and ground effect); without it the
-    arithmetic is that of still air and healthy rotors far from the ground, and the step
-    takes three arguments fewer: numba's call costs ~0.35 µs with 7 arrays and scalars,
-    ~1 µs with 10, against a single vehicle's step of about 1 µs. (Neither build calls a
-    compiled closure: one held as a closure variable enters numba's cache key pickled, a
-    dispatcher by a random UUID, and every process would compile again, 15–30 s.)
+    since releasing it would cost more than the step. Same source, same arithmetic.
+    ``wind`` (compile-time too) builds the world: the weather of
+    :mod:`quadsitl.physics.wind_kernel` before each physics step, and each rotor's
+    efficiency and ground effect; without it the arithmetic is that of still air and
+    healthy rotors far from the ground, unchanged (and the world's columns unread).
     """
     jit = numba.njit(nogil=release_gil, **_OPTIONS)
+    WIND = wind
+    # Block scratch: state, previous state, RK4 temp, k1..k4, parameters, commands, sums.
+    scratch_size = (7 * L.STATE_SIZE + L.N_PARAMS + L.N_ROTORS + SUMS_ROWS) * B
+    # The world's block arrays after them, in the same allocation: slices of one array
+    # at constant offsets are provably apart, so the loops that read one and write
+    # another vectorise (separate arrays defeated the compiler).
+    w_params = scratch_size
+    w_state = w_params + L.N_WIND_PARAMS * B
+    w_scratch = w_state + L.N_WIND_STATE * B
+    world_size = w_scratch + wind_kernel.N_SCRATCH * B
+
+    def advance(
+        state,
+        params,
+        rotor_cmd,
+        contact,
+        touchdown_speed,
+        dt,
+        n_substeps,
+        wind_params,
+        wind_state,
+        streams,
+    ):  # pragma: no cover
+        """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place, each
+        after a step of its weather: ``wind_params`` (n, N_WIND_PARAMS), ``wind_state``
+        (n, N_WIND_STATE), random ``streams`` (n,) uint64. Weather arrays with no rows
+        mean still air for every vehicle: only the rotors' world (efficiency, ground
+        effect) is added to the physics.
+
+        Returns -1, or the index of the first vehicle with a non-finite command, in
+        which case nothing was changed."""
+        commands = rotor_cmd.ravel()  # (n, 4), or (4,) for one vehicle: 4 per vehicle
+        bad = first_invalid_command(commands)
+        if bad >= 0:
+            return bad
+        weather = wind_params.shape[0] > 0
+        size = L.STATE_SIZE
+        # One allocation cut into the block arrays (each a run of rows of B values).
+        z = size * B
+        scratch = np.zeros(world_size)  # zeros: the air stays still without weather
+        s, prev, tmp = scratch[0:z], scratch[z : 2 * z], scratch[2 * z : 3 * z]
+        k1, k2 = scratch[3 * z : 4 * z], scratch[4 * z : 5 * z]
+        k3, k4 = scratch[5 * z : 6 * z], scratch[6 * z : 7 * z]
+        p = scratch[7 * z : 7 * z + L.N_PARAMS * B]
+        cmd = scratch[7 * z + L.N_PARAMS * B : 7 * z + (L.N_PARAMS + L.N_ROTORS) * B]
+        sums = scratch[7 * z + (L.N_PARAMS + L.N_ROTORS) * B : scratch_size]
+        wp, ws = scratch[w_params:w_state], scratch[w_state:w_scratch]
+        wscratch = scratch[w_scratch:world_size]
+        rng = np.empty(B, np.uint64)
+        sixth = dt / 6.0
+        for first in range(0, state.shape[0], B):
+            m = min(B, state.shape[0] - first)
+            for j in range(m):
+                for k in range(size):
+                    s[k * B + j] = state[first + j, k]
+                for k in range(L.N_PARAMS):
+                    p[k * B + j] = params[first + j, k]
+                for k in range(L.N_ROTORS):
+                    cmd[k * B + j] = commands[(first + j) * L.N_ROTORS + k]
+                if weather:
+                    for k in range(L.N_WIND_PARAMS):
+                        wp[k * B + j] = wind_params[first + j, k]
+                    for k in range(L.N_WIND_STATE):
+                        ws[k * B + j] = wind_state[first + j, k]
+                    rng[j] = streams[first + j]
+            # A short block is padded with copies of its first vehicle (finite values,
+            # computed and never written back): the weather's loops then run over the
+            # whole block, a count the compiler knows, and vectorise (1.5x the speed of
+            # loops to m, measured; the RK4 loops are faster to m, so they stay so).
+            for j in range(m, B):
+                for k in range(size):
+                    s[k * B + j] = s[k * B]
+                for k in range(L.N_PARAMS):
+                    p[k * B + j] = p[k * B]
+                for k in range(L.N_ROTORS):
+                    cmd[k * B + j] = cmd[k * B]
+                for k in range(L.N_WIND_PARAMS):
+                    wp[k * B + j] = wp[k * B]
+                for k in range(L.N_WIND_STATE):
+                    ws[k * B + j] = ws[k * B]
+                rng[j] = rng[0]
+            calm = True  # no turbulence in the whole block: its weather skips the filters
+            for j in range(B):
+                calm = calm and not wp[L.W_SIGMA_W * B + j] > 0.0
+            for _ in range(n_substeps):
+                for j in range(m):  # a crashed vehicle keeps its pose: remember it
+                    if contact[first + j] == L.CRASHED:
+                        for k in range(size):
+                            prev[k * B + j] = s[k * B + j]
+                if weather:
+                    wind_kernel.advance_block(s, p, wp, ws, rng, wscratch, sums, B, B, dt, calm)
+                rotor_factors(s, p, sums, m, B)
+                derivative(s, p, cmd, k1, m, sums, B, WIND)
+                _axpy(tmp, s, 0.5 * dt, k1, m, B)
+                derivative(tmp, p, cmd, k2, m, sums, B, WIND)
+                _axpy(tmp, s, 0.5 * dt, k2, m, B)
+                derivative(tmp, p, cmd, k3, m, sums, B, WIND)
+                _axpy(tmp, s, dt, k3, m, B)
+                derivative(tmp, p, cmd, k4, m, sums, B, WIND)
+                for k in range(size):
+                    for j in range(m):
+                        i = k * B + j
+                        s[i] = s[i] + sixth * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+                for j in range(m):
+                    qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
+                    qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
+                    norm = math.sqrt(qw**2 + qx**2 + qy**2 + qz**2)
+                    for k in range(L.I_QW, L.I_QZ + 1):
+                        s[k * B + j] /= norm
+                    omega_max = p[L.P_OMEGA_MAX * B + j]
+                    for k in range(L.I_ROTOR0, size):
+                        s[k * B + j] = min(max(s[k * B + j], 0.0), omega_max)
+                ground_contact(prev, s, p, contact, touchdown_speed, first, m, B)
+            for j in range(m):
+                for k in range(size):
+                    state[first + j, k] = s[k * B + j]
+                if weather:
+                    for k in range(L.N_WIND_STATE):
+                        wind_state[first + j, k] = ws[k * B + j]
+                    streams[first + j] = rng[j]
+        return -1
+
     if wind:
+        return jit(advance)
 
-        @jit
-        def world_step(
-            state, params, rotor_cmd, contact, touchdown_speed, dt, n_substeps,
-            wind_params, wind_state, streams,
-        ):  # fmt: skip  # pragma: no cover
-            scratch = np.zeros(WORLD_ROWS * B)  # zeros: the air stays still without weather
-            return advance(
-                state, params, rotor_cmd, contact, touchdown_speed, dt, n_substeps,
-                wind_params, wind_state, streams, scratch, B, True,
-            )  # fmt: skip
-
-        return world_step
-
+    # Still air: the same steps without the weather's, written out again because a
+    # compiled function calling ``advance`` would hold it as a closure variable, and
+    # numba's cache key pickles those (a dispatcher by a random UUID): every process
+    # then missed the cache and compiled the kernel again (15–30 s). Three arguments
+    # fewer also matter here: numba's call costs ~0.35 µs with 7 arrays and scalars,
+    # ~1 µs with 10, against a single vehicle's step of about 1 µs.
     @jit
     def still_step(
         state, params, rotor_cmd, contact, touchdown_speed, dt, n_substeps
     ):  # pragma: no cover
-        scratch = np.empty(SCRATCH_ROWS * B)
-        no_rows = state[:0]  # the weather's arrays: none, never read
-        return advance(
-            state, params, rotor_cmd, contact, touchdown_speed, dt, n_substeps,
-            no_rows, no_rows, scratch[:0].view(np.uint64), scratch, B, False,
-        )  # fmt: skip
+        """Advance every vehicle ``n_substeps`` physics steps of ``dt`` in place.
+
+        Returns -1, or the index of the first
+        vehicle with a non-finite command, in which case nothing was changed.
+        """
+        commands = rotor_cmd.ravel()  # (n, 4), or (4,) for one vehicle: 4 per vehicle
+        bad = first_invalid_command(commands)
+        if bad >= 0:
+            return bad
+        size = L.STATE_SIZE
+        # One allocation cut into the block arrays (each a run of rows of B values).
+        z = size * B
+        scratch = np.empty(scratch_size)
+        s, prev, tmp = scratch[0:z], scratch[z : 2 * z], scratch[2 * z : 3 * z]
+        k1, k2 = scratch[3 * z : 4 * z], scratch[4 * z : 5 * z]
+        k3, k4 = scratch[5 * z : 6 * z], scratch[6 * z : 7 * z]
+        p = scratch[7 * z : 7 * z + L.N_PARAMS * B]
+        cmd = scratch[7 * z + L.N_PARAMS * B : 7 * z + (L.N_PARAMS + L.N_ROTORS) * B]
+        sums = scratch[7 * z + (L.N_PARAMS + L.N_ROTORS) * B :]
+        sixth = dt / 6.0
+        for first in range(0, state.shape[0], B):
+            m = min(B, state.shape[0] - first)
+            for j in range(m):
+                for k in range(size):
+                    s[k * B + j] = state[first + j, k]
+                for k in range(L.N_PARAMS):
+                    p[k * B + j] = params[first + j, k]
+                for k in range(L.N_ROTORS):
+                    cmd[k * B + j] = commands[(first + j) * L.N_ROTORS + k]
+            for _ in range(n_substeps):
+                for j in range(m):  # a crashed vehicle keeps its pose: remember it
+                    if contact[first + j] == L.CRASHED:
+                        for k in range(size):
+                            prev[k * B + j] = s[k * B + j]
+                derivative(s, p, cmd, k1, m, sums, B, False)
+                _axpy(tmp, s, 0.5 * dt, k1, m, B)
+                derivative(tmp, p, cmd, k2, m, sums, B, False)
+                _axpy(tmp, s, 0.5 * dt, k2, m, B)
+                derivative(tmp, p, cmd, k3, m, sums, B, False)
+                _axpy(tmp, s, dt, k3, m, B)
+                derivative(tmp, p, cmd, k4, m, sums, B, False)
+                for k in range(size):
+                    for j in range(m):
+                        i = k * B + j
+                        s[i] = s[i] + sixth * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+                for j in range(m):
+                    qw, qx = s[L.I_QW * B + j], s[L.I_QX * B + j]
+                    qy, qz = s[L.I_QY * B + j], s[L.I_QZ * B + j]
+                    norm = math.sqrt(qw**2 + qx**2 + qy**2 + qz**2)
+                    for k in range(L.I_QW, L.I_QZ + 1):
+                        s[k * B + j] /= norm
+                    omega_max = p[L.P_OMEGA_MAX * B + j]
+                    for k in range(L.I_ROTOR0, size):
+                        s[k * B + j] = min(max(s[k * B + j], 0.0), omega_max)
+                ground_contact(prev, s, p, contact, touchdown_speed, first, m, B)
+            for j in range(m):
+                for k in range(size):
+                    state[first + j, k] = s[k * B + j]
+        return -1
 
     return still_step
 
