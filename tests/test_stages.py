@@ -53,13 +53,12 @@ def test_the_perturbations_import_only_the_physics():
 
 def test_an_option_that_is_off_is_a_stage_that_does_nothing():
     plain = _engine()
-    assert [type(stage) for stage in plain._stages] == [
-        G.Stage,
-        G.Truth,
-        G.Undelayed,
-        G.Stage,
-        G.Stage,
-    ]
+    assert plain._stages == ()  # each does nothing: none is called
+    assert type(plain._physics) is G.Undelayed and plain._motors == ()
+    obs = np.zeros((3, 34), np.float32)
+    kept = G.HiddenPosition(obs)
+    truth = G.Truth(plain.task.observe, plain.fleet, plain.goal, 34)
+    assert G.acting(G.Stage(), truth, kept, G.Undelayed(plain.fleet, 5)) == (kept,)
     every = _engine(
         proximity_reward={"weight": 1.0, "radius": 1.0},
         sensor_noise=1.0,
@@ -137,11 +136,12 @@ def test_a_delayed_stage_takes_its_observations_from_the_sensors():
     truth's: the task's observation of the state then), not a call into the engine."""
     engine = _engine(delay={"observation": 0.02})
     physics = engine._physics
-    assert isinstance(physics, G.Delayed) and physics.sensing is engine._stages[1]
+    assert isinstance(physics, G.Delayed) and engine._stages == (physics,)
+    assert type(physics.sensing) is G.Truth
     before = engine.fleet.state.copy()
     engine.step(np.zeros((3, 4)))
     assert not np.array_equal(engine.fleet.state, before)
-    seen = engine._stages[1].observed(np.arange(3))
+    seen = physics.sensing.observed(np.arange(3))
     assert seen.shape == engine.obs.shape
 
 

@@ -130,14 +130,3 @@ class FailingMotors:
                 efficiency = fleet.params[due][:, L.P_ROTOR_EFFICIENCY].copy()
                 efficiency[:, fault.motor - 1] = fault.efficiency
                 fleet.set_motor_efficiency(efficiency, mask=due)
-
-
-class Healthy:
-    """No motor fault: nothing to heal or fail (what :class:`FailingMotors` is without
-    the option)."""
-
-    def heal(self, rows: NDArray[np.int64]) -> None:
-        pass
-
-    def strike(self, steps: NDArray[np.int64], active: NDArray[np.bool_]) -> None:
-        pass

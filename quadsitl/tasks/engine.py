@@ -123,6 +123,9 @@ class TaskEngine:
         self.rngs = [np.random.default_rng() for _ in range(n)]
         self._all = np.ones(n, bool)
         self._action_shape = (n, L.N_ROTORS)
+        # The shapes an action may have: a lone env's may also be (4,).
+        one = (L.N_ROTORS,)
+        self._action_shapes = (self._action_shape, one) if n == 1 else (self._action_shape,)
         fleet = self.fleet
         self._batch = StepBatch(  # what the task's evaluate() reads and writes
             state=fleet.state,
@@ -162,11 +165,12 @@ class TaskEngine:
     def _build_stages(self, o: TaskOptions) -> None:
         """The stages around the task, once (:mod:`.stages`): the motor faults before the
         physics, the physics (delayed or not), and the stages after ``evaluate``; an
-        option that is off gives a stage that does nothing."""
+        option that is off gives a stage that does nothing, left out of the loop."""
         n, period, failing = self.n, self.control_period, FT.sensor_faults(o.faults)
-        self._motors: FT.FailingMotors | FT.Healthy = FT.Healthy()
+        # The motor faults (none without the option): healed at a reset, struck when due.
+        self._motors: tuple[FT.FailingMotors, ...] = ()
         if o.faults:
-            self._motors = FT.FailingMotors(self.fleet, FT.motor_faults(o.faults), period)
+            self._motors = (FT.FailingMotors(self.fleet, FT.motor_faults(o.faults), period),)
         sensing = G.Truth(self.task.observe, self.fleet, self.goal, self.obs_size)
         self.observation_noise = ObservationNoise(n, o.sensor_noise) if o.sensor_noise else None
         if self.observation_noise is not None or failing:
@@ -177,13 +181,13 @@ class TaskEngine:
         if delay is None and self.randomization is not None:
             delay = self.randomization.delay
         self.delay: DelayLine | None = None
-        self._physics = G.Undelayed(self.fleet, self.substeps)
+        self._physics: G.Undelayed | G.Delayed = G.Undelayed(self.fleet, self.substeps)
         if delay is not None:
             delay.check_episode(self.max_steps * period)
             self.delay = DelayLine(delay, n, o.physics_dt, self.substeps, self.obs_size)
             self._physics = G.Delayed(self.delay, sensing, self.obs, self.steps, self.hover_speed)
         nothing, proximity = G.Stage(), o.proximity_reward
-        self._stages = (  # in the order they run after evaluate (stages.py)
+        self._stages = G.acting(  # in the order they run after evaluate (stages.py)
             G.ProximityReward(self.reward, self.dist, proximity) if proximity else nothing,
             sensing,
             self._physics,
@@ -210,7 +214,8 @@ class TaskEngine:
         hover = self.fleet.hover_rotor_speed[rows]
         states[:, L.ROTORS] = np.minimum(hover, self.fleet.params[rows, L.P_OMEGA_MAX])[:, None]
         self.fleet.reset(states, mask=mask)
-        self._motors.heal(rows)
+        for motors in self._motors:
+            motors.heal(rows)
         self.steps[rows] = 0
         self.outcome[rows] = S.RUNNING
         self.time_within[rows] = 0.0
@@ -274,7 +279,11 @@ class TaskEngine:
             reward (N,), terminated (N,), truncated (N,): the engine's own arrays,
             overwritten by the next step (copy them to keep them).
         """
-        raw = self._checked(action)
+        raw = np.asarray(action)
+        if raw.dtype.kind not in "fiu" or raw.shape not in self._action_shapes:
+            raise self._refusal(raw)
+        # float16, float32, integers: one kernel; a lone env's (4,) as (1, 4)
+        raw = raw.astype(np.float64, copy=False).reshape(self._action_shape)
         if active is None:
             active = self._all
         bad = take_action(
@@ -290,7 +299,8 @@ class TaskEngine:
         )
         if bad >= 0:
             raise ValueError(f"action of env {bad} is not finite: {raw[bad]}")
-        self._motors.strike(self.steps, active)
+        for motors in self._motors:
+            motors.strike(self.steps, active)
         self._physics.fly(self.rotor_cmd)
         self._advance_goal(self, active)
         self.task.evaluate(self._batch)
@@ -299,21 +309,12 @@ class TaskEngine:
         self.recorded = close_step(self._end)
         return self.reward, self.terminated, self.truncated
 
-    def _checked(self, action: ArrayLike) -> NDArray[np.float64]:
-        """``action`` as (N, 4) float64 (a view where it is one); ValueError where it
-        holds no real numbers or has the wrong shape."""
-        raw = np.asarray(action)
+    def _refusal(self, raw: NDArray) -> ValueError:
+        """Why an action cannot be taken: it holds no real numbers, or has another shape
+        than (N, 4) (or (4,) for one env)."""
         if raw.dtype.kind not in "fiu":  # float, signed or unsigned integer
-            raise ValueError(f"action must hold real numbers, got dtype {raw.dtype}")
-        raw = raw.astype(np.float64, copy=False)  # float16, float32, integers: one kernel
-        if raw.shape != self._action_shape:
-            if self.n == 1 and raw.shape == (L.N_ROTORS,):
-                raw = raw.reshape(self._action_shape)
-            else:
-                raise ValueError(
-                    f"action must have shape ({self.n}, {L.N_ROTORS}), got {raw.shape}"
-                )
-        return raw
+            return ValueError(f"action must hold real numbers, got dtype {raw.dtype}")
+        return ValueError(f"action must have shape ({self.n}, {L.N_ROTORS}), got {raw.shape}")
 
     def record(self, buffer: NDArray[np.float64]) -> None:
         """From the next step on, each step writes the recorded env's row into ``buffer``

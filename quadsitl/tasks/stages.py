@@ -14,14 +14,16 @@ step runs :meth:`Stage.step`):
 4. the hidden position (``observe_position=False``): the position columns read 0;
 5. the integral (``observe_integral``): its own three columns.
 
-Each stage writes the observation once, and a feature that is off is a stage that does
-nothing (:class:`Stage` itself). Rewards, distances and episode ends stay the truth's:
-what the stages change is what the policy sees.
+Each stage writes the observation once. A feature that is off is a stage that does
+nothing (:class:`Stage` itself, or the truth's sensors, or no delay), and :func:`acting`
+leaves such stages out when the engine is made. Rewards, distances and episode ends stay
+the truth's: what the stages change is what the policy sees.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -50,6 +52,18 @@ class Stage:
 
     def step(self) -> None:
         """A step's observation and reward, every env's."""
+
+
+def acting(*stages: Stage) -> tuple[Stage, ...]:
+    """The stages that do something, in order: one whose ``start``, ``reset`` and
+    ``step`` are all :class:`Stage`'s own does nothing, and is left out once, when the
+    engine is made (the step's loop then costs nothing for an option that is off)."""
+    hooks = ("start", "reset", "step")
+    return tuple(
+        stage
+        for stage in stages
+        if any(getattr(type(stage), hook) is not getattr(Stage, hook) for hook in hooks)
+    )
 
 
 class ProximityReward(Stage):
@@ -141,21 +155,20 @@ class Sensors(Truth):
 
 
 class Undelayed(Stage):
-    """No delay: the physics steps the whole control period under the step's commands,
-    and the observation is this step's."""
+    """No delay: the physics steps the whole control period under the step's commands
+    (:attr:`fly`), and the observation is this step's."""
 
     def __init__(self, fleet: FleetLike, substeps: int) -> None:
         self.fleet, self.substeps = fleet, substeps
+        # One control period of the physics, the commands given at its start: the
+        # fleet's own step (no call of ours in between, on the step's path).
+        self.fly: Callable[[NDArray[np.float64]], None] = partial(fleet.step, n_substeps=substeps)
 
     def draw(self, rows: Rows, rngs: Generators) -> None:
         """The new episodes of ``rows`` draw their delays (with the world they fly)."""
 
-    def fly(self, rotor_cmd: NDArray[np.float64]) -> None:
-        """One control period of the physics, ``rotor_cmd`` given at its start."""
-        self.fleet.step(rotor_cmd, n_substeps=self.substeps)
 
-
-class Delayed(Undelayed):
+class Delayed(Stage):
     """``delay``: the commands act and the observations arrive as the delay line has
     them (:mod:`quadsitl.perturbations.delay`); an observation taken inside a period
     is the sensors' (``sensing``)."""
@@ -168,7 +181,7 @@ class Delayed(Undelayed):
         steps: NDArray[np.int64],
         hover_speed: float,
     ) -> None:
-        super().__init__(sensing.fleet, line.substeps)
+        self.fleet, self.substeps = sensing.fleet, line.substeps
         self.line, self.sensing = line, sensing
         self.obs, self.steps, self.hover_speed = obs, steps, hover_speed
 
@@ -176,6 +189,8 @@ class Delayed(Undelayed):
         self.line.draw(rows, rngs)
 
     def fly(self, rotor_cmd: NDArray[np.float64]) -> None:
+        """One control period of the physics in the pieces the delay line hands out,
+        ``rotor_cmd`` given at its start; the observations it takes inside, kept."""
         line = self.line
         for command, count, taken in line.pieces(rotor_cmd, self.steps):
             self.fleet.step(command, n_substeps=count)
