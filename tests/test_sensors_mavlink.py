@@ -23,7 +23,8 @@ PRESSURE_AT_REST = float(E.isa_pressure(np.array([HOME.altitude]))[0]) / 100  # 
 
 
 def _collect(noise: float) -> dict[str, list]:
-    """40 HIGHRES_IMU, 20 SCALED_PRESSURE and 10 GPS_RAW_INT of a vehicle at rest."""
+    """40 HIGHRES_IMU, 20 SCALED_PRESSURE and 10 GPS_RAW_INT (from the first fix on) of a
+    vehicle at rest."""
     port = free_udp_port()
     process = subprocess.Popen(
         cli(
@@ -52,8 +53,15 @@ def _collect(noise: float) -> dict[str, list]:
             return all(len(got[kind]) >= count for kind, count in wanted.items())
 
         def file(msg) -> None:  # type: ignore[no-untyped-def]
-            if msg is not None and msg.get_type() in got:
-                got[msg.get_type()].append(msg)
+            if msg is None or msg.get_type() not in got:
+                return
+            kind = msg.get_type()
+            # A receiver has no fix until its first measurement comes through the
+            # delay line: GPS_RAW_INT says so (fix type 1, lat/lon 0). Collect from the
+            # first fix on; once there, the fix must hold at rest.
+            if kind == "GPS_RAW_INT" and not got[kind] and msg.fix_type < mav.GPS_FIX_TYPE_3D_FIX:
+                return
+            got[kind].append(msg)
 
         deadline = time.monotonic() + 60
         while not enough():
