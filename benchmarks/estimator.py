@@ -20,10 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadsitl import frames
+from quadsitl.flight_software import mission as M
+from quadsitl.flight_software.group import VehicleGroup
+from quadsitl.flight_software.vehicle import Vehicle
 from quadsitl.physics import layout as L
-from quadsitl.vehicle import mission as M
-from quadsitl.vehicle.group import VehicleGroup
-from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire.modes import Mode
 
 SETTLE = 30.0  # s on the ground before arming

@@ -31,9 +31,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import quadsitl  # noqa: F401  (registers the envs)
 from gcs_tools.relay import LossyRelay
-from quadsitl.client.fleet_client import FleetClient
-from quadsitl.client.motor_client import SimulatorError
 from quadsitl.envs.sim_process import SimProcess
+from quadsitl.lockstep_client.fleet_client import FleetClient
+from quadsitl.lockstep_client.motor_client import SimulatorError
 from quadsitl.physics import PAPER
 from quadsitl.wire.state import WireState
 

@@ -1,5 +1,5 @@
 """What a classical controller achieves where the robust policies are measured: the
-built-in cascaded PID controller (quadsitl/vehicle/controller.py, the simulator's own
+built-in cascaded PID controller (quadsitl/flight_software/controller.py, the simulator's own
 flight software) flying the hover and random waypoint tasks on the robustness ladder's
 rungs, its setpoint the task's goal.
 
@@ -30,9 +30,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks._common import pin_to_one_core
 from policies.config import STARTS
 from policies.ladder import LADDER
+from quadsitl.flight_software.controller import CascadedController, ControllerGains, Setpoint
 from quadsitl.physics import PAPER
 from quadsitl.registration import task_env_id
-from quadsitl.vehicle.controller import CascadedController, ControllerGains, Setpoint
 
 EPISODES = 100
 RATE_PERIOD = 0.01  # s: the controller's period (the physics step)

@@ -26,7 +26,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from gcs_tools.replay import convert
 from gcs_tools.tlog_reader import read_tlog
-from quadsitl.mavlink.tlog import TlogWriter
+from quadsitl.simulator.tlog import TlogWriter
 from quadsitl.viz.episode_writer import wait_for_recordings
 
 HOURS = 1.0

@@ -43,7 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import report
 
 from gcs_tools.demo import free_udp_port
-from quadsitl.client.motor_client import MotorClient, SimulatorError
+from quadsitl.lockstep_client.motor_client import MotorClient, SimulatorError
 from quadsitl.physics import get_airframe
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.signing import key_from_passphrase

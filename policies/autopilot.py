@@ -1,6 +1,6 @@
 """A trained policy as the simulator's autopilot (``quadsitl sim --autopilot CKPT``).
 
-It implements :class:`quadsitl.vehicle.controller.Autopilot`: given the vehicle state
+It implements :class:`quadsitl.flight_software.controller.Autopilot`: given the vehicle state
 and the navigator's setpoint (take-off, goto, mission legs), it builds the task
 observation and returns the policy's rotor commands, held for the policy's control
 period (0.05 s). A policy learned goals only so far away (:class:`TrainedRange`: hover
@@ -31,6 +31,7 @@ from policies.config import TrainConfig
 from policies.export.contract import layout_text, observation_size, trained_options
 from policies.export.runtimes import load_policy
 from policies.networks import DeterministicPolicy
+from quadsitl.flight_software.controller import CascadedController, Setpoint
 from quadsitl.frames import euler_from_quat, quat_from_axis_angle, quat_multiply, quat_rotate
 from quadsitl.physics import Airframe
 from quadsitl.physics import layout as L
@@ -38,7 +39,6 @@ from quadsitl.tasks import TASKS, TaskOptions
 from quadsitl.tasks import error_integral as EI
 from quadsitl.tasks import features as F
 from quadsitl.tasks.step_kernels import commanded_rotor_speed
-from quadsitl.vehicle.controller import CascadedController, Setpoint
 
 REANCHOR = 0.5  # the carrot steps on when the vehicle is this fraction of its reach from it
 SETTLE = 1.0  # s: ... or when the vehicle has come no nearer it (by 1 cm) for this long

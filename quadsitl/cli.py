@@ -2,8 +2,8 @@
 dispatch from a parsed command to what runs it.
 
 The small subcommands' options (``demo``, ``fly``, ``replay``) are here; ``sim``'s are in
-:mod:`quadsitl.commands.sim_options` (read by :mod:`quadsitl.commands.sim_setup`), the
-shared ones in :mod:`quadsitl.commands.options`, and the training commands' in
+:mod:`quadsitl.command_line.sim_options` (read by :mod:`quadsitl.command_line.sim_setup`), the
+shared ones in :mod:`quadsitl.command_line.options`, and the training commands' in
 :mod:`policies.cli` (run by :mod:`policies.commands`). Options are parsed there and
 nowhere else.
 """
@@ -16,15 +16,15 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from quadsitl import __version__
-from quadsitl.commands.options import (
+from quadsitl.command_line.options import (
     CommandParser,
     add_signing_options,
     add_weather_options,
     parse_weather,
     signing_key,
 )
-from quadsitl.commands.sim_options import add_sim_parser
-from quadsitl.commands.sim_setup import flight_stack_config, sim_config
+from quadsitl.command_line.sim_options import add_sim_parser
+from quadsitl.command_line.sim_setup import flight_stack_config, sim_config
 
 
 def _build_parser() -> argparse.ArgumentParser:
@@ -230,7 +230,7 @@ def _main(argv: Sequence[str] | None = None) -> int:
         except (ValueError, OSError) as error:
             parser.exit(2, f"quadsitl sim: error: {error}\n")
     if args.command == "sim":
-        from quadsitl.mavlink.runner import run_simulator
+        from quadsitl.simulator.runner import run_simulator
 
         try:
             make_autopilot, make_view = _sim_collaborators(args)

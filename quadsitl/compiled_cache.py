@@ -27,7 +27,13 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parent
 # Where compiled code and everything it imports live (tests/test_kernel_cache.py checks
 # that this covers every module the compiled functions import, directly or not).
-COMPILED_SOURCES = ("physics", "tasks", "vehicle/cascade.py", "frames.py", "registration.py")
+COMPILED_SOURCES = (
+    "physics",
+    "tasks",
+    "flight_software/cascade.py",
+    "frames.py",
+    "registration.py",
+)
 STAMP = "compiled_sources.sha256"
 
 

@@ -4,7 +4,7 @@
 and the first test start in about two seconds instead of spending half a minute
 compiling (each kernel is compiled once per source version and then loaded from
 ``__pycache__``). Running it again costs only the loading. It compiles what a simulator
-loads before its clock starts (:func:`quadsitl.mavlink.runner.compile_for_sim`), a fleet
+loads before its clock starts (:func:`quadsitl.simulator.runner.compile_for_sim`), a fleet
 of one stepped with a (4,) command, commands given as strided views, and what the envs
 use: every task's single and vector env, in still air and in wind.
 """
@@ -24,10 +24,10 @@ def main() -> int:
     import gymnasium as gym
 
     import quadsitl  # noqa: F401  (registers the envs)
-    from quadsitl.mavlink.runner import compile_for_sim
     from quadsitl.physics import Fleet
     from quadsitl.physics.wind import Wind
     from quadsitl.registration import task_env_spec
+    from quadsitl.simulator.runner import compile_for_sim
     from quadsitl.tasks import TASKS
 
     def fleets_of_one() -> None:

@@ -21,9 +21,9 @@ from gymnasium.vector import AutoresetMode
 
 from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
-from quadsitl.client.motor_client import MotorClient, SimulatorError
 from quadsitl.envs.mavlink_backend import START_LIMIT, START_POLL
 from quadsitl.envs.sim_process import UDP_TABLES, udp_port_bound
+from quadsitl.lockstep_client.motor_client import MotorClient, SimulatorError
 
 # The signing timestamps that simulators keep across restarts go to this session's own
 # folder (inherited by every simulator process), never to the user's state folder.

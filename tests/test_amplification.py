@@ -13,8 +13,8 @@ import pytest
 from pymavlink import mavutil
 
 from gcs_tools.demo import free_udp_port
-from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.links import PEER_TIMEOUT, Link
+from quadsitl.simulator.links import PEER_TIMEOUT, Link
+from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.signing import sign_outgoing
 from tests.conftest import cli, wait_until_listening
 

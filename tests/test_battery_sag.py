@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from quadsitl.flight_software.battery import Battery, ocv_shape
+from quadsitl.flight_software.vehicle import Vehicle
 from quadsitl.physics import layout as L
-from quadsitl.vehicle.battery import Battery, ocv_shape
-from quadsitl.vehicle.vehicle import Vehicle
 
 
 def test_voltage_under_a_constant_current_is_the_closed_form():

@@ -7,16 +7,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from quadsitl.frames import quat_from_euler
-from quadsitl.physics import PAPER
-from quadsitl.physics import layout as L
-from quadsitl.physics.fleet import initial_state
-from quadsitl.vehicle.controller import (
+from quadsitl.flight_software.controller import (
     CascadedController,
     ControllerGains,
     Setpoint,
     allocation_matrix,
 )
+from quadsitl.frames import quat_from_euler
+from quadsitl.physics import PAPER
+from quadsitl.physics import layout as L
+from quadsitl.physics.fleet import initial_state
 
 DT = 0.004
 

@@ -11,8 +11,8 @@ from collections import Counter
 import pytest
 from pymavlink.dialects.v20 import common as mav
 
-from quadsitl.mavlink import degrade as D
-from quadsitl.mavlink import telemetry as T
+from quadsitl.simulator import degrade as D
+from quadsitl.simulator import telemetry as T
 from tests.conftest import cli, wait_until_listening
 
 

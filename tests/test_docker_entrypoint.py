@@ -11,7 +11,7 @@ from pathlib import Path
 
 from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
-from quadsitl.client.motor_client import MotorClient
+from quadsitl.lockstep_client.motor_client import MotorClient
 from tests.conftest import wait_until_listening
 
 ENTRYPOINT = Path(__file__).resolve().parents[1] / "docker" / "entrypoint.sh"

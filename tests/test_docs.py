@@ -297,7 +297,7 @@ def test_rotor_speeds_quoted_in_the_docs_are_the_papers_airframe():
 
 
 def test_parameter_table_of_mavlink_md_is_the_codes():
-    from quadsitl.vehicle.params import PARAMETERS
+    from quadsitl.flight_software.params import PARAMETERS
 
     doc = ROOT / "docs" / "mavlink.md"
     specs = {spec.name: spec for spec in PARAMETERS}
@@ -360,7 +360,7 @@ def _number(text: str) -> float | None:
 
 
 def test_telemetry_rates_of_mavlink_md_are_the_codes():
-    from quadsitl.mavlink.telemetry import DEFAULT_RATES, mav
+    from quadsitl.simulator.telemetry import DEFAULT_RATES, mav
 
     doc = ROOT / "docs" / "mavlink.md"
     text = doc.read_text()

@@ -129,8 +129,8 @@ def test_an_env_made_in_a_worker_thread_keeps_its_simulator():
 def test_mavlink_vector_env_recovers_after_a_simulator_dies():
     import numpy as np
 
-    from quadsitl.client.motor_client import SimulatorError
     from quadsitl.envs.parallel import mavlink_vector_env
+    from quadsitl.lockstep_client.motor_client import SimulatorError
 
     envs = mavlink_vector_env("QuadSITL/Hover-v0", 2, timeout=1.0)
     try:

@@ -18,12 +18,12 @@ from policies.export.contract import observation_size
 from policies.export.runtimes import load_policy
 from policies.export.writer import export
 from policies.networks import ActorCritic
+from quadsitl.flight_software.controller import Setpoint
 from quadsitl.physics import PAPER
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS, TaskOptions
 from quadsitl.tasks import error_integral as EI
 from quadsitl.tasks import features as F
-from quadsitl.vehicle.controller import Setpoint
 from tests.conftest import vector_env
 
 PERIOD = TaskOptions().control_period
@@ -163,7 +163,7 @@ def test_robust_hover_autopilot_takes_off_and_holds_in_a_steady_wind_the_still_a
     steady 6 m/s wind (SIM_WIND_SPD): the still-air policy is held downwind and low
     (its carrot moves on as it climbs, so it gets near, not there); the robust one,
     whose integral the autopilot keeps, climbs and holds the setpoint."""
-    from quadsitl.vehicle.vehicle import Vehicle
+    from quadsitl.flight_software.vehicle import Vehicle
 
     torch.set_num_threads(1)
     setpoint = np.array([0.0, 0.0, 1.0 + PAPER.gear_height])

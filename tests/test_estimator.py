@@ -15,13 +15,13 @@ from benchmarks.estimator import fly_mission
 from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
 from quadsitl import frames
-from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.snapshot import Snapshot
-from quadsitl.mavlink.telemetry_pose import build_odometry
+from quadsitl.flight_software.group import VehicleGroup
+from quadsitl.flight_software.params import ParamError
+from quadsitl.flight_software.vehicle import Vehicle
 from quadsitl.physics import layout as L
-from quadsitl.vehicle.group import VehicleGroup
-from quadsitl.vehicle.params import ParamError
-from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.simulator.snapshot import Snapshot
+from quadsitl.simulator.telemetry_pose import build_odometry
+from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.state import WireState
 from tests.conftest import cli, wait_until_listening
 

@@ -225,7 +225,7 @@ def test_eval_gives_the_checkpoints_success_rate_for_its_exports(tmp_path, capsy
 @pytest.mark.parametrize("form", ["onnx", "c"])
 def test_exported_waypoint_policy_flies_take_off_and_goto_as_the_checkpoint_does(form, tmp_path):
     from policies.autopilot import PolicyAutopilot
-    from quadsitl.vehicle.vehicle import Vehicle
+    from quadsitl.flight_software.vehicle import Vehicle
 
     torch.set_num_threads(1)
     source = CHECKPOINTS / "random_waypoint.pt"

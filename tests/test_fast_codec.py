@@ -9,9 +9,9 @@ import string
 import numpy as np
 import pytest
 
-from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics import layout as L
 from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.state import WireState
 
 INT_RANGES = {

@@ -230,7 +230,7 @@ def test_inject_failure_over_udp_turns_the_gps_off_and_sticks_the_barometer():
 def test_fail_motor_fits_a_weak_motor_from_power_on_and_a_reboot_keeps_it():
     """``--fail-motor 3:0.8`` (SimConfig.motor_faults): the vehicle's physics has the weak
     motor from power-on and after a reboot; an injected failure does not outlive one."""
-    from quadsitl.mavlink.runner import SimConfig, Simulator
+    from quadsitl.simulator.runner import SimConfig, Simulator
 
     sim = Simulator(
         SimConfig(

@@ -12,10 +12,10 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import quadsitl  # noqa: F401  (registers the ids)
+from quadsitl.flight_software.controller import CascadedController, Setpoint
 from quadsitl.physics import PAPER
 from quadsitl.physics import layout as L
 from quadsitl.tasks import figure_eight as FE
-from quadsitl.vehicle.controller import CascadedController, Setpoint
 
 ENV_ID = "QuadSITL/FigureEight-v0"
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")

@@ -9,12 +9,12 @@ import math
 import numpy as np
 import pytest
 
-from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.telemetry_status import mission_state
-from quadsitl.vehicle import mission as M
-from quadsitl.vehicle.params import ParamError
-from quadsitl.vehicle.results import Outcome
-from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.flight_software import mission as M
+from quadsitl.flight_software.params import ParamError
+from quadsitl.flight_software.results import Outcome
+from quadsitl.flight_software.vehicle import Vehicle
+from quadsitl.simulator.telemetry_status import mission_state
+from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.modes import Mode
 from tests.test_vehicle import _fly, _item
 

@@ -17,7 +17,7 @@ from pymavlink import mavutil
 
 import quadsitl
 from gcs_tools.demo import free_udp_port
-from quadsitl.mavlink import mavlink as mav
+from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.param_values import decode_value, encode_raw
 from tests.conftest import cli, wait_until_listening
 

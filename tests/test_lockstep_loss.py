@@ -11,11 +11,11 @@ import pytest
 
 import quadsitl  # noqa: F401  (registers the envs)
 from gcs_tools.relay import LossyRelay
-from quadsitl.client.fleet_client import FleetClient
-from quadsitl.client.motor_client import MotorClient, SimulatorError
 from quadsitl.envs.sim_process import SimProcess
-from quadsitl.mavlink import mavlink as mav
+from quadsitl.lockstep_client.fleet_client import FleetClient
+from quadsitl.lockstep_client.motor_client import MotorClient, SimulatorError
 from quadsitl.physics import PAPER, Fleet
+from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.lockstep import RESET_STATE
 from quadsitl.wire.state import WireState
 from tests.conftest import OBS_TOLERANCE, MotorSim, fly_both

@@ -16,11 +16,11 @@ import pytest
 from pymavlink import mavutil
 
 import quadsitl  # noqa: F401  (registers the envs)
-from quadsitl.client.fleet_client import FleetClient
-from quadsitl.client.motor_client import SimulatorError
 from quadsitl.envs.sim_process import SimProcess
-from quadsitl.mavlink.ownership import Ownership
-from quadsitl.mavlink.runner import SimConfig
+from quadsitl.lockstep_client.fleet_client import FleetClient
+from quadsitl.lockstep_client.motor_client import SimulatorError
+from quadsitl.simulator.ownership import Ownership
+from quadsitl.simulator.runner import SimConfig
 from quadsitl.wire.lockstep import OWNER_SILENCE, RESET_STATE, STAGE_MOTION
 from tests.conftest import (
     OBS_TOLERANCE,

@@ -1,6 +1,6 @@
 """One lockstep path: a fleet's round (SET_ACTUATOR_CONTROL_TARGET) and a lone vehicle's
 HIL_ACTUATOR_CONTROLS (a round of one) go through the same rules of the one motor path
-(:class:`~quadsitl.mavlink.motor_path.MotorPath`), in process: pending commands, the
+(:class:`~quadsitl.simulator.motor_path.MotorPath`), in process: pending commands, the
 repeat rule, the lockstep clock and the answer."""
 
 from __future__ import annotations
@@ -10,12 +10,12 @@ import time
 import numpy as np
 import pytest
 
-from quadsitl.mavlink.links import Link
-from quadsitl.mavlink.motor_path import LOCKSTEP_IDLE, MotorPath
-from quadsitl.mavlink.motor_slot import MotorSlot
+from quadsitl.flight_software.group import VehicleGroup
 from quadsitl.physics import get_airframe
 from quadsitl.physics import layout as L
-from quadsitl.vehicle.group import VehicleGroup
+from quadsitl.simulator.links import Link
+from quadsitl.simulator.motor_path import LOCKSTEP_IDLE, MotorPath
+from quadsitl.simulator.motor_slot import MotorSlot
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.answer import AnswerReader, decode_answer
 from quadsitl.wire.dialect import mavlink as mav

@@ -16,10 +16,10 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import quadsitl  # noqa: F401  (registers the envs)
-from quadsitl.client.motor_client import SimulatorError
 from quadsitl.envs.parallel import mavlink_vector_env
-from quadsitl.mavlink import mavlink
+from quadsitl.lockstep_client.motor_client import SimulatorError
 from quadsitl.registration import ENV_IDS
+from quadsitl.wire.dialect import mavlink
 from tests.conftest import OBS_TOLERANCE, REWARD_TOLERANCE, fly_both
 
 

@@ -12,7 +12,7 @@ from pymavlink.dialects.v10 import common as mavlink1
 from pymavlink.dialects.v20 import common as mavlink2
 
 from gcs_tools.client import VehicleClient
-from quadsitl.mavlink import mavlink as mav
+from quadsitl.wire.dialect import mavlink as mav
 from tests.conftest import start_sim
 
 HOLD_SECONDS = 2.0  # s of simulated time the height is watched after the attack

@@ -11,7 +11,7 @@ from pymavlink import mavutil
 
 from gcs_tools.client import ClientError, Waypoint, mav
 from gcs_tools.scripted_flight import fly_mission
-from quadsitl.vehicle.params import PARAMETERS
+from quadsitl.flight_software.params import PARAMETERS
 
 
 def _hold_position(client, seconds: float) -> np.ndarray:

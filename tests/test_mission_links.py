@@ -21,8 +21,8 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil
 
 from gcs_tools.demo import free_udp_port
-from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.links import Link
+from quadsitl.simulator.links import Link
+from quadsitl.wire.dialect import mavlink as mav
 from tests.conftest import cli, wait_until_listening
 from tests.test_ground_station_wire import _item, _stop
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from pymavlink import mavutil
 
-from quadsitl.client.fleet_client import FleetClient
-from quadsitl.client.motor_client import MotorClient, SimulatorError
+from quadsitl.lockstep_client.fleet_client import FleetClient
+from quadsitl.lockstep_client.motor_client import MotorClient, SimulatorError
 from quadsitl.physics import Fleet, get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.wire.state import WireState

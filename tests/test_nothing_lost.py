@@ -18,9 +18,9 @@ from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
 from gcs_tools.scripted_flight import Waypoint, mission_items
 from policies import checkpoint
-from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.runner import SimConfig, Simulator
-from quadsitl.mavlink.tlog import TlogWriter
+from quadsitl.simulator.runner import SimConfig, Simulator
+from quadsitl.simulator.tlog import TlogWriter
+from quadsitl.wire.dialect import mavlink as mav
 from tests.conftest import cli, interrupt, refused_here, wait_until_listening
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -306,7 +306,7 @@ def test_training_through_the_wire_flies_the_preset_envs_as_fleets():
 
 def test_waypoint_policy_flies_take_off_and_goto_as_autopilot():
     from policies.autopilot import PolicyAutopilot
-    from quadsitl.vehicle.vehicle import Vehicle
+    from quadsitl.flight_software.vehicle import Vehicle
 
     torch.set_num_threads(1)
     policy = PolicyAutopilot.from_checkpoint(CHECKPOINTS / "random_waypoint.pt", PAPER)
@@ -324,8 +324,8 @@ def test_waypoint_policy_flies_take_off_and_goto_as_autopilot():
 def test_waypoint_policy_flies_a_whole_mission_as_autopilot():
     from gcs_tools.scripted_flight import DEFAULT_WAYPOINTS
     from policies.autopilot import PolicyAutopilot
-    from quadsitl.vehicle import mission as M
-    from quadsitl.vehicle.vehicle import Vehicle
+    from quadsitl.flight_software import mission as M
+    from quadsitl.flight_software.vehicle import Vehicle
     from quadsitl.wire.modes import Mode
 
     torch.set_num_threads(1)

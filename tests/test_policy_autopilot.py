@@ -15,10 +15,10 @@ import torch
 from policies import checkpoint
 from policies.autopilot import PolicyAutopilot, carrot, trained_range
 from policies.config import TrainConfig
+from quadsitl.flight_software.controller import Setpoint
 from quadsitl.physics import PAPER
 from quadsitl.physics import layout as L
 from quadsitl.tasks import features as F
-from quadsitl.vehicle.controller import Setpoint
 from quadsitl.wire.addresses import free_udp_port
 from tests.conftest import cli, run_cli, wait_until_listening
 

@@ -28,11 +28,11 @@ from quadsitl.bridges.px4_hil import (
     HilPhysics,
 )
 from quadsitl.geo import Home
-from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import AIRFRAMES, get_airframe
 from quadsitl.physics.fleet import Fleet
 from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.dialect import mavlink as mav
 
 
 def actuators(controls: list[float], lockstep: bool = True, armed: bool = True) -> FC.Frame:

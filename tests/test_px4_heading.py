@@ -20,9 +20,9 @@ import numpy as np
 from quadsitl.bridges.fake_px4 import HilSensor
 from quadsitl.bridges.px4_hil import FIELDS_MAG, ROUND_US, HilPhysics
 from quadsitl.geo import Home
-from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics.fleet import Fleet
 from quadsitl.physics.sensors import environment as E
+from quadsitl.wire.dialect import mavlink as mav
 from tests.test_px4_bridge import actuators, received
 
 VEHICLES = 8  # independent sensor draws (instance i: seed i)

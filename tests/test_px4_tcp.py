@@ -19,11 +19,11 @@ from quadsitl.bridges.fake_px4 import FakePx4, HilSensor, Px4HoverController, pr
 from quadsitl.bridges.px4_hil import LOCKSTEP_FLAG, ROUND_US, HilPhysics
 from quadsitl.bridges.px4_tcp import Px4Config, Px4TcpServer, _banner
 from quadsitl.geo import Home
-from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics.airframe import get_airframe
 from quadsitl.physics.fleet import Fleet
 from quadsitl.physics.wind import Gust, Wind
 from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.dialect import mavlink as mav
 from tests.conftest import refused_here
 from tests.test_ardupilot_udp import START_TIMEOUT, Sim
 

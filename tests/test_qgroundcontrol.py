@@ -22,11 +22,11 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil
 
 from gcs_tools.demo import free_udp_port
-from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink.identity import AVAILABLE_MODES
-from quadsitl.mavlink.links import Link
-from quadsitl.mavlink.server import MavlinkServer
-from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.flight_software.vehicle import Vehicle
+from quadsitl.simulator.identity import AVAILABLE_MODES
+from quadsitl.simulator.links import Link
+from quadsitl.simulator.server import MavlinkServer
+from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.modes import Mode
 from quadsitl.wire.param_values import decode_value, encode_raw
 from tests.conftest import wait_until_listening

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import quadsitl  # noqa: F401  (registers the envs)
-from quadsitl.client.motor_client import SimulatorError
+from quadsitl.lockstep_client.motor_client import SimulatorError
 from tests.conftest import OBS_TOLERANCE, cli, fly_both
 
 ray = pytest.importorskip("ray")

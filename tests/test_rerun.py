@@ -20,7 +20,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from gcs_tools.client import VehicleClient
 from gcs_tools.replay import convert, main
 from gcs_tools.tlog_reader import ReadStats, read_tlog
-from quadsitl.mavlink.tlog import TlogWriter
+from quadsitl.simulator.tlog import TlogWriter
 from quadsitl.viz.scene import WIND_ARROW_SCALE
 from quadsitl.wire.addresses import free_udp_port
 from tests.conftest import cli, run_cli, start_sim, wait_until_listening
@@ -543,7 +543,7 @@ def test_sim_view_logs_one_message_a_pass_in_the_time_a_step_leaves(tmp_path):
     view logs one message per pass of the loop, only in a pass with time to spare before
     the next step, unless half the time to the next snapshot has gone (faster than real
     time no pass has that much)."""
-    from quadsitl.mavlink.runner import SimConfig, Simulator
+    from quadsitl.simulator.runner import SimConfig, Simulator
     from quadsitl.viz import sim_view
 
     sim = Simulator(SimConfig(gcs_url="udpin:127.0.0.1:0", api_url=None, log_dir=None))

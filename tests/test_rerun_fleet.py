@@ -14,7 +14,7 @@ import rerun.chunk as rrc
 
 from gcs_tools.client import VehicleClient
 from gcs_tools.replay import convert
-from quadsitl.vehicle.group import grid_offsets
+from quadsitl.flight_software.group import grid_offsets
 from quadsitl.wire.addresses import free_udp_port
 from tests.conftest import cli, wait_until_listening
 from tests.test_rerun import check_attitude, rows_per_entity, scalars, views
@@ -215,7 +215,7 @@ def test_replay_of_one_system_of_the_fleet_log_is_a_single_vehicle(fleet_flight,
     """The single-vehicle layout and paths are kept for a log of one vehicle: the fleet's
     log cut down to system 2 (and the ground station) replays as one vehicle."""
     from gcs_tools.tlog_reader import ReadStats, read_tlog
-    from quadsitl.mavlink.tlog import TlogWriter
+    from quadsitl.simulator.tlog import TlogWriter
 
     _, log = fleet_flight
     single = tmp_path / "sys2.tlog"

@@ -163,11 +163,11 @@ def test_every_form_of_import_is_seen():
         "from quadsitl.viz import sim_view": "quadsitl.viz.sim_view",
         "from .. import viz": "quadsitl.viz",
         "from ..viz.sim_view import SimView": "quadsitl.viz.sim_view",
-        "def f():\n    from . import server": "quadsitl.mavlink.server",
+        "def f():\n    from . import server": "quadsitl.simulator.server",
         "if TYPE_CHECKING:\n    from quadsitl.viz import sim_view": "quadsitl.viz.sim_view",
     }
     for source, module in forms.items():
-        assert module in _imported(source, "quadsitl.mavlink"), source
+        assert module in _imported(source, "quadsitl.simulator"), source
 
 
 def test_importing_a_module_runs_the_packages_above_it():
@@ -249,11 +249,15 @@ def _runs(code: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_the_clients_and_the_ground_station_import_without_the_server_or_the_flight_software():
-    modules = [n for n, p in _modules().items() if p.startswith(("quadsitl/client/", "gcs_tools/"))]
+    modules = [
+        n
+        for n, p in _modules().items()
+        if p.startswith(("quadsitl/lockstep_client/", "gcs_tools/"))
+    ]
     code = (
         "import sys\n"
-        "sys.modules['quadsitl.mavlink'] = None  # any import of them now fails\n"
-        "sys.modules['quadsitl.vehicle'] = None\n"
+        "sys.modules['quadsitl.simulator'] = None  # any import of them now fails\n"
+        "sys.modules['quadsitl.flight_software'] = None\n"
         f"for name in {sorted(modules)!r}:\n"
         "    __import__(name)\n"
     )

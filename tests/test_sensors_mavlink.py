@@ -14,8 +14,8 @@ import pytest
 from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
 from quadsitl.geo import Home
-from quadsitl.mavlink import mavlink as mav
 from quadsitl.physics.sensors import environment as E
+from quadsitl.wire.dialect import mavlink as mav
 from tests.conftest import cli, wait_until_listening
 
 HOME = Home()

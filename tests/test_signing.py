@@ -7,8 +7,8 @@ import time
 import pytest
 from pymavlink import mavutil
 
-from quadsitl.client.motor_client import MotorClient, SimulatorError
-from quadsitl.mavlink.signing import SignatureCheck
+from quadsitl.lockstep_client.motor_client import MotorClient, SimulatorError
+from quadsitl.simulator.signing import SignatureCheck
 from quadsitl.wire.signing import (
     keep_signing_clock,
     key_from_file,
@@ -173,7 +173,7 @@ def test_a_forged_frame_does_not_lock_out_the_real_sender():
 
 def test_signing_timestamps_follow_the_wall_clock():
     """After a minute of running, a new station must still accept the vehicle's stream."""
-    from quadsitl.mavlink.links import Link
+    from quadsitl.simulator.links import Link
     from quadsitl.wire.signing import now_timestamp
 
     key = key_from_passphrase(PASSPHRASE)

@@ -18,7 +18,7 @@ import pytest
 import quadsitl  # noqa: F401  (registers the envs)
 from quadsitl.envs import mavlink_backend
 from quadsitl.envs.sim_process import SimProcess, udp_port_bound
-from quadsitl.mavlink import mavlink
+from quadsitl.wire.dialect import mavlink
 from tests import conftest
 from tests.conftest import cli, free_udp_port, socket_addresses, wait_until_listening
 

@@ -1,16 +1,16 @@
 """Stepping is written once: a lone vehicle is a batch of one, stepped as a group's
-vehicles are (:mod:`quadsitl.vehicle.stepping`)."""
+vehicles are (:mod:`quadsitl.flight_software.stepping`)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from quadsitl.mavlink.motor_path import MotorPath
-from quadsitl.mavlink.motor_slot import MotorSlot
+from quadsitl.flight_software.group import VehicleGroup
+from quadsitl.flight_software.vehicle import Vehicle
 from quadsitl.physics import layout as L
-from quadsitl.vehicle.group import VehicleGroup
-from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.simulator.motor_path import MotorPath
+from quadsitl.simulator.motor_slot import MotorSlot
 from quadsitl.wire.lockstep import ARMED_FLAG, LOCKSTEP_FLAG
 
 GRAVITY = 9.81

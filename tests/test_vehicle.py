@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from gcs_tools.scripted_flight import _segment_distance
+from quadsitl.flight_software import mission as M
+from quadsitl.flight_software.controller import ControllerGains, Setpoint
+from quadsitl.flight_software.results import Outcome
+from quadsitl.flight_software.vehicle import Vehicle
 from quadsitl.geo import Home
-from quadsitl.vehicle import mission as M
-from quadsitl.vehicle.controller import ControllerGains, Setpoint
-from quadsitl.vehicle.results import Outcome
-from quadsitl.vehicle.vehicle import Vehicle
 from quadsitl.wire.modes import Mode
 
 

@@ -13,17 +13,17 @@ import pytest
 
 import quadsitl  # noqa: F401  (registers the envs)
 from quadsitl.cli import _build_parser
-from quadsitl.commands.sim_setup import flight_stack_config, sim_config
-from quadsitl.mavlink import mavlink as mav
-from quadsitl.mavlink import telemetry as T
-from quadsitl.mavlink.snapshot import Snapshot
-from quadsitl.mavlink.telemetry_status import build_heartbeat
+from quadsitl.command_line.sim_setup import flight_stack_config, sim_config
+from quadsitl.flight_software.params import SPECS
+from quadsitl.flight_software.vehicle import Vehicle
 from quadsitl.perturbations.randomization import WindDraw
 from quadsitl.physics import layout as L
 from quadsitl.physics.wind import MAX_GUST_SPEED, MAX_SIGMA_W, MAX_WIND_SPEED, Gust, Wind
-from quadsitl.vehicle.params import SPECS
-from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.simulator import telemetry as T
+from quadsitl.simulator.snapshot import Snapshot
+from quadsitl.simulator.telemetry_status import build_heartbeat
 from quadsitl.wire import fast_codec as FC
+from quadsitl.wire.dialect import mavlink as mav
 from tests.conftest import refused_here
 
 # --- the limits -------------------------------------------------------------------------

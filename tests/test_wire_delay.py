@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import quadsitl  # noqa: F401  (registers the envs)
-from quadsitl.client.fleet_client import FleetClient
-from quadsitl.client.motor_client import MotorClient, SimulatorError
 from quadsitl.envs.sim_process import SimProcess
+from quadsitl.lockstep_client.fleet_client import FleetClient
+from quadsitl.lockstep_client.motor_client import MotorClient, SimulatorError
 from quadsitl.physics import get_airframe
 from quadsitl.physics.fleet import initial_state
 from quadsitl.wire.state import WireState

@@ -15,12 +15,12 @@ import time
 import warnings
 from typing import Any
 
-from quadsitl.client.fleet_client import FleetClient
-from quadsitl.client.motor_client import SimulatorError
 from quadsitl.envs.memory import available_bytes
 from quadsitl.envs.ray_simulators import LOCAL, RaySimulator, join_ray, place_simulators
 from quadsitl.envs.remote_fleet import RemoteFleet
 from quadsitl.envs.sim_process import SimProcess
+from quadsitl.lockstep_client.fleet_client import FleetClient
+from quadsitl.lockstep_client.motor_client import SimulatorError
 from quadsitl.perturbations import faults as FT
 from quadsitl.perturbations.delay import DELAY_KINDS, Delay
 from quadsitl.perturbations.randomization import Randomization

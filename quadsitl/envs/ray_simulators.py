@@ -19,8 +19,8 @@ import os
 import socket
 from typing import Any
 
-from quadsitl.client.motor_client import SimulatorError
 from quadsitl.envs.sim_process import SimProcess
+from quadsitl.lockstep_client.motor_client import SimulatorError
 
 PLACE_TIMEOUT = 60.0  # s for Ray to place an actor and its simulator to start
 CALL_TIMEOUT = 5.0  # s for an actor to answer a question about its simulator

@@ -6,7 +6,7 @@ task code is the same for both backends: ``step`` sends one lockstep round to ev
 simulator process (the commands of all its vehicles together), then collects their
 answers (the simulators work in parallel); ``reset`` sends the reset commands of the
 vehicles to reset (docs/mavlink.md) and arms them. Lost datagrams are resent by the
-:class:`~quadsitl.client.fleet_client.FleetClient` of each process.
+:class:`~quadsitl.lockstep_client.fleet_client.FleetClient` of each process.
 
 Never out of step: after a :class:`SimulatorError` (a simulator stalled past the
 timeout, died, or answered for the wrong time) the simulators may have applied a
@@ -29,8 +29,8 @@ from gymnasium.error import ClosedEnvironmentError
 from numpy.typing import ArrayLike
 
 from quadsitl import frames
-from quadsitl.client.fleet_client import FleetClient
-from quadsitl.client.fleet_link import SimulatorError
+from quadsitl.lockstep_client.fleet_client import FleetClient
+from quadsitl.lockstep_client.fleet_link import SimulatorError
 from quadsitl.perturbations.randomization import AIRFRAME_COLUMNS
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe

@@ -9,12 +9,12 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.error import ClosedEnvironmentError
 
-from quadsitl.client.motor_client import SimulatorError
 from quadsitl.envs import docs, versions
 from quadsitl.envs.factory import build_engine
 from quadsitl.envs.mavlink_backend import (
     reset_envs,
 )
+from quadsitl.lockstep_client.motor_client import SimulatorError
 from quadsitl.tasks import TASKS, TaskEngine, get_task
 from quadsitl.viz import raster
 

@@ -21,13 +21,13 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from quadsitl.client.motor_client import SimulatorError
 from quadsitl.envs import versions
 from quadsitl.envs.factory import build_engine
 from quadsitl.envs.mavlink_backend import (
     reset_envs,
 )
 from quadsitl.envs.single import check_no_render, check_open, make_spaces
+from quadsitl.lockstep_client.motor_client import SimulatorError
 from quadsitl.registration import task_env_name, versioned_ids
 from quadsitl.tasks import get_task
 

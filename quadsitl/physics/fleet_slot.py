@@ -16,7 +16,7 @@ class FleetSlot(VehicleStates):
     """Vehicle ``index`` of a shared :class:`Fleet`, seen as a fleet of one.
 
     Its arrays are views of the shared fleet's rows, so whoever steps the shared fleet
-    (:class:`quadsitl.vehicle.group.VehicleGroup`, one batch for all) moves this vehicle;
+    (:class:`quadsitl.flight_software.group.VehicleGroup`, one batch for all) moves this vehicle;
     ``time`` is the shared clock, counted from this vehicle's own start (a reboot sets
     it back to 0 for this vehicle alone).
     """

@@ -24,11 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from quadsitl.mavlink import telemetry_pose as pose
-from quadsitl.mavlink import telemetry_sensors as sensors
-from quadsitl.mavlink import telemetry_status as status
-from quadsitl.mavlink.snapshot import Snapshot
-from quadsitl.vehicle.vehicle import Vehicle
+from quadsitl.flight_software.vehicle import Vehicle
+from quadsitl.simulator import telemetry_pose as pose
+from quadsitl.simulator import telemetry_sensors as sensors
+from quadsitl.simulator import telemetry_status as status
+from quadsitl.simulator.snapshot import Snapshot
 from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
 from quadsitl.viz.live import LiveLogger
 from quadsitl.viz.scene import LIVE_PANELS, SENSOR_PANELS, blueprint, framing

@@ -1,5 +1,5 @@
-"""The wire vocabulary both ends share: the simulator's server (:mod:`quadsitl.mavlink`)
-and the bridges on one end, the lockstep clients (:mod:`quadsitl.client`) and the
+"""The wire vocabulary both ends share: the simulator's server (:mod:`quadsitl.simulator`)
+and the bridges on one end, the lockstep clients (:mod:`quadsitl.lockstep_client`) and the
 ground station (``gcs_tools``) on the other.
 
 - :mod:`.dialect`: ``mavlink``, pymavlink's ``development`` dialect (``common`` plus

@@ -1,7 +1,7 @@
 """MAVLink 2 signing, what both ends of the wire do: keys (from a passphrase, 64 hex
 digits or a file) and the signing of what a pymavlink connection sends, its timestamp
 kept on the wall clock. The server's check of incoming frames is
-:mod:`quadsitl.mavlink.signing`.
+:mod:`quadsitl.simulator.signing`.
 
 Timestamps count 10 µs units since 2015-01-01 00:00 UTC (the MAVLink spec's).
 """

@@ -5,7 +5,7 @@ becomes the motor path's frames: position in local NED whose origin is the centr
 mass resting at home (the frame of LOCAL_POSITION_NED), attitude FRD -> NED, velocity in
 body FRD (ODOMETRY's child frame, as PX4 sends it), body rates FRD, rotor speeds rad/s.
 Both the simulator (encoding: telemetry and the motor path) and the lockstep clients
-(:mod:`quadsitl.client`, decoding) use this class, so the round trip is exact up to the
+(:mod:`quadsitl.lockstep_client`, decoding) use this class, so the round trip is exact up to the
 wire's float32 and every message agrees.
 """
 
