@@ -100,12 +100,25 @@ class HeadlessViewer:
 
         deadline = time.monotonic() + SETTLE
         while True:
-            png = self.client.take_screenshot()
+            png = self.take_screenshot(deadline)
             if toast_rows(Image.open(io.BytesIO(png))) < TOAST_ROWS:
                 return png
             if time.monotonic() > deadline:
                 raise RuntimeError(f"the viewer's notices were still shown after {SETTLE:g} s")
             time.sleep(0.25)
+
+    def take_screenshot(self, deadline: float | None = None) -> bytes:
+        """One frame drawn and saved as PNG. On a busy machine a software-rendered frame
+        can outlast the control connection's own wait ("transport error"): asked again
+        while the viewer lives, until ``deadline`` (monotonic s; SETTLE from now)."""
+        deadline = time.monotonic() + SETTLE if deadline is None else deadline
+        while True:
+            try:
+                return bytes(self.client.take_screenshot())
+            except ConnectionError:
+                if self.process.poll() is not None or time.monotonic() > deadline:
+                    raise
+                time.sleep(0.5)
 
     def screenshot(self, rrd: Path, png: Path) -> list[str]:
         """Open ``rrd``, wait until all of it has arrived (the cursor at the end of the
