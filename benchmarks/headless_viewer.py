@@ -79,13 +79,7 @@ class HeadlessViewer:
                 break
             except Exception as error:  # not listening yet
                 if self.process.poll() is not None:
-                    self.errors.seek(0)
-                    said = self.errors.read().strip()
-                    last = said.splitlines()[-1] if said else f"exit code {self.process.returncode}"
-                    raise SystemExit(
-                        f"images.py: the headless Rerun viewer did not start ({last}); "
-                        "without a GPU it needs Debian's mesa-vulkan-drivers"
-                    ) from None
+                    raise self._ended("did not start") from None
                 if time.monotonic() > deadline:
                     self.close()
                     message = f"images.py: the headless viewer did not answer: {error}"
@@ -116,9 +110,21 @@ class HeadlessViewer:
             try:
                 return bytes(self.client.take_screenshot())
             except ConnectionError:
-                if self.process.poll() is not None or time.monotonic() > deadline:
+                if self.process.poll() is not None:  # no Vulkan driver: it ends drawing
+                    raise self._ended("ended while drawing") from None
+                if time.monotonic() > deadline:
                     raise
                 time.sleep(0.5)
+
+    def _ended(self, what: str) -> SystemExit:
+        """The viewer process has ended: its last word, and what it needs."""
+        self.errors.seek(0)
+        said = self.errors.read().strip()
+        last = said.splitlines()[-1] if said else f"exit code {self.process.returncode}"
+        return SystemExit(
+            f"images.py: the headless Rerun viewer {what} ({last}); "
+            "without a GPU it needs Debian's mesa-vulkan-drivers"
+        )
 
     def screenshot(self, rrd: Path, png: Path) -> list[str]:
         """Open ``rrd``, wait until all of it has arrived (the cursor at the end of the
