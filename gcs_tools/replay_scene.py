@@ -75,7 +75,7 @@ class Columns:
         by_panel: dict[str, list[tuple[str, np.ndarray, np.ndarray]]] = {}
         starts, ends = [], []
         for (entity, kind), (times, values, _) in self.series.items():
-            stamps = np.asarray(times, dtype=np.float64)
+            stamps = np.asarray(times, dtype=np.float64) / 1e6  # s, as the layout's axes
             starts.append(stamps.min())
             ends.append(stamps.max())
             head, panel, *_ = [*entity.split("/"), ""]

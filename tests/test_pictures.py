@@ -66,7 +66,7 @@ def test_a_range_is_widened_to_labelled_ends():
 
 def test_the_legend_goes_where_it_hides_no_data():
     """A curve falling from the top left to the bottom right: the legend at the top
-    right; a band of data across the whole height: the range raised to make room."""
+    right; a band of data across the whole height: room made above or after it."""
     t = np.linspace(0.0, 10.0, 200)
     falling = fit([(t, np.exp(-t))], ["distance"], (350.0, 190.0))
     assert falling is not None and falling.corner == "RightTop"
@@ -75,8 +75,28 @@ def test_the_legend_goes_where_it_hides_no_data():
     assert crowded is not None
     low, high = crowded.y_range
     box = legend_size(["east", "north"], 350.0, 190.0)
-    points = np.column_stack([np.r_[t, t] / 10.0, (np.r_[noisy, -noisy] - low) / (high - low)])
+    end = crowded.time_end or 10.0  # room above the data, or after it
+    points = np.column_stack([np.r_[t, t] / end, (np.r_[noisy, -noisy] - low) / (high - low)])
     assert covered(crowded.corner, box, points) == 0
+
+
+def test_a_legend_too_tall_to_sit_above_the_data_sits_after_it():
+    """Four noisy wind series filling a short panel (the legend taller than the room
+    above any data could be): the time axis runs on past the data's end and the legend
+    stands there, hiding nothing."""
+    t = np.linspace(0.0, 30.0, 300)
+    rng = np.random.default_rng(1)
+    series = [(t, rng.uniform(-8, 8, t.size)) for _ in range(4)]
+    names = ["east", "north", "up", "speed"]
+    size = (330.0, 130.0)
+    fitted = fit(series, names, size)
+    assert fitted is not None and fitted.time_end is not None and fitted.time_end > 30.0
+    low, high = fitted.y_range
+    box = legend_size(names, *size)
+    times = np.concatenate([s[0] for s in series]) / fitted.time_end
+    values = (np.concatenate([s[1] for s in series]) - low) / (high - low)
+    assert covered(fitted.corner, box, np.column_stack([times, values])) == 0
+    assert fitted.time_end < 30.0 / 0.6  # the data keeps most of the width
 
 
 def test_a_replay_fits_each_plot_to_its_data(tmp_path):

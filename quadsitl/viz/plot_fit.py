@@ -6,8 +6,10 @@ and only where two labels are far enough apart on screen; a panel 80 px tall
 showing -8..8 m/s labels nothing but 0. So the range is widened to whole multiples of
 the finest power of ten whose labels fit (:func:`nice_range`): its ends, at least, are
 labelled. The legend sits in a corner of the plot, over the lines, and Rerun chooses
-none by itself: :func:`legend_corner` takes the corner where its box covers the fewest
-samples, and :func:`fit` makes room at the top where every corner is taken.
+none by itself: :func:`fit` takes the corner where its box covers no sample, and where
+every corner is taken makes room for it, above the data (a higher y range) or after it
+(a time axis that runs on past the data's end), whichever leaves the data more of the
+plot.
 
 Only a recording whose data is known when its layout is made uses this (a replay; an
 episode recording once it closes); a live view keeps Rerun's automatic ranges.
@@ -32,15 +34,19 @@ LEGEND_MARKER = 34.0  # px, the colour dot, its margins and the box's
 Corner = Literal["RightTop", "LeftTop", "RightBottom", "LeftBottom"]  # Rerun's names
 CORNERS: tuple[Corner, ...] = ("RightTop", "LeftTop", "RightBottom", "LeftBottom")
 EDGE = 0.04  # of the range beyond each labelled end: Rerun draws no label on the edge
-ROOM_AT_MOST = 0.6  # of a plot's height given up above the data for its legend
+ROOM_AT_MOST = 0.6  # of a plot's height (or width) given up beside the data for its legend
+MARGIN = 0.03  # of the plot, kept clear between the legend box and the data
 
 
 @dataclass(frozen=True)
 class PanelFit:
-    """A panel's y range (its ends labelled) and its legend's corner (Rerun's names)."""
+    """A panel's y range (its ends labelled), its legend's corner (Rerun's names) and,
+    where the legend's room is after the data, where its time axis ends (s on the
+    plot's timeline, as the data's times were given; None: at the data's end)."""
 
     y_range: tuple[float, float]
     corner: Corner
+    time_end: float | None = None
 
 
 def nice_range(low: float, high: float, height: float) -> tuple[float, float]:
@@ -85,7 +91,9 @@ def legend_size(names: Sequence[str], width: float, height: float) -> tuple[floa
     return min(1.0, box_width / width), min(1.0, box_height / height)
 
 
-def covered(corner: str, box: tuple[float, float], points: np.ndarray, margin: float = 0.03) -> int:
+def covered(
+    corner: str, box: tuple[float, float], points: np.ndarray, margin: float = MARGIN
+) -> int:
     """How many ``points`` ((K, 2): time and value as fractions of the plot, 0..1, y
     up) the legend box hides in ``corner``, with ``margin`` around it."""
     box_width, box_height = box[0] + margin, box[1] + margin
@@ -101,7 +109,7 @@ def fit(
     size: tuple[float, float],
     time_range: tuple[float, float] | None = None,
 ) -> PanelFit | None:
-    """The fit of a panel drawing ``series`` ((times, values) each) with a legend of
+    """The fit of a panel drawing ``series`` ((times s, values) each) with a legend of
     ``names`` on a plot of ``size`` (width, height) px, over ``time_range`` (None: the
     series' own); None where it has no finite value."""
     values = [np.asarray(v, np.float64) for _, v in series]
@@ -117,17 +125,38 @@ def fit(
     box = legend_size(names, width, height)
     shown = nice_range(float(finite.min()), float(finite.max()), height)
     corner = _least_hidden(box, _fractions(times, samples, (start, end), shown))
-    if corner[1] == 0 or box[1] > ROOM_AT_MOST:
+    if corner[1] == 0:
         return PanelFit(shown, corner[0])
-    # Every corner hides data: room above the data for the legend's height, where it is
-    # short enough to leave the data most of the plot and the labels still fit (else
-    # the corner that hides the least).
+    # Every corner hides data: room for the legend above the data (the y range raised
+    # by its height, where the labels still fit) or after it (the time axis run on by
+    # its width), whichever leaves the data more of the plot; neither where the legend
+    # would take more than ROOM_AT_MOST (then the corner that hides the least).
+    raised = _raised(finite, shown, box[1], height)
+    after = box[0] + MARGIN
+    kept_raised = 1.0 - box[1] if raised is not None else 0.0
+    kept_after = 1.0 - after if after <= ROOM_AT_MOST else 0.0
+    if raised is not None and kept_raised >= kept_after:
+        corner = _least_hidden(box, _fractions(times, samples, (start, end), raised))
+        return PanelFit(raised, corner[0])
+    if kept_after > 0.0:
+        time_end = start + (end - start) / (1.0 - after - 0.01)
+        return PanelFit(shown, "RightTop", time_end)
+    return PanelFit(shown, corner[0])
+
+
+def _raised(
+    finite: np.ndarray, shown: tuple[float, float], box_height: float, height: float
+) -> tuple[float, float] | None:
+    """``shown`` raised by a legend ``box_height`` tall (a fraction of the plot) above
+    the data; None where the legend is taller than ROOM_AT_MOST or the raised range's
+    labels would no longer fit."""
+    if box_height > ROOM_AT_MOST:
+        return None
     bottom, top, step = _labelled(float(finite.min()), float(finite.max()), height)
-    raised = (shown[0], shown[1] + (shown[1] - shown[0]) * box[1] / (1.0 - box[1]))
+    raised = (shown[0], shown[1] + (shown[1] - shown[0]) * box_height / (1.0 - box_height))
     if (raised[1] - raised[0]) / step > fitting(height) + 2 * EDGE * (top - bottom) / step:
-        return PanelFit(shown, corner[0])
-    corner = _least_hidden(box, _fractions(times, samples, (start, end), raised))
-    return PanelFit(raised, corner[0])
+        return None
+    return raised
 
 
 def _least_hidden(box: tuple[float, float], points: np.ndarray) -> tuple[Corner, int]:

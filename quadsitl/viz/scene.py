@@ -271,11 +271,23 @@ def shown_panels(panels: Any) -> list[str]:
 def time_series(
     origin: str, name: str, axis: Any, fit: PanelFit | None, **view: Any
 ) -> rrb.TimeSeriesView:
-    """A time-series view, with the y range and legend corner of ``fit`` if given."""
+    """A time-series view, with the y range and legend corner of ``fit`` if given (and
+    its time axis run on past the data, where the legend's room is there)."""
     if fit is not None:
         view.setdefault("axis_y", rrb.ScalarAxis(range=fit.y_range))
         view.setdefault("plot_legend", rrb.PlotLegend(corner=fit.corner))
+        if fit.time_end is not None:
+            axis = time_axis_until(fit.time_end)
     return rrb.TimeSeriesView(origin=origin, name=name, axis_x=axis, **view)
+
+
+def time_axis_until(end: float) -> rrb.TimeAxis:
+    """A plot's own time axis, from the recording's start to ``end`` s (past the data's
+    end: room for the legend)."""
+    view_range = rr.TimeRange(
+        rr.TimeRangeBoundary.infinite(), rr.TimeRangeBoundary.absolute(seconds=end)
+    )
+    return rrb.TimeAxis(link="Independent", view_range=view_range)
 
 
 def time_axis(whole_range: bool) -> rrb.TimeAxis | None:
