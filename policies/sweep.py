@@ -135,18 +135,51 @@ def run_sweep(
     target, where = ray_target(address)
     check_address(target)
     storage = (Path(runs) / "sweeps").resolve()
-    folder = storage / name
-    if resume and not folder.is_dir():
-        raise SweepError(f"nothing to resume: no sweep {name!r} in {storage}")
-    if not resume and folder.exists():
-        raise SweepError(f"sweep {name!r} exists in {storage}: resume it with --resume")
+    folder = _sweep_folder(storage, name, resume)
     if not resume and not search:
         check_new_runs(trials, runs)
     check_writable(storage, "the sweep")
 
     import ray
     from ray import tune
-    from ray.tune.schedulers import ASHAScheduler
+
+    _start_ray(target, where, cpus)
+    quiet = _TuneInterruptNoise()
+    for logger in _TUNE_LOGGERS:
+        logging.getLogger(logger).addFilter(quiet)
+    try:
+        runnable = tune.with_resources(trial, {"cpu": 1})
+        if resume:
+            tuner = tune.Tuner.restore(  # with its callback, kept in Tune's saved state
+                str(folder), runnable, resume_unfinished=True, resume_errored=True
+            )
+        else:
+            space = _param_space(grid, search, {**sweep_options, **fixed}, runs, folder)
+            tuner = _new_tuner(runnable, space, bool(search), samples, folder)
+        results = tuner.fit()
+    finally:
+        for logger in _TUNE_LOGGERS:
+            logging.getLogger(logger).removeFilter(quiet)
+        ray.shutdown()
+    return [
+        result_row(results[i].config, results[i].metrics, results[i].error)
+        for i in range(len(results))
+    ]
+
+
+def _sweep_folder(storage: Path, name: str, resume: bool) -> Path:
+    """The sweep's folder in ``storage``: an existing one to resume, else a new one's."""
+    folder = storage / name
+    if resume and not folder.is_dir():
+        raise SweepError(f"nothing to resume: no sweep {name!r} in {storage}")
+    if not resume and folder.exists():
+        raise SweepError(f"sweep {name!r} exists in {storage}: resume it with --resume")
+    return folder
+
+
+def _start_ray(target: str, where: str, cpus: int | None) -> None:
+    """Ray joined at ``target``, or a private one with ``cpus`` CPUs; says which on stderr."""
+    import ray
 
     private = target == LOCAL
     if private:
@@ -159,55 +192,54 @@ def run_sweep(
         log_to_driver=False,
         configure_logging=False,
     )
-    quiet = _TuneInterruptNoise()
-    for logger in _TUNE_LOGGERS:
-        logging.getLogger(logger).addFilter(quiet)
-    try:
-        runnable = tune.with_resources(trial, {"cpu": 1})
-        if resume:
-            tuner = tune.Tuner.restore(  # with its callback, kept in Tune's saved state
-                str(folder), runnable, resume_unfinished=True, resume_errored=True
-            )
-        else:
-            space: dict[str, Any] = {"runs": str(Path(runs).resolve()), "sweep": str(folder)}
-            space |= {"preset": "fast", "seed": 0, **sweep_options, **fixed}
-            space |= {k: tune.grid_search(v) for k, v in grid.items()}
-            distributions = {
-                "loguniform": lambda v: tune.loguniform(*v),
-                "uniform": lambda v: tune.uniform(*v),
-                "randint": lambda v: tune.randint(*v),
-                "choice": lambda v: tune.choice(v),
-            }
-            space |= {k: distributions[kind](v) for k, (kind, v) in search.items()}
-            scheduler = (
-                ASHAScheduler(metric="mean_return", mode="max", time_attr="iteration")
-                if search
-                else None
-            )
-            tuner = tune.Tuner(
-                runnable,
-                param_space=space,
-                # A trial's worker process stays for the next trial: no new interpreter
-                # (and torch import) per run.
-                tune_config=tune.TuneConfig(
-                    num_samples=samples, scheduler=scheduler, reuse_actors=True
-                ),
-                run_config=tune.RunConfig(
-                    storage_path=str(storage),
-                    name=name,
-                    verbose=1,
-                    callbacks=[_progress_callback(folder)],
-                ),
-            )
-        results = tuner.fit()
-    finally:
-        for logger in _TUNE_LOGGERS:
-            logging.getLogger(logger).removeFilter(quiet)
-        ray.shutdown()
-    return [
-        result_row(results[i].config, results[i].metrics, results[i].error)
-        for i in range(len(results))
-    ]
+
+
+def _param_space(
+    grid: dict[str, list[Any]],
+    search: dict[str, tuple[str, list[Any]]],
+    options: dict[str, Any],
+    runs: Path,
+    folder: Path,
+) -> dict[str, Any]:
+    """Tune's parameter space: the fixed ``options``, the grid, the search distributions."""
+    from ray import tune
+
+    space: dict[str, Any] = {"runs": str(Path(runs).resolve()), "sweep": str(folder)}
+    space |= {"preset": "fast", "seed": 0, **options}
+    space |= {k: tune.grid_search(v) for k, v in grid.items()}
+    distributions = {
+        "loguniform": lambda v: tune.loguniform(*v),
+        "uniform": lambda v: tune.uniform(*v),
+        "randint": lambda v: tune.randint(*v),
+        "choice": lambda v: tune.choice(v),
+    }
+    space |= {k: distributions[kind](v) for k, (kind, v) in search.items()}
+    return space
+
+
+def _new_tuner(
+    runnable: Any, space: dict[str, Any], search: bool, samples: int, folder: Path
+) -> Any:
+    """A new sweep's Tuner: ASHA early stopping for a search, the progress callback."""
+    from ray import tune
+    from ray.tune.schedulers import ASHAScheduler
+
+    scheduler = (
+        ASHAScheduler(metric="mean_return", mode="max", time_attr="iteration") if search else None
+    )
+    return tune.Tuner(
+        runnable,
+        param_space=space,
+        # A trial's worker process stays for the next trial: no new interpreter
+        # (and torch import) per run.
+        tune_config=tune.TuneConfig(num_samples=samples, scheduler=scheduler, reuse_actors=True),
+        run_config=tune.RunConfig(
+            storage_path=str(folder.parent),
+            name=folder.name,
+            verbose=1,
+            callbacks=[_progress_callback(folder)],
+        ),
+    )
 
 
 # Tune's messages on an interrupted run (its Python restore call, metrics it could not

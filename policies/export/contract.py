@@ -17,9 +17,9 @@ from typing import Any
 
 from policies.config import TrainConfig
 from quadsitl.frames import __doc__ as FRAMES_DOC
-from quadsitl.physics import get_airframe
+from quadsitl.physics import Airframe, get_airframe
 from quadsitl.physics import layout as L
-from quadsitl.tasks import TASKS, TaskOptions
+from quadsitl.tasks import TASKS, TaskOptions, TaskSpec
 from quadsitl.tasks import features as F
 from quadsitl.tasks.observation_layout import observation_layout, observation_size
 
@@ -71,20 +71,10 @@ def build_contract(config: TrainConfig, checkpoint: Path, act_size: int) -> dict
     task = TASKS[config.task]
     options = trained_options(config)
     airframe = get_airframe(options.airframe)  # type: ignore[arg-type]
-    hover, top = airframe.hover_rotor_speed, airframe.max_rotor_speed
     obs_size = observation_size(task, options)
     return {
         "format": FORMAT,
-        "task": {
-            "name": task.name,
-            "description": _task_description(task.name),
-            "episode_seconds": task.episode_seconds,
-            "start_position_enu_m": _fixed_or_drawn(task.start),
-            "goal_position_velocity_enu": _fixed_or_drawn(task.goal),
-            "training_start_noise": {
-                k: v for k, v in config.task_options.items() if k.startswith("init_")
-            },
-        },
+        "task": _task_section(task, config),
         "checkpoint": {
             "file": checkpoint.name,
             "sha256": sha256(checkpoint),
@@ -94,67 +84,9 @@ def build_contract(config: TrainConfig, checkpoint: Path, act_size: int) -> dict
             "config": config.to_dict(),
         },
         "conventions": _conventions(),
-        "observation": {
-            "size": obs_size,
-            "dtype": "float32",
-            "normalisation": (
-                "inside the exported policy: feed raw observations. "
-                + (
-                    f"(obs − mean) / sqrt(var + 1e-8) with the training's running mean and "
-                    f"variance, clipped to ±{NORM_CLIP:g}"
-                    if config.normalize_obs
-                    else "none (trained on raw observations)"
-                )
-                + (
-                    f"; the network also sees tanh(obs[{F.OBS_GOAL_POS.start}:"
-                    f"{F.OBS_GOAL_POS.stop}] / {config.fine_offset_scale:g} m), computed "
-                    "inside from the raw goal offset"
-                    if config.fine_offset_scale
-                    else ""
-                )
-            ),
-            "layout": [
-                {
-                    "columns": [s.start, s.stop],
-                    "meaning": meaning + _hidden(s, options),
-                    "frame_unit": unit,
-                }
-                for s, meaning, unit in observation_layout(task, options)
-            ],
-        },
-        "action": {
-            "size": act_size,
-            "dtype": "float32",
-            "meaning": (
-                "a: the network's mean action, one value per motor in motor order, not "
-                "clipped; the rotor speed command is Eq. 19 below"
-            ),
-            "rotor_speed_command": (
-                "Ω_c[i] = clip(hover_rotor_speed + beta · a[i], 0, max_rotor_speed), rad/s "
-                "(equivalently: clip a to action_bounds first)"
-            ),
-            "hover_rotor_speed_rad_s": hover,
-            "beta_rad_s": options.beta,
-            "max_rotor_speed_rad_s": top,
-            "action_bounds": [-hover / options.beta, (top - hover) / options.beta],
-        },
-        "motors": {
-            "airframe": airframe.name,
-            "order": [
-                {
-                    "motor": i + 1,
-                    "position_body_flu_m": [float(v) for v in position],
-                    "spin_seen_from_above": _spin(sign),
-                    "reaction_torque_sign_z": sign,
-                }
-                for i, (position, sign) in enumerate(
-                    zip(airframe.rotor_positions(), airframe.rotor_yaw_sign, strict=True)
-                )
-            ],
-            "thrust_coeff_n_per_rad_s_sq": airframe.thrust_coeff,
-            "motor_time_constant_s": 1.0 / airframe.motor_rate,
-            "mass_kg": airframe.mass,
-        },
+        "observation": _observation_section(task, config, options, obs_size),
+        "action": _action_section(airframe, options, act_size),
+        "motors": _motors_section(airframe),
         "control": {
             "rate_hz": 1.0 / options.control_period,
             "period_s": options.control_period,
@@ -173,6 +105,96 @@ def build_contract(config: TrainConfig, checkpoint: Path, act_size: int) -> dict
                 "needs": "a C99 compiler and libm's tanhf",
             },
         },
+    }
+
+
+def _task_section(task: TaskSpec, config: TrainConfig) -> dict[str, Any]:
+    """The contract's ``task``: its name, description, episode length, start and goal."""
+    return {
+        "name": task.name,
+        "description": _task_description(task.name),
+        "episode_seconds": task.episode_seconds,
+        "start_position_enu_m": _fixed_or_drawn(task.start),
+        "goal_position_velocity_enu": _fixed_or_drawn(task.goal),
+        "training_start_noise": {
+            k: v for k, v in config.task_options.items() if k.startswith("init_")
+        },
+    }
+
+
+def _observation_section(
+    task: TaskSpec, config: TrainConfig, options: TaskOptions, obs_size: int
+) -> dict[str, Any]:
+    """The contract's ``observation``: size, what normalisation is inside, the layout."""
+    return {
+        "size": obs_size,
+        "dtype": "float32",
+        "normalisation": (
+            "inside the exported policy: feed raw observations. "
+            + (
+                f"(obs − mean) / sqrt(var + 1e-8) with the training's running mean and "
+                f"variance, clipped to ±{NORM_CLIP:g}"
+                if config.normalize_obs
+                else "none (trained on raw observations)"
+            )
+            + (
+                f"; the network also sees tanh(obs[{F.OBS_GOAL_POS.start}:"
+                f"{F.OBS_GOAL_POS.stop}] / {config.fine_offset_scale:g} m), computed "
+                "inside from the raw goal offset"
+                if config.fine_offset_scale
+                else ""
+            )
+        ),
+        "layout": [
+            {
+                "columns": [s.start, s.stop],
+                "meaning": meaning + _hidden(s, options),
+                "frame_unit": unit,
+            }
+            for s, meaning, unit in observation_layout(task, options)
+        ],
+    }
+
+
+def _action_section(airframe: Airframe, options: TaskOptions, act_size: int) -> dict[str, Any]:
+    """The contract's ``action``: what the network returns and Eq. 19's constants."""
+    hover, top = airframe.hover_rotor_speed, airframe.max_rotor_speed
+    return {
+        "size": act_size,
+        "dtype": "float32",
+        "meaning": (
+            "a: the network's mean action, one value per motor in motor order, not "
+            "clipped; the rotor speed command is Eq. 19 below"
+        ),
+        "rotor_speed_command": (
+            "Ω_c[i] = clip(hover_rotor_speed + beta · a[i], 0, max_rotor_speed), rad/s "
+            "(equivalently: clip a to action_bounds first)"
+        ),
+        "hover_rotor_speed_rad_s": hover,
+        "beta_rad_s": options.beta,
+        "max_rotor_speed_rad_s": top,
+        "action_bounds": [-hover / options.beta, (top - hover) / options.beta],
+    }
+
+
+def _motors_section(airframe: Airframe) -> dict[str, Any]:
+    """The contract's ``motors``: the airframe, each motor's place and spin, in order."""
+    return {
+        "airframe": airframe.name,
+        "order": [
+            {
+                "motor": i + 1,
+                "position_body_flu_m": [float(v) for v in position],
+                "spin_seen_from_above": _spin(sign),
+                "reaction_torque_sign_z": sign,
+            }
+            for i, (position, sign) in enumerate(
+                zip(airframe.rotor_positions(), airframe.rotor_yaw_sign, strict=True)
+            )
+        ],
+        "thrust_coeff_n_per_rad_s_sq": airframe.thrust_coeff,
+        "motor_time_constant_s": 1.0 / airframe.motor_rate,
+        "mass_kg": airframe.mass,
     }
 
 

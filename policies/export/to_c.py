@@ -64,14 +64,26 @@ def parse_weights(text: str) -> dict[str, np.ndarray]:
 
 def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -> str:
     """The header of these arrays (sizes read from them) and this contract."""
-    w1, b1, w2, b2 = (arrays[k] for k in ("policy_w1", "policy_b1", "policy_w2", "policy_b2"))
-    hidden_size, act_size = b1.size, b2.size
-    input_size = w1.size // max(hidden_size, 1)
     fine = fine_offset_scale(contract)  # 0: none
-    obs_size = input_size - (FineOffset.SIZE if fine else 0)
     normalised = "policy_obs_mean" in arrays
-    action = contract["action"]
     guard = "QUADSITL_" + re.sub(r"\W", "_", name, flags=re.ASCII).upper() + "_INCLUDED"
+    lines = [
+        *_preamble(contract, name, guard),
+        *_sizes(arrays, contract, fine),
+        *_weight_arrays(arrays, normalised),
+        "",
+        *_forward(normalised, fine),
+        "",
+        *_rotor_speeds(),
+        "",
+        f"#endif /* {guard} */",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _preamble(contract: dict[str, Any], name: str, guard: str) -> list[str]:
+    """The header's opening comment (what wrote it, how to call it), guard and include."""
     checkpoint = contract["checkpoint"]
     task, algo, preset, seed = (
         _comment(v)
@@ -82,7 +94,7 @@ def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -
             checkpoint["seed"],
         )
     )
-    lines = [
+    return [
         f"/* {_comment(name)}: the quadsitl {task} policy ({algo}, {preset} preset, seed {seed}), "
         "written by quadsitl export.",
         f" * Checkpoint {_comment(checkpoint['file'])}, sha256 {_comment(checkpoint['sha256'])}.",
@@ -101,6 +113,16 @@ def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -
         "",
         "#include <math.h>",
         "",
+    ]
+
+
+def _sizes(arrays: dict[str, np.ndarray], contract: dict[str, Any], fine: float) -> list[str]:
+    """The ``#define`` lines: the arrays' sizes, the control rate and Eq. 19's constants."""
+    hidden_size, act_size = arrays["policy_b1"].size, arrays["policy_b2"].size
+    input_size = arrays["policy_w1"].size // max(hidden_size, 1)
+    obs_size = input_size - (FineOffset.SIZE if fine else 0)
+    action = contract["action"]
+    return [
         f"#define POLICY_OBS_SIZE {obs_size}",
         f"#define POLICY_INPUT_SIZE {input_size} /* what the hidden layer sees */",
         f"#define POLICY_ACT_SIZE {act_size}",
@@ -111,6 +133,11 @@ def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -
         f"#define POLICY_MAX_ROTOR_SPEED {_float(action['max_rotor_speed_rad_s'])} /* rad/s */",
         "",
     ]
+
+
+def _weight_arrays(arrays: dict[str, np.ndarray], normalised: bool) -> list[str]:
+    """The ``static const`` arrays: the normalisation's (if any), then the layers'."""
+    lines: list[str] = []
     if normalised:
         mean, std = arrays["policy_obs_mean"], arrays["policy_obs_std"]
         lines += [
@@ -118,12 +145,19 @@ def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -
             _array("static const double policy_obs_mean[POLICY_OBS_SIZE]", mean, _double),
             _array("static const double policy_obs_std[POLICY_OBS_SIZE]", std, _double),
         ]
+    w1, b1, w2, b2 = (arrays[k] for k in ("policy_w1", "policy_b1", "policy_w2", "policy_b2"))
     lines += [
         _array("static const float policy_w1[POLICY_HIDDEN * POLICY_INPUT_SIZE]", w1, _float),
         _array("static const float policy_b1[POLICY_HIDDEN]", b1, _float),
         _array("static const float policy_w2[POLICY_ACT_SIZE * POLICY_HIDDEN]", w2, _float),
         _array("static const float policy_b2[POLICY_ACT_SIZE]", b2, _float),
-        "",
+    ]
+    return lines
+
+
+def _forward(normalised: bool, fine: float) -> list[str]:
+    """``policy_forward``: normalise, add the fine view (if any), hidden layer, mean head."""
+    lines = [
         f"static inline {C_FORWARD}",
         "{",
         "    float z[POLICY_INPUT_SIZE];",
@@ -162,7 +196,13 @@ def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -
         "        action[i] = s;",
         "    }",
         "}",
-        "",
+    ]
+    return lines
+
+
+def _rotor_speeds() -> list[str]:
+    """``policy_rotor_speeds``: Eq. 19 with its clip, one rotor speed per motor."""
+    return [
         f"static inline {C_ROTOR_SPEEDS}",
         "{",
         "    int i;",
@@ -172,11 +212,7 @@ def render(arrays: dict[str, np.ndarray], contract: dict[str, Any], name: str) -
         "                       : w > POLICY_MAX_ROTOR_SPEED ? POLICY_MAX_ROTOR_SPEED : w;",
         "    }",
         "}",
-        "",
-        f"#endif /* {guard} */",
-        "",
     ]
-    return "\n".join(lines)
 
 
 def _layers(net: ActorCritic) -> tuple[torch.nn.Linear, torch.nn.Linear]:
