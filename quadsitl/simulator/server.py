@@ -11,7 +11,8 @@ Telemetry goes to a peer of a link only once a frame from it has been accepted h
 messages (:attr:`MavlinkServer.to_sender`) are answered to their sender alone: two ground
 stations with the same ids never hear each other's transfer.
 What the vehicle presents itself as (PX4-compatible or generic) is :mod:`.identity`;
-parameters, missions and offboard setpoints have their own modules.
+parameters, missions and pilot input (modes, sticks, offboard setpoints:
+:mod:`.pilot_input`) have their own modules.
 """
 
 from __future__ import annotations
@@ -21,10 +22,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from quadsitl import frames
 from quadsitl.flight_software.results import Outcome, Severity
 from quadsitl.flight_software.vehicle import Vehicle
-from quadsitl.simulator import offboard
 from quadsitl.simulator import telemetry as T
 from quadsitl.simulator import telemetry_status as status
 from quadsitl.simulator.commands import Command, Commands
@@ -33,6 +32,7 @@ from quadsitl.simulator.links import Link, Peer
 from quadsitl.simulator.mission_protocol import MissionProtocol, Origin
 from quadsitl.simulator.motor_slot import MotorSlot
 from quadsitl.simulator.param_protocol import ParamProtocol
+from quadsitl.simulator.pilot_input import PilotInput
 from quadsitl.simulator.signing import (
     SignatureCheck,
     SigningNotices,
@@ -96,6 +96,7 @@ class MavlinkServer:
         self.after_ack: list[Any] = []
         self.commands = Commands(self)
         self.counters = {"ignored": 0, "bad_values": 0}
+        self.pilot = PilotInput(vehicle, self.statustext, self.counters)
         self.handlers: dict[int, Handler] = {  # message id: its handler
             mav.MAVLINK_MSG_ID_HEARTBEAT: self._on_heartbeat,
             mav.MAVLINK_MSG_ID_SETUP_SIGNING: self._on_setup_signing,
@@ -103,11 +104,12 @@ class MavlinkServer:
             mav.MAVLINK_MSG_ID_TIMESYNC: self._on_timesync,
             mav.MAVLINK_MSG_ID_COMMAND_LONG: self._command,
             mav.MAVLINK_MSG_ID_COMMAND_INT: self._command,
-            mav.MAVLINK_MSG_ID_SET_MODE: self._on_set_mode,
-            mav.MAVLINK_MSG_ID_MANUAL_CONTROL: self._on_manual_control,
+            # pilot input: modes, sticks, offboard setpoints (pilot_input.py)
+            mav.MAVLINK_MSG_ID_SET_MODE: self.pilot.on_set_mode,
+            mav.MAVLINK_MSG_ID_MANUAL_CONTROL: self.pilot.on_manual_control,
             mav.MAVLINK_MSG_ID_REQUEST_DATA_STREAM: self._on_request_data_stream,
-            mav.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED: self._on_set_position_target,
-            mav.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET: self._on_set_attitude_target,
+            mav.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED: self.pilot.on_set_position_target,
+            mav.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET: self.pilot.on_set_attitude_target,
             # parameters (param_protocol.py)
             mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST: self._replying(self.params.on_request_list),
             mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ: self._replying(self.params.on_request_read),
@@ -336,31 +338,6 @@ class MavlinkServer:
             self.send_together(self.after_ack, link)
             self.after_ack = []
 
-    def _on_set_mode(self, msg: Any, link: Link) -> None:
-        """SET_MODE (QGroundControl's PX4 plugin and MAVProxy send it); no ACK exists for
-        it: the heartbeat shows the new mode, a STATUSTEXT the refusal."""
-        try:
-            mode = Mode.from_custom_mode(msg.custom_mode)
-        except ValueError as error:
-            self.statustext(Severity.WARNING, str(error))
-            return
-        result = self.vehicle.set_mode(mode)
-        if result.reason:
-            self.statustext(Severity.WARNING, result.reason)
-
-    def _on_manual_control(self, msg: Any, link: Link) -> None:
-        """Joystick (QGroundControl's): x forward, y right, r yaw in ±1000, z thrust
-        0..1000 with 500 = hold altitude. Flown in POSCTL/ALTCTL; COM_RC_IN_MODE = 4
-        turns stick input off."""
-        if self.vehicle.params["COM_RC_IN_MODE"] == 4:
-            return
-        centre = (0, 0, 500, 0)  # an axis out of range (INT16_MAX: not in use) is centred
-        x, y, z, r = (
-            a if -1000 <= a <= 1000 else c
-            for a, c in zip((msg.x, msg.y, msg.z, msg.r), centre, strict=True)
-        )
-        self.vehicle.stick_input(x / 1000, y / 1000, (z - 500) / 500, r / 1000)
-
     def _on_request_data_stream(self, msg: Any, link: Link) -> None:
         ids = T.DATA_STREAMS.get(msg.req_stream_id, ())
         rate = float(msg.req_message_rate) if msg.start_stop else 0.0
@@ -400,25 +377,3 @@ class MavlinkServer:
         if result.reason:
             self.statustext(Severity.WARNING, result.reason)
         self.send(status.build_mission_current(self.snapshot()), link)
-
-    # --- offboard (offboard.py) ---------------------------------------------------------
-    def _on_set_position_target(self, msg: Any, link: Link) -> None:
-        v = self.vehicle
-        yaw_now = float(frames.euler_from_quat(v.fleet.quaternion[0])[2])
-        setpoint = offboard.position_target(msg, v.position, yaw_now, v.airframe.gear_height)
-        if isinstance(setpoint, str):
-            self._bad_value(setpoint)
-        else:
-            v.offboard_setpoint(setpoint)
-
-    def _on_set_attitude_target(self, msg: Any, link: Link) -> None:
-        setpoint = offboard.attitude_target(msg)
-        if isinstance(setpoint, str):
-            self._bad_value(setpoint)
-        else:
-            self.vehicle.offboard_setpoint(setpoint)
-
-    def _bad_value(self, text: str) -> None:
-        self.counters["bad_values"] += 1
-        if self.counters["bad_values"] % 100 == 1:  # do not flood the links
-            self.statustext(Severity.WARNING, text)
