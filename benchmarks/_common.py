@@ -1,8 +1,11 @@
-"""Helpers shared by the benchmarks: pin to one core, time a loop, print a figure."""
+"""Helpers shared by the benchmarks: pin to one core, time a loop, print a figure,
+start a simulator for a flight stack."""
 
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import time
 from collections.abc import Callable
 
@@ -36,3 +39,22 @@ def figure(name: str, value: float, unit: str, note: str) -> None:
     """Print a figure that has no target: a human line and a ``name: value`` line."""
     print(f"{name}: {value:,.0f} {unit} ({note})")
     print(f"{name}: {value:.0f}")
+
+
+def start_stack_simulator(
+    stack: str, airframe: str, vehicles: int, port: int
+) -> subprocess.Popen[bytes]:
+    """``quadsitl sim --flight-stack STACK`` with ``vehicles`` from ``port`` on; returns
+    once it listens (it has printed its last vehicle's line)."""
+    command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", stack]
+    command += ["--airframe", airframe, "--vehicles", str(vehicles)]
+    process = subprocess.Popen(
+        [*command, "--flight-stack-port", str(port)],
+        stdout=subprocess.PIPE,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    assert process.stdout is not None
+    while f"vehicle {vehicles - 1}:".encode() not in process.stdout.readline():
+        if process.poll() is not None:
+            raise SystemExit("the simulator did not start")
+    return process

@@ -16,14 +16,13 @@ Both processes share the machine's cores: the figures are of the pair.
 from __future__ import annotations
 
 import math
-import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import best_rate, report
+from _common import best_rate, report, start_stack_simulator
 
 from quadsitl.bridges.fake_ardupilot import FakeArduPilot
 from quadsitl.physics import get_airframe
@@ -41,18 +40,7 @@ def start_simulator(vehicles: int) -> tuple[subprocess.Popen[bytes], int]:
     port = free_udp_port()
     while port + 10 * vehicles > 65535:
         port = free_udp_port()
-    command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", "ardupilot"]
-    command += ["--airframe", AIRFRAME, "--vehicles", str(vehicles)]
-    process = subprocess.Popen(
-        [*command, "--flight-stack-port", str(port)],
-        stdout=subprocess.PIPE,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    assert process.stdout is not None
-    while f"vehicle {vehicles - 1}:".encode() not in process.stdout.readline():
-        if process.poll() is not None:
-            raise SystemExit("the simulator did not start")
-    return process, port
+    return start_stack_simulator("ardupilot", AIRFRAME, vehicles, port), port
 
 
 def hover_pwm() -> list[int]:

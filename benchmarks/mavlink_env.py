@@ -23,6 +23,7 @@ import multiprocessing
 import socket
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import gymnasium as gym
@@ -43,33 +44,41 @@ FLEET_SIZES = (1, 8, 64, 254)  # 254: every MAVLink system id (256 do not fit)
 RATES = ["--physics-rate", "100", "--control-rate", "20", "--gcs", "none", "--api", "none"]
 
 
+def best_timed_rate(step: Callable[[], int], seconds: float, repeats: int) -> float:
+    """The best of ``repeats`` runs of ``seconds`` each, in counts per second: ``step``
+    does one piece of work and returns its count (env steps, round trips)."""
+    best = 0.0
+    for _ in range(repeats):
+        count, start = 0, time.perf_counter()
+        while time.perf_counter() - start < seconds:
+            count += step()
+        best = max(best, count / (time.perf_counter() - start))
+    return best
+
+
 def single_rate(env: gym.Env, repeats: int = 3) -> float:
     rng = np.random.default_rng(0)
     env.reset(seed=0)
-    best = 0.0
-    for _ in range(repeats):
-        steps, start = 0, time.perf_counter()
-        while time.perf_counter() - start < SECONDS:
-            action = rng.normal(0, 0.05, 4).astype(np.float32)
-            _, _, terminated, truncated, _ = env.step(action)
-            steps += 1
-            if terminated or truncated:
-                env.reset()
-        best = max(best, steps / (time.perf_counter() - start))
-    return best
+
+    def step() -> int:
+        action = rng.normal(0, 0.05, 4).astype(np.float32)
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            env.reset()
+        return 1
+
+    return best_timed_rate(step, SECONDS, repeats)
 
 
 def vector_rate(envs: gym.vector.VectorEnv, seconds: float = SECONDS, repeats: int = 2) -> float:
     rng = np.random.default_rng(0)
     envs.reset(seed=0)
-    best = 0.0
-    for _ in range(repeats):
-        steps, start = 0, time.perf_counter()
-        while time.perf_counter() - start < seconds:
-            envs.step(rng.normal(0, 0.05, (envs.num_envs, 4)).astype(np.float32))
-            steps += envs.num_envs
-        best = max(best, steps / (time.perf_counter() - start))
-    return best
+
+    def step() -> int:
+        envs.step(rng.normal(0, 0.05, (envs.num_envs, 4)).astype(np.float32))
+        return envs.num_envs
+
+    return best_timed_rate(step, seconds, repeats)
 
 
 def fleet_curve() -> dict[int, float]:
@@ -105,14 +114,13 @@ def udp_round_trips() -> float:
     ready.wait(5)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     payload = bytes(100)  # about one command
-    best = 0.0
-    for _ in range(3):
-        count, start = 0, time.perf_counter()
-        while time.perf_counter() - start < SECONDS / 2:
-            sock.sendto(payload, ("127.0.0.1", port))
-            sock.recv(65535)
-            count += 1
-        best = max(best, count / (time.perf_counter() - start))
+
+    def round_trip() -> int:
+        sock.sendto(payload, ("127.0.0.1", port))
+        sock.recv(65535)
+        return 1
+
+    best = best_timed_rate(round_trip, SECONDS / 2, repeats=3)
     sock.sendto(b"stop", ("127.0.0.1", port))
     echo.join(2)
     return best
@@ -135,14 +143,12 @@ def lockstep_round_trips() -> float:
         wire = WireState.from_physics(state, PAPER.gear_height, 0, None, None)
         client.reset([0], wire, np.zeros((1, 3)))
         hover = np.full((1, 4), PAPER.hover_rotor_speed / PAPER.max_rotor_speed)
-        best = 0.0
-        for _ in range(3):
-            count, start = 0, time.perf_counter()
-            while time.perf_counter() - start < SECONDS / 2:
-                client.step(hover)
-                count += 1
-            best = max(best, count / (time.perf_counter() - start))
-        return best
+
+        def round_trip() -> int:
+            client.step(hover)
+            return 1
+
+        return best_timed_rate(round_trip, SECONDS / 2, repeats=3)
     finally:
         client.close()
         sim.stop()

@@ -17,7 +17,6 @@ Both processes share the machine's cores: the figures are of the pair.
 from __future__ import annotations
 
 import math
-import os
 import socket
 import subprocess
 import sys
@@ -25,7 +24,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import best_rate, report
+from _common import best_rate, report, start_stack_simulator
 
 from quadsitl.bridges.fake_px4 import FakePx4
 from quadsitl.bridges.px4_hil import ROUND_US
@@ -55,18 +54,7 @@ def free_tcp_ports(count: int) -> int:
 def start_simulator(vehicles: int) -> tuple[subprocess.Popen[bytes], int]:
     """``quadsitl sim --flight-stack px4`` on free ports; returns once it listens."""
     port = free_tcp_ports(vehicles)
-    command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", "px4"]
-    command += ["--airframe", AIRFRAME, "--vehicles", str(vehicles)]
-    process = subprocess.Popen(
-        [*command, "--flight-stack-port", str(port)],
-        stdout=subprocess.PIPE,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    assert process.stdout is not None
-    while f"vehicle {vehicles - 1}:".encode() not in process.stdout.readline():
-        if process.poll() is not None:
-            raise SystemExit("the simulator did not start")
-    return process, port
+    return start_stack_simulator("px4", AIRFRAME, vehicles, port), port
 
 
 def hover() -> list[float]:

@@ -45,12 +45,7 @@ def _add_train_parser(commands: argparse._SubParsersAction) -> None:
         "turbulence, delay, airframe spread; docs/training.md) (default: paper)",
     )
     train.add_argument("--seed", type=_count(0), default=0, help="random seed ≥ 0 (default: 0)")
-    train.add_argument(
-        "--backend",
-        default="inprocess",
-        choices=("inprocess", "mavlink"),
-        help="physics in-process, or in quadsitl sim processes over MAVLink",
-    )
+    _add_backend_option(train)
     train.add_argument(
         "--vehicles-per-sim",
         type=_count(1),
@@ -129,18 +124,23 @@ def _add_eval_parser(commands: argparse._SubParsersAction) -> None:
         "standard, docs/training.md); task: the task's own start, with no start noise (the "
         "paper's) (default: trained)",
     )
-    evaluate.add_argument(
-        "--backend",
-        default="inprocess",
-        choices=("inprocess", "mavlink"),
-        help="physics in-process, or in quadsitl sim processes over MAVLink",
-    )
+    _add_backend_option(evaluate)
     evaluate.add_argument(
         "--rerun",
         nargs="?",
         const="",
         metavar="RRD",
         help="record the first env's episodes in Rerun (a viewer, or the file RRD)",
+    )
+
+
+def _add_backend_option(parser: argparse.ArgumentParser) -> None:
+    """Add ``--backend`` (train's and eval's): where the physics runs."""
+    parser.add_argument(
+        "--backend",
+        default="inprocess",
+        choices=("inprocess", "mavlink"),
+        help="physics in-process, or in quadsitl sim processes over MAVLink",
     )
 
 
