@@ -11,6 +11,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +59,31 @@ def fly_both(local, remote, rng: np.random.Generator, steps: int, scale: float) 
         assert (ta == tb).all() and (ua == ub).all()
         ended += int((ta | ua).sum())
     return ended
+
+
+def reset_both(local, remote, seed: int) -> None:  # type: ignore[no-untyped-def]
+    """Reset the in-process and the wire vector envs with ``seed``, asserting the same
+    first observations."""
+    a, _ = local.reset(seed=seed)
+    b, _ = remote.reset(seed=seed)
+    np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
+
+
+def step_as_singles(vector, singles, seed: int, actions: np.ndarray) -> None:  # type: ignore[no-untyped-def]
+    """Reset the vector env ``vector`` with ``seed`` and step it with ``actions`` (steps ×
+    envs × 4), asserting each step the same observations and rewards, exactly, as each
+    of the single envs ``singles`` reset with ``seed + i`` and stepped with its own
+    action; no episode may end on the way."""
+    obs, _ = vector.reset(seed=seed)
+    for i, env in enumerate(singles):
+        np.testing.assert_array_equal(obs[i], env.reset(seed=seed + i)[0])
+    for step in actions:
+        obs, reward, terminated, truncated, _ = vector.step(step)
+        assert not (terminated | truncated).any()
+        for i, env in enumerate(singles):
+            single_obs, single_reward, *_ = env.step(step[i])
+            np.testing.assert_array_equal(obs[i], single_obs)
+            assert reward[i] == single_reward
 
 
 def wait_until_listening(process: subprocess.Popen[Any], *ports: int) -> None:
@@ -132,6 +158,70 @@ def socket_addresses(
             if fields[9] in inodes:
                 addresses.append(fields[1].split(":")[0])
     return addresses
+
+
+STOP_LIMIT = 20.0  # s a simulator has to end after SIGTERM before it is killed
+
+
+def stop_process(process: subprocess.Popen[str]) -> tuple[str, str]:
+    """SIGTERM (unless it has ended), then what it wrote to its pipes (stdout, stderr;
+    "" for one not piped); killed if it is still running STOP_LIMIT later, so that a
+    test never leaves a process behind nor hangs on one."""
+    if process.poll() is None:
+        process.terminate()
+    try:
+        out, err = process.communicate(timeout=STOP_LIMIT)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        out, err = process.communicate()
+    return out or "", err or ""
+
+
+@dataclass
+class SimRun:
+    """A ``quadsitl sim`` started by :func:`running_sim`: its process and the ports it
+    listens on; once stopped, what it wrote (``output``: stdout, with stderr unless that
+    was piped apart into ``errors``)."""
+
+    process: subprocess.Popen[str]
+    ports: tuple[int, ...]
+    output: str = ""
+    errors: str = ""
+
+
+@contextlib.contextmanager
+def running_sim(
+    words: str, *args: object, ports: tuple[int, ...] = (), stderr: int = subprocess.STDOUT
+) -> Iterator[SimRun]:
+    """``quadsitl WORDS ARGS`` (as :func:`cli` reads them) from its start until its links
+    are open (:func:`wait_until_listening` on ``ports``) to its stop on leaving
+    (:func:`stop_process`, also when the test fails), its output then kept."""
+    process = subprocess.Popen(cli(words, *args), stdout=subprocess.PIPE, stderr=stderr, text=True)
+    run = SimRun(process, ports)
+    try:
+        wait_until_listening(process, *ports)
+        yield run
+    finally:
+        run.output, run.errors = stop_process(process)
+
+
+@contextlib.contextmanager
+def sim_with_client(
+    options: str, *args: object, connect_timeout: float = 30, stderr: int = subprocess.STDOUT
+) -> Iterator[tuple[VehicleClient, SimRun]]:
+    """``quadsitl sim --gcs udpin:127.0.0.1:PORT --api none OPTIONS ARGS`` on a free
+    ``PORT`` (:func:`running_sim`) and a ground station's :class:`VehicleClient`
+    connected to it within ``connect_timeout`` s; the client is closed before the
+    simulator is stopped."""
+    port = free_udp_port()
+    gcs = f"sim --gcs udpin:127.0.0.1:{port} --api none"
+    with running_sim(f"{gcs} {options}", *args, ports=(port,), stderr=stderr) as run:
+        client = VehicleClient(f"udpout:127.0.0.1:{port}")
+        try:
+            client.connect(timeout=connect_timeout)
+            yield client, run
+        finally:
+            client.close()
 
 
 class RunningSim:

@@ -4,10 +4,11 @@ falls silent. Real simulator processes and UDP sockets; bytes counted as they ar
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import socket
-import subprocess
 import time
+from collections.abc import Iterator
 
 import pytest
 from pymavlink import mavutil
@@ -16,7 +17,7 @@ from gcs_tools.demo import free_udp_port
 from quadsitl.simulator.links import PEER_TIMEOUT, Link
 from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.signing import sign_outgoing
-from tests.conftest import cli, wait_until_listening
+from tests.conftest import running_sim
 
 PASSPHRASE = "amplification test"
 QUIET_SECONDS = 3.0  # how long a silent peer is listened to
@@ -43,71 +44,55 @@ def _heartbeat(signing_key: bytes | None = None) -> bytes:
     )
 
 
-def _start(port: int, *options: str) -> subprocess.Popen[str]:
-    """A simulator whose only link listens on ``port``; returns once it answers."""
-    sim = subprocess.Popen(
-        cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --logs none", *options),
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    wait_until_listening(sim, port)
-    probe = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=250)
-    key = _key() if "--signing-passphrase" in options else None
-    if key is not None:
-        probe.setup_signing(key, sign_outgoing=True)
-    try:
-        deadline = time.monotonic() + 60
-        while not probe.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5):
-            if time.monotonic() > deadline:
-                _stop(sim)  # never leave a simulator running behind a failed test
-                raise AssertionError("the simulator did not answer within 60 s")
-            probe.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-    finally:
-        probe.close()
-    return sim
+@contextlib.contextmanager
+def _answering_sim(port: int, *options: str) -> Iterator[None]:
+    """A simulator whose only link listens on ``port``, from when it answers."""
+    sim = f"sim --gcs udpin:127.0.0.1:{port} --api none --logs none"
+    with running_sim(sim, *options, ports=(port,)):
+        probe = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=250)
+        key = _key() if "--signing-passphrase" in options else None
+        if key is not None:
+            probe.setup_signing(key, sign_outgoing=True)
+        try:
+            deadline = time.monotonic() + 60
+            while not probe.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5):
+                if time.monotonic() > deadline:
+                    raise AssertionError("the simulator did not answer within 60 s")
+                probe.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        finally:
+            probe.close()
+        yield
 
 
 def _key() -> bytes:
     return hashlib.sha256(PASSPHRASE.encode()).digest()
 
 
-def _stop(sim: subprocess.Popen[str]) -> None:
-    sim.terminate()
-    try:
-        sim.wait(10)
-    except subprocess.TimeoutExpired:
-        sim.kill()
-        sim.wait()
-
-
 @pytest.mark.parametrize("vehicles", [1, 4])
 def test_one_junk_byte_brings_back_nothing_a_valid_frame_brings_telemetry(vehicles):
     port = free_udp_port()
-    sim = _start(port, "--vehicles", str(vehicles))
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as peer:
-        try:
-            peer.sendto(b"\x00", ("127.0.0.1", port))
-            assert _bytes_received(peer, QUIET_SECONDS) == 0
-            peer.sendto(_heartbeat(), ("127.0.0.1", port))
-            assert _bytes_received(peer, 2.0) > 0
-        finally:
-            _stop(sim)
+    with (
+        _answering_sim(port, "--vehicles", str(vehicles)),
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as peer,
+    ):
+        peer.sendto(b"\x00", ("127.0.0.1", port))
+        assert _bytes_received(peer, QUIET_SECONDS) == 0
+        peer.sendto(_heartbeat(), ("127.0.0.1", port))
+        assert _bytes_received(peer, 2.0) > 0
 
 
 def test_with_signing_only_a_signed_frame_brings_telemetry():
     port = free_udp_port()
-    sim = _start(port, "--signing-passphrase", PASSPHRASE)
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as peer:
-        try:
-            peer.sendto(b"\x00", ("127.0.0.1", port))
-            peer.sendto(_heartbeat(), ("127.0.0.1", port))  # valid, but unsigned
-            peer.sendto(_heartbeat(hashlib.sha256(b"wrong").digest()), ("127.0.0.1", port))
-            assert _bytes_received(peer, QUIET_SECONDS) == 0
-            peer.sendto(_heartbeat(_key()), ("127.0.0.1", port))
-            assert _bytes_received(peer, 2.0) > 0
-        finally:
-            _stop(sim)
+    with (
+        _answering_sim(port, "--signing-passphrase", PASSPHRASE),
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as peer,
+    ):
+        peer.sendto(b"\x00", ("127.0.0.1", port))
+        peer.sendto(_heartbeat(), ("127.0.0.1", port))  # valid, but unsigned
+        peer.sendto(_heartbeat(hashlib.sha256(b"wrong").digest()), ("127.0.0.1", port))
+        assert _bytes_received(peer, QUIET_SECONDS) == 0
+        peer.sendto(_heartbeat(_key()), ("127.0.0.1", port))
+        assert _bytes_received(peer, 2.0) > 0
 
 
 def test_a_peer_that_falls_silent_is_forgotten():

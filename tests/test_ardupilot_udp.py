@@ -21,7 +21,7 @@ from quadsitl.bridges.ardupilot_udp import ArduPilotJsonServer
 from quadsitl.bridges.fake_ardupilot import FakeArduPilot, HoverController
 from quadsitl.physics.airframe import get_airframe
 from quadsitl.physics.fleet import Fleet
-from tests.conftest import refused_here, wait_until_listening
+from tests.conftest import refused_here, run_cli, wait_until_listening
 
 START_TIMEOUT = 60.0  # s for the process to open its ports (numba loads its cache)
 
@@ -51,20 +51,21 @@ class Sim:
         raise AssertionError(f"no line with {text!r} in {self.said}")
 
 
-def free_port_base(vehicles: int) -> int:
-    """A base port whose instance ports (base + 10 i) are free now."""
+def free_port_base(vehicles: int, step: int = 10, kind: int = socket.SOCK_DGRAM) -> int:
+    """A base port whose instance ports (base + ``step`` i) are free now for ``kind``
+    sockets: UDP ones 10 apart (ArduPilot's instances) unless told."""
     while True:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        with socket.socket(socket.AF_INET, kind) as probe:
             probe.bind(("127.0.0.1", 0))
             base = probe.getsockname()[1]
-        if base + 10 * vehicles > 65535:
+        if base + step * vehicles > 65535:
             continue
+        held = []
         try:
-            held = []
             for i in range(vehicles):
-                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                s = socket.socket(socket.AF_INET, kind)
                 held.append(s)
-                s.bind(("127.0.0.1", base + 10 * i))
+                s.bind(("127.0.0.1", base + step * i))
             return base
         except OSError:
             continue
@@ -74,10 +75,11 @@ def free_port_base(vehicles: int) -> int:
 
 
 @contextmanager
-def running_sim(*options: str, vehicles: int = 1) -> Iterator[tuple[Sim, int]]:
-    """``quadsitl sim --flight-stack ardupilot`` on free ports, until the block ends."""
-    port = free_port_base(vehicles)
-    command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", "ardupilot"]
+def flight_stack_sim(stack: str, port: int, *options: str, vehicles: int = 1) -> Iterator[Sim]:
+    """``quadsitl sim --flight-stack STACK`` serving its instances from ``port`` on, from
+    when its banner names the last vehicle until the block ends (then stopped, all it
+    said on stderr read to the end)."""
+    command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", stack]
     command += ["--flight-stack-port", str(port), "--vehicles", str(vehicles), *options]
     process = subprocess.Popen(
         command,
@@ -86,7 +88,7 @@ def running_sim(*options: str, vehicles: int = 1) -> Iterator[tuple[Sim, int]]:
         text=True,
         env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )
-    assert process.stdout is not None
+    assert process.stdout is not None and process.stderr is not None
     deadline = time.monotonic() + START_TIMEOUT
     banner = []
     while time.monotonic() < deadline and f"vehicle {vehicles - 1}:" not in "".join(banner):
@@ -96,11 +98,19 @@ def running_sim(*options: str, vehicles: int = 1) -> Iterator[tuple[Sim, int]]:
         banner.append(line)
     sim = Sim(process)
     try:
-        yield sim, port
+        yield sim
     finally:
         process.terminate()
         process.wait(timeout=30)
         sim._reader.join(timeout=30)  # all it said, to the end
+
+
+@contextmanager
+def running_sim(*options: str, vehicles: int = 1) -> Iterator[tuple[Sim, int]]:
+    """``quadsitl sim --flight-stack ardupilot`` on free ports, until the block ends."""
+    port = free_port_base(vehicles)
+    with flight_stack_sim("ardupilot", port, *options, vehicles=vehicles) as sim:
+        yield sim, port
 
 
 def hover(fake: FakeArduPilot, airframe: str, seconds: float, altitude: float = 2.0) -> tuple:
@@ -223,9 +233,8 @@ def test_a_port_in_use_is_a_one_line_error_naming_it() -> None:
     port = free_port_base(2)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as holder:
         holder.bind(("127.0.0.1", port + 10))
-        command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", "ardupilot"]
-        command += ["--flight-stack-port", str(port), "--vehicles", "2"]
-        done = subprocess.run(command, capture_output=True, text=True, timeout=120)
+        stack = ["--flight-stack", "ardupilot", "--flight-stack-port", str(port)]
+        done = run_cli("sim", *stack, "--vehicles", "2")
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == [
         f"quadsitl sim: error: UDP port {port + 10} (ArduPilot instance 1) on 127.0.0.1 is in use"

@@ -5,15 +5,12 @@ off, the truth exactly); ODOMETRY carries its covariance over real UDP."""
 from __future__ import annotations
 
 import math
-import subprocess
 import time
 
 import numpy as np
 import pytest
 
 from benchmarks.estimator import fly_mission
-from gcs_tools.client import VehicleClient
-from gcs_tools.demo import free_udp_port
 from quadsitl import frames
 from quadsitl.flight_software.group import VehicleGroup
 from quadsitl.flight_software.params import ParamError
@@ -23,7 +20,7 @@ from quadsitl.simulator.snapshot import Snapshot
 from quadsitl.simulator.telemetry_pose import build_odometry
 from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.state import WireState
-from tests.conftest import cli, wait_until_listening
+from tests.conftest import sim_with_client
 
 
 def _errors(v: Vehicle) -> tuple[float, float]:
@@ -137,17 +134,7 @@ def test_a_mission_flown_on_the_estimate_is_accurate():
 
 
 def test_odometry_over_udp_carries_the_estimate_and_its_covariance():
-    port = free_udp_port()
-    process = subprocess.Popen(
-        cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --logs none --speed 5 --estimator ekf"),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    wait_until_listening(process, port)
-    client = VehicleClient(f"udpout:127.0.0.1:{port}")
-    try:
-        client.connect(timeout=30)
+    with sim_with_client("--logs none --speed 5 --estimator ekf") as (client, _):
         client.command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_ODOMETRY, 1e5)
         got = []
         deadline = time.monotonic() + 60
@@ -156,10 +143,6 @@ def test_odometry_over_udp_carries_the_estimate_and_its_covariance():
             msg = client.pump()
             if msg is not None and msg.get_type() == "ODOMETRY" and msg.time_usec > 1e6:
                 got.append(msg)
-    finally:
-        client.close()
-        process.terminate()
-        process.wait(10)
     diagonal = [0, 6, 11, 15, 18, 20]  # of the 6×6 upper triangles, row by row
     for m in got:
         assert m.estimator_type == mav.MAV_ESTIMATOR_TYPE_GPS_INS

@@ -28,7 +28,7 @@ from quadsitl.physics import PAPER
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS, TaskEngine, TaskOptions
 from quadsitl.tasks import features as F
-from tests.conftest import cli, run_cli, wait_until_listening
+from tests.conftest import run_cli, sim_with_client
 
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "policies" / "checkpoints"
 PARITY = 1e-5  # max abs difference of the actions, any two forms
@@ -263,30 +263,12 @@ def test_sim_flies_with_an_onnx_autopilot(tmp_path):
 def test_ground_station_mission_flown_by_an_exported_autopilot(form, tmp_path):
     """The demo mission (take-off, a 15 m square with a climb, land) as the checkpoint
     flies it (tests/test_policies.py)."""
-    from gcs_tools.client import VehicleClient
     from gcs_tools.scripted_flight import fly_mission
-    from quadsitl.wire.addresses import free_udp_port
 
     exported = export(CHECKPOINTS / "random_waypoint.pt", form, tmp_path)[0]
-    port = free_udp_port()
-    sim = subprocess.Popen(
-        cli(
-            f"sim --gcs udpin:127.0.0.1:{port} --api none --logs none --speed 4 --autopilot",
-            exported,
-        ),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    wait_until_listening(sim, port)
-    client = VehicleClient(f"udpout:127.0.0.1:{port}")
-    try:
-        client.connect(timeout=40)
+    options = "--logs none --speed 4 --autopilot"
+    with sim_with_client(options, exported, connect_timeout=40) as (client, _):
         report = fly_mission(client, timeout=60)
-    finally:
-        client.close()
-        sim.terminate()
-        sim.communicate(timeout=15)
     assert report.landed
     assert max(report.waypoint_errors) < 0.3
 

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 import re
-import subprocess
 
 import numpy as np
 import pytest
@@ -17,7 +16,7 @@ from gcs_tools.client import VehicleClient
 from quadsitl.perturbations.motor_faults import MotorFaults
 from quadsitl.physics import PAPER, Fleet
 from quadsitl.physics import layout as L
-from tests.conftest import cli, free_udp_port, refused_here
+from tests.conftest import refused_here, sim_with_client
 
 mav = mavutil.mavlink
 OMEGA = 250.0  # rad/s
@@ -139,16 +138,7 @@ def test_inject_failure_over_udp_stops_a_motor_and_the_vehicle_crashes():
     (front, plus layout) OFF is acknowledged: the front arm's thrust gone, the nose drops
     (pitch down, FRD), the vehicle flips and crashes (PX4's outcome on a quadrotor with
     default parameters), disarmed."""
-    port = free_udp_port()
-    process = subprocess.Popen(
-        cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --speed 2 --logs none"),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    client = VehicleClient(f"udpout:127.0.0.1:{port}")
-    try:
-        client.connect(timeout=60)
+    with sim_with_client("--speed 2 --logs none", connect_timeout=60) as (client, sim):
         result, text = _inject(client, mav.FAILURE_UNIT_SYSTEM_MOTOR, mav.FAILURE_TYPE_OFF, 1)
         assert result == mav.MAV_RESULT_DENIED and "SYS_FAILURE_EN" in text
         client.param_types["SYS_FAILURE_EN"] = mav.MAV_PARAM_TYPE_INT32
@@ -168,11 +158,7 @@ def test_inject_failure_over_udp_stops_a_motor_and_the_vehicle_crashes():
         assert nose_down is not None
         client.wait(lambda: any("crashed" in t for t in client.texts), 30, "the crash")
         client.wait(lambda: not client.armed, 10, "disarmed")
-    finally:
-        client.close()
-        process.terminate()
-        out = process.communicate(timeout=20)[0]
-    assert "Traceback" not in out
+    assert "Traceback" not in sim.output
 
 
 def test_inject_failure_over_udp_turns_the_gps_off_and_sticks_the_barometer():
@@ -180,17 +166,8 @@ def test_inject_failure_over_udp_turns_the_gps_off_and_sticks_the_barometer():
     satellites and SYS_STATUS calls the GPS unhealthy; OK brings the fix back. The
     barometer STUCK keeps reporting one pressure while the vehicle climbs; a second
     barometer does not exist; GARBAGE is not simulated."""
-    port = free_udp_port()
-    process = subprocess.Popen(
-        cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --speed 2 --logs none"),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    client = VehicleClient(f"udpout:127.0.0.1:{port}")
     gps_bit = mav.MAV_SYS_STATUS_SENSOR_GPS
-    try:
-        client.connect(timeout=60)
+    with sim_with_client("--speed 2 --logs none", connect_timeout=60) as (client, sim):
         client.param_types["SYS_FAILURE_EN"] = mav.MAV_PARAM_TYPE_INT32
         assert client.set_param("SYS_FAILURE_EN", 1) == 1
         client.wait_message("GPS_RAW_INT", 10, lambda m: m.fix_type == 3)
@@ -220,11 +197,7 @@ def test_inject_failure_over_udp_turns_the_gps_off_and_sticks_the_barometer():
         client.wait(lambda: client.position_enu()[2] > 4.5, 60, "take-off")
         # 5 m higher: about 0.6 hPa less air, and a barometer that still reads the same
         assert client.wait_message("HIGHRES_IMU", 10).abs_pressure == stuck
-    finally:
-        client.close()
-        process.terminate()
-        out = process.communicate(timeout=20)[0]
-    assert "Traceback" not in out
+    assert "Traceback" not in sim.output
 
 
 def test_fail_motor_fits_a_weak_motor_from_power_on_and_a_reboot_keeps_it():

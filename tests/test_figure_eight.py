@@ -16,6 +16,7 @@ from quadsitl.flight_software.controller import CascadedController, Setpoint
 from quadsitl.physics import PAPER
 from quadsitl.physics import layout as L
 from quadsitl.tasks import figure_eight as FE
+from tests.conftest import step_as_singles
 
 ENV_ID = "QuadSITL/FigureEight-v0"
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
@@ -78,18 +79,8 @@ def test_vector_env_equals_single_envs():
     vector = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point")
     assert type(vector.unwrapped).__name__ == "FigureEightVectorEnv"
     singles = [gym.make(ENV_ID) for _ in range(3)]
-    obs, _ = vector.reset(seed=7)
-    for i, env in enumerate(singles):
-        np.testing.assert_array_equal(obs[i], env.reset(seed=7 + i)[0])
-    rng = np.random.default_rng(0)
-    for _ in range(40):
-        actions = rng.normal(0.0, 0.05, (3, 4)).astype(np.float32)
-        obs, reward, terminated, truncated, _ = vector.step(actions)
-        assert not (terminated | truncated).any()
-        for i, env in enumerate(singles):
-            single_obs, single_reward, *_ = env.step(actions[i])
-            np.testing.assert_array_equal(obs[i], single_obs)
-            assert reward[i] == single_reward
+    actions = np.random.default_rng(0).normal(0.0, 0.05, (40, 3, 4)).astype(np.float32)
+    step_as_singles(vector, singles, 7, actions)
 
 
 def _fly(track: bool, seed: int = 2) -> tuple[float, dict]:

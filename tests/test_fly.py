@@ -13,28 +13,18 @@ from gcs_tools.mission_file import read_mission
 from gcs_tools.scripted_flight import planned_path
 from quadsitl.geo import Home
 from quadsitl.wire.addresses import free_udp_port
-from tests.conftest import cli, refused_here, run_cli, wait_until_listening
+from tests.conftest import cli, refused_here, run_cli, running_sim, wait_until_listening
 
 MISSIONS = Path(__file__).resolve().parent.parent / "docs" / "missions"
 
 
 def test_a_qgroundcontrol_plan_flies_against_a_running_sim():
     port = free_udp_port()
-    sim = subprocess.Popen(
-        cli(f"sim --gcs none --api udpout:127.0.0.1:{port} --speed 8 --logs none"),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    wait_until_listening(sim)  # its udpout link
-    try:
+    with running_sim(f"sim --gcs none --api udpout:127.0.0.1:{port} --speed 8 --logs none") as sim:
         flown = run_cli(
             "fly", str(MISSIONS / "square.plan"), "--connect", f"udpin:127.0.0.1:{port}"
         )
-    finally:
-        sim.terminate()
-        sim_output = sim.communicate(timeout=15)[0]
-    assert flown.returncode == 0, flown.stdout + flown.stderr + sim_output
+    assert flown.returncode == 0, flown.stdout + flown.stderr + sim.output
     assert "flying 8 items" in flown.stdout
     errors = re.search(r"waypoint error \(closest approach\): ([\d., ]+) m", flown.stdout)
     assert errors is not None, flown.stdout
@@ -42,7 +32,7 @@ def test_a_qgroundcontrol_plan_flies_against_a_running_sim():
     assert len(closest) == 4 and max(closest) < 0.3  # take-off target and three waypoints
     assert "landed: True" in flown.stdout
     # the plan's camera items were taken as a payload-less vehicle takes them
-    assert "skipped (no payload)" in sim_output
+    assert "skipped (no payload)" in sim.output
 
 
 def test_fly_signs_for_a_vehicle_with_signing_on(tmp_path):

@@ -5,8 +5,8 @@ uploading a mission at once (one vehicle, and one of a fleet)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
-import subprocess
 import time
 from collections.abc import Iterator
 
@@ -19,7 +19,7 @@ import quadsitl
 from gcs_tools.demo import free_udp_port
 from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.param_values import decode_value, encode_raw
-from tests.conftest import cli, wait_until_listening
+from tests.conftest import SimRun, running_sim
 
 
 class Station:
@@ -97,39 +97,22 @@ class Station:
         self.conn.close()
 
 
-def _start(port: int, *options: str) -> subprocess.Popen[str]:
-    """A simulator whose only link listens on ``port``; returns once that is open."""
-    sim = subprocess.Popen(
-        cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --logs none --speed 4", *options),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    wait_until_listening(sim, port)
-    return sim
-
-
-def _stop(sim: subprocess.Popen[str]) -> str:
-    sim.terminate()
-    try:
-        out, _ = sim.communicate(timeout=10)
-    except subprocess.TimeoutExpired:
-        sim.kill()
-        out, _ = sim.communicate()
-    return out
+def _sim_on(port: int, *options: str) -> contextlib.AbstractContextManager[SimRun]:
+    """A simulator whose only link listens on ``port``, from when that is open."""
+    gcs = f"udpin:127.0.0.1:{port}"
+    return running_sim(f"sim --gcs {gcs} --api none --logs none --speed 4", *options, ports=(port,))
 
 
 @pytest.fixture
 def station() -> Iterator[Station]:
     port = free_udp_port()
-    sim = _start(port)
-    ground = Station(port, 250)
-    try:
-        ground.connect()
-        yield ground
-    finally:
-        ground.close()
-        _stop(sim)
+    with _sim_on(port):
+        ground = Station(port, 250)
+        try:
+            ground.connect()
+            yield ground
+        finally:
+            ground.close()
 
 
 def _fence_count(conn, kind: int = mav.MAV_MISSION_TYPE_FENCE) -> bytes:  # type: ignore[no-untyped-def]
@@ -226,48 +209,49 @@ def _item(conn, target: int, seq: int, north_m: float):  # type: ignore[no-untyp
 @pytest.mark.parametrize("vehicles", [1, 2])
 def test_a_second_upload_during_a_transfer_is_refused_busy_and_the_first_completes(vehicles):
     port = free_udp_port()
-    sim = _start(port, "--vehicles", str(vehicles))
-    target = vehicles  # the last vehicle of the fleet (system ids start at 1)
-    a, b = Station(port, 250), Station(port, 251)
-    try:
-        a.connect(target)
-        b.connect(target)
-        a.send(a.conn.mav.mission_count_encode(target, 1, 3, mav.MAV_MISSION_TYPE_MISSION))
-        request = a.mine("MISSION_REQUEST_INT", check=lambda m: m.get_srcSystem() == target)
-        assert request.seq == 0
-        a.send(_item(a.conn, target, 0, 10.0))
-        a.mine("MISSION_REQUEST_INT", check=lambda m: m.seq == 1 and m.get_srcSystem() == target)
-        # B starts its own upload in the middle of A's, and sends items anyway.
-        b.send(b.conn.mav.mission_count_encode(target, 1, 4, mav.MAV_MISSION_TYPE_MISSION))
-        refused = b.mine("MISSION_ACK", check=lambda m: m.get_srcSystem() == target)
-        assert refused.type == mav.MAV_MISSION_DENIED
-        for seq in range(4):
-            b.send(_item(b.conn, target, seq, 100.0 + seq))
-        # A's transfer goes on to the end.
-        for seq in (1, 2):
-            a.send(_item(a.conn, target, seq, 10.0 + 10 * seq))
-            if seq == 1:
-                a.mine("MISSION_REQUEST_INT", check=lambda m: m.seq == 2)
-        ack = a.mine("MISSION_ACK", check=lambda m: m.get_srcSystem() == target)
-        assert ack.type == mav.MAV_MISSION_ACCEPTED
-        # The vehicle holds A's mission, A's items only.
-        a.send(a.conn.mav.mission_request_list_encode(target, 1, mav.MAV_MISSION_TYPE_MISSION))
-        assert a.mine("MISSION_COUNT", check=lambda m: m.get_srcSystem() == target).count == 3
-        for seq in range(3):
-            request = a.conn.mav.mission_request_int_encode(
-                target, 1, seq, mav.MAV_MISSION_TYPE_MISSION
+    with _sim_on(port, "--vehicles", str(vehicles)) as sim:
+        target = vehicles  # the last vehicle of the fleet (system ids start at 1)
+        a, b = Station(port, 250), Station(port, 251)
+        try:
+            a.connect(target)
+            b.connect(target)
+            a.send(a.conn.mav.mission_count_encode(target, 1, 3, mav.MAV_MISSION_TYPE_MISSION))
+            request = a.mine("MISSION_REQUEST_INT", check=lambda m: m.get_srcSystem() == target)
+            assert request.seq == 0
+            a.send(_item(a.conn, target, 0, 10.0))
+            a.mine(
+                "MISSION_REQUEST_INT", check=lambda m: m.seq == 1 and m.get_srcSystem() == target
             )
-            a.send(request)
-            item = a.mine("MISSION_ITEM_INT", check=lambda m, s=seq: m.seq == s)
-            assert item.x == _item(a.conn, target, seq, 10.0 + 10 * seq).x
-        a.send(a.conn.mav.mission_ack_encode(target, 1, mav.MAV_MISSION_ACCEPTED))
-        # B, now that the vehicle is free, uploads its own.
-        b.send(b.conn.mav.mission_count_encode(target, 1, 1, mav.MAV_MISSION_TYPE_MISSION))
-        b.mine("MISSION_REQUEST_INT", check=lambda m: m.seq == 0)
-        b.send(_item(b.conn, target, 0, 50.0))
-        assert b.mine("MISSION_ACK").type == mav.MAV_MISSION_ACCEPTED
-    finally:
-        a.close()
-        b.close()
-        output = _stop(sim)
-    assert "busy" in output, output
+            # B starts its own upload in the middle of A's, and sends items anyway.
+            b.send(b.conn.mav.mission_count_encode(target, 1, 4, mav.MAV_MISSION_TYPE_MISSION))
+            refused = b.mine("MISSION_ACK", check=lambda m: m.get_srcSystem() == target)
+            assert refused.type == mav.MAV_MISSION_DENIED
+            for seq in range(4):
+                b.send(_item(b.conn, target, seq, 100.0 + seq))
+            # A's transfer goes on to the end.
+            for seq in (1, 2):
+                a.send(_item(a.conn, target, seq, 10.0 + 10 * seq))
+                if seq == 1:
+                    a.mine("MISSION_REQUEST_INT", check=lambda m: m.seq == 2)
+            ack = a.mine("MISSION_ACK", check=lambda m: m.get_srcSystem() == target)
+            assert ack.type == mav.MAV_MISSION_ACCEPTED
+            # The vehicle holds A's mission, A's items only.
+            a.send(a.conn.mav.mission_request_list_encode(target, 1, mav.MAV_MISSION_TYPE_MISSION))
+            assert a.mine("MISSION_COUNT", check=lambda m: m.get_srcSystem() == target).count == 3
+            for seq in range(3):
+                request = a.conn.mav.mission_request_int_encode(
+                    target, 1, seq, mav.MAV_MISSION_TYPE_MISSION
+                )
+                a.send(request)
+                item = a.mine("MISSION_ITEM_INT", check=lambda m, s=seq: m.seq == s)
+                assert item.x == _item(a.conn, target, seq, 10.0 + 10 * seq).x
+            a.send(a.conn.mav.mission_ack_encode(target, 1, mav.MAV_MISSION_ACCEPTED))
+            # B, now that the vehicle is free, uploads its own.
+            b.send(b.conn.mav.mission_count_encode(target, 1, 1, mav.MAV_MISSION_TYPE_MISSION))
+            b.mine("MISSION_REQUEST_INT", check=lambda m: m.seq == 0)
+            b.send(_item(b.conn, target, 0, 50.0))
+            assert b.mine("MISSION_ACK").type == mav.MAV_MISSION_ACCEPTED
+        finally:
+            a.close()
+            b.close()
+    assert "busy" in sim.output, sim.output

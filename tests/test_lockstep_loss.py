@@ -18,7 +18,7 @@ from quadsitl.physics import PAPER, Fleet
 from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.lockstep import RESET_STATE
 from quadsitl.wire.state import WireState
-from tests.conftest import OBS_TOLERANCE, MotorSim, fly_both
+from tests.conftest import MotorSim, fly_both, reset_both
 
 RATES = ["--physics-rate", "100", "--control-rate", "20", "--gcs", "none", "--api", "none"]
 
@@ -45,11 +45,8 @@ def test_ten_percent_loss_both_ways_changes_nothing_but_the_resend_count(fleet_s
             **kwargs,
         )
         try:
-            a, _ = local.reset(seed=2)
-            b, _ = remote.reset(seed=2)
-            np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
-            rng = np.random.default_rng(0)
-            fly_both(local, remote, rng, 150, 0.3)
+            reset_both(local, remote, seed=2)
+            fly_both(local, remote, np.random.default_rng(0), 150, 0.3)
             client = remote.unwrapped.backend.clients[0]
             assert relay.dropped > 20  # the relay did lose datagrams ...
             assert client.resent > 10  # ... the client resent, and nothing went wrong
@@ -174,11 +171,8 @@ def test_a_signed_fleet_matches_in_process():
         init_position_noise=0.3,
     )
     try:
-        a, _ = local.reset(seed=5)
-        b, _ = remote.reset(seed=5)
-        np.testing.assert_allclose(b, a, atol=OBS_TOLERANCE)
-        rng = np.random.default_rng(2)
-        fly_both(local, remote, rng, 30, 0.1)
+        reset_both(local, remote, seed=5)
+        fly_both(local, remote, np.random.default_rng(2), 30, 0.1)
         assert remote.unwrapped.backend.clients[0].signing
     finally:
         local.close()

@@ -11,9 +11,8 @@ import numpy as np
 from pymavlink.dialects.v10 import common as mavlink1
 from pymavlink.dialects.v20 import common as mavlink2
 
-from gcs_tools.client import VehicleClient
 from quadsitl.wire.dialect import mavlink as mav
-from tests.conftest import start_sim
+from tests.conftest import sim_with_client
 
 HOLD_SECONDS = 2.0  # s of simulated time the height is watched after the attack
 
@@ -77,11 +76,8 @@ def _bad_frames(datagrams: list[bytes]) -> int:
 
 
 def test_fuzzed_vehicle_keeps_flying(tmp_path):
-    running = start_sim(str(tmp_path), speed=2.0)
-    process, port = running.process, running.port
-    client = VehicleClient(f"udpout:127.0.0.1:{port}")
-    try:
-        client.connect(timeout=30)
+    with sim_with_client("--speed 2 --logs", tmp_path) as (client, sim):
+        process, (port,) = sim.process, sim.ports
         client.arm()
         client.takeoff(3.0)
         client.wait(lambda: client.position_enu()[2] > 2.9, 20, "take-off")
@@ -116,7 +112,4 @@ def test_fuzzed_vehicle_keeps_flying(tmp_path):
             status.errors_comm,
             expected,
         )
-    finally:
-        client.close()
-        output = running.stop()
-    assert "Traceback" not in output and process.returncode == 0
+    assert "Traceback" not in sim.output and process.returncode == 0

@@ -21,7 +21,7 @@ from policies import checkpoint
 from quadsitl.simulator.runner import SimConfig, Simulator
 from quadsitl.simulator.tlog import TlogWriter
 from quadsitl.wire.dialect import mavlink as mav
-from tests.conftest import cli, interrupt, refused_here, wait_until_listening
+from tests.conftest import cli, interrupt, refused_here, sim_with_client
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "checkpoints" / "hover.pt"
@@ -148,17 +148,7 @@ def test_a_full_disk_stops_the_log_not_the_flight(tmp_path, capsys):
 
 def test_a_log_folder_that_disappears_stops_the_log_not_the_vehicle(tmp_path):
     logs = tmp_path / "logs"
-    port = free_udp_port()
-    process = subprocess.Popen(
-        cli("sim --gcs", f"udpin:127.0.0.1:{port}", "--api", "none", "--logs", str(logs)),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    wait_until_listening(process, port)
-    client = VehicleClient(f"udpout:127.0.0.1:{port}")
-    try:
-        client.connect(timeout=30)
+    with sim_with_client("--logs", logs, stderr=subprocess.PIPE) as (client, sim):
         for log in logs.iterdir():
             log.unlink()
         logs.rmdir()
@@ -166,10 +156,8 @@ def test_a_log_folder_that_disappears_stops_the_log_not_the_vehicle(tmp_path):
         client.arm()
         client.takeoff(2.0)
         client.wait(lambda: client.position_enu()[2] > 1.5, 30, "the take-off")
-    finally:
-        client.close()
-        _out, err = interrupt(process)
-    assert process.returncode == 0 and "was deleted" in err
+        _out, err = interrupt(sim.process)
+    assert sim.process.returncode == 0 and "was deleted" in err
 
 
 # --- 11. the smaller ones ---------------------------------------------------------------

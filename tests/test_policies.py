@@ -10,7 +10,6 @@ import pickle
 import re
 import shlex
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +25,7 @@ from policies.rollout import compute_gae, make_vector_env
 from policies.train import train
 from quadsitl.physics import PAPER
 from quadsitl.physics import layout as L
-from tests.conftest import cli, refused_here, run_cli, wait_until_listening
+from tests.conftest import refused_here, run_cli, sim_with_client
 
 CHECKPOINTS = Path(__file__).resolve().parents[1] / "policies" / "checkpoints"
 
@@ -223,22 +222,19 @@ def test_a_diverging_run_stops_and_keeps_the_last_good_checkpoint(tmp_path, monk
     assert all(torch.isfinite(p).all() for p in net.parameters())
 
 
+def _train(options: str, runs: Path, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    """``quadsitl train OPTIONS --preset fast --steps 8192 --runs RUNS`` to completion,
+    output captured: a short run of the command as a user types it."""
+    words = [*options.split(), "--preset", "fast", "--steps", "8192", "--runs", str(runs)]
+    return run_cli("train", *words, timeout=timeout)
+
+
 def test_train_and_eval_commands(tmp_path):
-    run = subprocess.run(
-        cli("train --task land --algo gae --preset fast --steps 8192 --quiet --runs", tmp_path),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    run = _train("--task land --algo gae --quiet", tmp_path)
     assert run.returncode == 0, run.stderr
     ckpt = tmp_path / "land-gae-fast-seed0" / "checkpoints" / "last.pt"
     assert (tmp_path / "land-gae-fast-seed0" / "config.json").is_file()
-    out = subprocess.run(
-        [sys.executable, "-m", "quadsitl.cli", "eval", str(ckpt), "--episodes", "5"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    out = run_cli("eval", str(ckpt), "--episodes", "5")
     assert out.returncode == 0, out.stderr
     assert "touchdown speed" in out.stdout and "success_rate: " in out.stdout
     bad = refused_here("train", "--task", "hover", "--algo", "ddpg")
@@ -349,41 +345,19 @@ def test_waypoint_policy_flies_a_whole_mission_as_autopilot():
 
 
 def test_ground_station_mission_flown_by_the_policy_autopilot(tmp_path):
-    from gcs_tools.client import VehicleClient
     from gcs_tools.scripted_flight import fly_mission
-    from quadsitl.wire.addresses import free_udp_port
 
-    port = free_udp_port()
-    sim = subprocess.Popen(
-        cli(
-            f"sim --gcs udpin:127.0.0.1:{port} --api none --logs none --speed 4 --autopilot",
-            CHECKPOINTS / "random_waypoint.pt",
-        ),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    wait_until_listening(sim, port)
-    client = VehicleClient(f"udpout:127.0.0.1:{port}")
-    try:
-        client.connect(timeout=40)
+    options = "--logs none --speed 4 --autopilot"
+    checkpoint = CHECKPOINTS / "random_waypoint.pt"
+    with sim_with_client(options, checkpoint, connect_timeout=40) as (client, _):
         report = fly_mission(client, timeout=60)  # take-off, 15 m square with a climb, land
-    finally:
-        client.close()
-        sim.terminate()
-        sim.communicate(timeout=15)
     assert report.landed
     assert max(report.waypoint_errors) < 0.3
 
 
 # --- the command line's small print -------------------------------------------------------
 def test_train_shows_an_eta_and_ends_naming_best_pt_and_the_command_to_run_next(tmp_path):
-    run = subprocess.run(
-        cli("train --task hover --algo ppo --preset fast --steps 8192 --runs", tmp_path),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    run = _train("--task hover --algo ppo", tmp_path)
     assert run.returncode == 0, run.stderr
     assert re.search(r"ETA \d+:\d\d", run.stderr), run.stderr  # the progress bar's
     best = tmp_path / "hover-ppo-fast-seed0" / "checkpoints" / "best.pt"
@@ -393,12 +367,7 @@ def test_train_shows_an_eta_and_ends_naming_best_pt_and_the_command_to_run_next(
     words = shlex.split(command.removeprefix("next: "))
     assert words[:2] == ["quadsitl", "eval"] and words[2] == str(best)
     # the printed command runs as printed (five episodes, to be quick)
-    evaluated = subprocess.run(
-        [sys.executable, "-m", "quadsitl.cli", *words[1:], "--episodes", "5"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    evaluated = run_cli(*words[1:], "--episodes", "5")
     assert evaluated.returncode == 0, evaluated.stderr
     # hover's success is an outcome named timed_out: the output says so
     outcomes = next(line for line in evaluated.stdout.splitlines() if line.startswith("outcomes"))
@@ -463,12 +432,7 @@ def _unwritable_folder(tmp_path: Path) -> Path:
 
 def test_training_into_an_unwritable_folder_is_one_line_before_any_work(tmp_path):
     runs = _unwritable_folder(tmp_path) / "runs"
-    result = subprocess.run(
-        cli("train --task hover --algo ppo --preset fast --steps 8192 --quiet --runs", runs),
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    result = _train("--task hover --algo ppo --quiet", runs, timeout=60)
     assert result.returncode == 2, result.stderr
     assert result.stderr.startswith("quadsitl train: error: cannot write the run to "), (
         result.stderr

@@ -20,7 +20,7 @@ from quadsitl.physics import PAPER
 from quadsitl.physics import layout as L
 from quadsitl.tasks import features as F
 from quadsitl.wire.addresses import free_udp_port
-from tests.conftest import cli, run_cli, wait_until_listening
+from tests.conftest import run_cli, running_sim
 
 HOVER = checkpoint.SHIPPED / "hover.pt"
 
@@ -117,19 +117,9 @@ def _fly(
     mission: Path, sim_args: str, *fly_args: str
 ) -> tuple[subprocess.CompletedProcess[str], str]:
     port = free_udp_port()
-    sim = subprocess.Popen(
-        cli(f"sim --gcs none --api udpout:127.0.0.1:{port} --logs none {sim_args}"),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    wait_until_listening(sim)  # its udpout link
-    try:
+    with running_sim(f"sim --gcs none --api udpout:127.0.0.1:{port} --logs none {sim_args}") as sim:
         flown = run_cli("fly", str(mission), "--connect", f"udpin:127.0.0.1:{port}", *fly_args)
-    finally:
-        sim.terminate()
-        sim_output = sim.communicate(timeout=15)[0]
-    return flown, sim_output
+    return flown, sim.output
 
 
 def test_shipped_hover_policy_flies_legs_longer_than_its_training_range(tmp_path):

@@ -4,10 +4,7 @@ fleets, a PX4 that disconnects and comes back, and bad input."""
 
 from __future__ import annotations
 
-import os
 import socket
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -24,30 +21,14 @@ from quadsitl.physics.fleet import Fleet
 from quadsitl.physics.wind import Gust, Wind
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.dialect import mavlink as mav
-from tests.conftest import refused_here
-from tests.test_ardupilot_udp import START_TIMEOUT, Sim
+from tests import test_ardupilot_udp as ardupilot_udp
+from tests.conftest import refused_here, run_cli
+from tests.test_ardupilot_udp import Sim, flight_stack_sim
 
 
 def free_port_base(vehicles: int) -> int:
     """A base port whose instance ports (base + i) are free for TCP now."""
-    while True:
-        with socket.socket() as probe:
-            probe.bind(("127.0.0.1", 0))
-            base = probe.getsockname()[1]
-        if base + vehicles > 65535:
-            continue
-        held = []
-        try:
-            for i in range(vehicles):
-                s = socket.socket()
-                held.append(s)
-                s.bind(("127.0.0.1", base + i))
-            return base
-        except OSError:
-            continue
-        finally:
-            for s in held:
-                s.close()
+    return ardupilot_udp.free_port_base(vehicles, step=1, kind=socket.SOCK_STREAM)
 
 
 @contextmanager
@@ -56,29 +37,8 @@ def running_sim(
 ) -> Iterator[tuple[Sim, int]]:
     """``quadsitl sim --flight-stack px4`` on free ports, until the block ends."""
     port = port or free_port_base(vehicles)
-    command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", "px4"]
-    command += ["--flight-stack-port", str(port), "--vehicles", str(vehicles), *options]
-    process = subprocess.Popen(
-        command,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    assert process.stdout is not None
-    deadline = time.monotonic() + START_TIMEOUT
-    banner = []
-    while time.monotonic() < deadline and f"vehicle {vehicles - 1}:" not in "".join(banner):
-        line = process.stdout.readline()
-        if not line:
-            raise AssertionError(f"the simulator exited: {process.stderr.read()}")  # type: ignore[union-attr]
-        banner.append(line)
-    sim = Sim(process)
-    try:
+    with flight_stack_sim("px4", port, *options, vehicles=vehicles) as sim:
         yield sim, port
-    finally:
-        process.terminate()
-        process.wait(timeout=30)
 
 
 def hover(fake: FakePx4, airframe: str, seconds: float, altitude: float = 2.0) -> list[float]:
@@ -175,9 +135,7 @@ def test_a_port_in_use_is_a_one_line_error_naming_it() -> None:
         holder.bind(("127.0.0.1", 0))
         holder.listen(1)
         port = holder.getsockname()[1]
-        command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", "px4"]
-        command += ["--flight-stack-port", str(port)]
-        result = subprocess.run(command, capture_output=True, text=True, timeout=120)
+        result = run_cli("sim", "--flight-stack", "px4", "--flight-stack-port", str(port))
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
         f"quadsitl sim: error: TCP port {port} (PX4 instance 0) on 127.0.0.1 is in use"

@@ -276,6 +276,21 @@ def test_replay_of_a_large_log_shows_progress(flight_log, tmp_path, capsys, monk
     assert len(percents) >= 3 and percents == sorted(percents) and percents[-1] == 100
 
 
+def _run_sim(
+    options: str, *args: object, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
+    """``quadsitl sim --gcs udpin:127.0.0.1:0 --api none OPTIONS ARGS`` (as :func:`cli`
+    reads them) to its end within a minute, output captured; ``env``, when given, is
+    its whole environment."""
+    return subprocess.run(
+        cli(f"sim --gcs udpin:127.0.0.1:0 --api none {options}", *args),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+    )
+
+
 def free_tcp_port() -> int:
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
@@ -339,13 +354,7 @@ def test_web_viewer_on_a_busy_port_is_a_one_line_error(tmp_path):
         busy.listen()
         env = dict(os.environ, QUADSITL_WEB_PORT=str(busy.getsockname()[1]))
         env["QUADSITL_GRPC_PORT"] = str(free_tcp_port())
-        result = subprocess.run(
-            cli("sim --gcs udpin:127.0.0.1:0 --api none --logs none --rerun-web --duration 5"),
-            capture_output=True,
-            text=True,
-            timeout=60,
-            env=env,
-        )
+        result = _run_sim("--logs none --rerun-web --duration 5", env=env)
     assert result.returncode == 2
     assert result.stderr.startswith("quadsitl sim: error: the Rerun web viewer cannot listen")
     assert len(result.stderr.splitlines()) == 1
@@ -417,12 +426,7 @@ def test_web_viewer_in_a_real_browser(tmp_path):
 
 def test_sim_streams_itself_to_a_recording(tmp_path):
     out = tmp_path / "sim.rrd"
-    result = subprocess.run(
-        cli("sim --gcs udpin:127.0.0.1:0 --api none --logs none --duration 2 --rerun-save", out),
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    result = _run_sim("--logs none --duration 2 --rerun-save", out)
     assert result.returncode == 0, result.stderr
     rows = rows_per_entity(out)
     assert rows["/world/vehicle"] >= 2 * 30  # pose at 30 Hz for 2 s
@@ -465,15 +469,7 @@ def test_the_wind_shows_live_and_in_the_replay(tmp_path):
     arrow at the vehicle pointing east, the way a west wind blows; the .tlog's WIND_COV
     replays as the same panel and arrow."""
     out = tmp_path / "sim.rrd"
-    result = subprocess.run(
-        cli(
-            "sim --gcs udpin:127.0.0.1:0 --api none --duration 3 --wind 6,270",
-            "--logs", tmp_path, "--rerun-save", out,
-        ),
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )  # fmt: skip
+    result = _run_sim("--duration 3 --wind 6,270 --logs", tmp_path, "--rerun-save", out)
     assert result.returncode == 0, result.stderr
     replayed = tmp_path / "replay.rrd"
     convert(next(tmp_path.glob("*.tlog")), replayed)
@@ -488,13 +484,7 @@ def test_the_wind_shows_live_and_in_the_replay(tmp_path):
 def test_sim_rerun_without_a_display_says_so_in_one_plain_line(tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     env["QUADSITL_RERUN_DIR"] = str(tmp_path)
-    result = subprocess.run(
-        cli("sim --gcs udpin:127.0.0.1:0 --api none --logs none --duration 1 --rerun"),
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env=env,
-    )
+    result = _run_sim("--logs none --duration 1 --rerun", env=env)
     assert result.returncode == 0, result.stderr
     notice = [line for line in result.stderr.splitlines() if "Rerun" in line]
     assert len(notice) == 1, result.stderr

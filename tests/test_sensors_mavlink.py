@@ -5,18 +5,15 @@ SCALED_PRESSURE and GPS_RAW_INT with noisy, plausible values, and exact ones wit
 from __future__ import annotations
 
 import math
-import subprocess
 import time
 
 import numpy as np
 import pytest
 
-from gcs_tools.client import VehicleClient
-from gcs_tools.demo import free_udp_port
 from quadsitl.geo import Home
 from quadsitl.physics.sensors import environment as E
 from quadsitl.wire.dialect import mavlink as mav
-from tests.conftest import cli, wait_until_listening
+from tests.conftest import sim_with_client
 
 HOME = Home()
 PRESSURE_AT_REST = float(E.isa_pressure(np.array([HOME.altitude]))[0]) / 100  # hPa
@@ -25,21 +22,7 @@ PRESSURE_AT_REST = float(E.isa_pressure(np.array([HOME.altitude]))[0]) / 100  # 
 def _collect(noise: float) -> dict[str, list]:
     """40 HIGHRES_IMU, 20 SCALED_PRESSURE and 10 GPS_RAW_INT (from the first fix on) of a
     vehicle at rest."""
-    port = free_udp_port()
-    process = subprocess.Popen(
-        cli(
-            f"sim --gcs udpin:127.0.0.1:{port} --api none --logs none --speed 5",
-            "--sensor-noise",
-            noise,
-        ),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    wait_until_listening(process, port)
-    client = VehicleClient(f"udpout:127.0.0.1:{port}")
-    try:
-        client.connect(timeout=30)
+    with sim_with_client("--logs none --speed 5 --sensor-noise", noise) as (client, _):
         for message_id, hz in (
             (mav.MAVLINK_MSG_ID_HIGHRES_IMU, 50.0),
             (mav.MAVLINK_MSG_ID_SCALED_PRESSURE, 25.0),
@@ -68,10 +51,6 @@ def _collect(noise: float) -> dict[str, list]:
             assert time.monotonic() < deadline, f"timed out waiting for the sensor messages: {got}"
             file(client.pump())
         return got
-    finally:
-        client.close()
-        process.terminate()
-        process.wait(10)
 
 
 def test_sim_sends_noisy_plausible_sensor_messages():

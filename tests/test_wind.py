@@ -451,22 +451,9 @@ def _hover_lean(*options: str) -> tuple[np.ndarray, str]:
     """Take off to 2 m in ``quadsitl sim OPTIONS`` (through MAVLink) and hold for three
     simulated seconds; the mean horizontal part of the thrust direction over the hold
     (north, east: the sine of the lean towards each), and the console."""
-    import subprocess
+    from tests.conftest import sim_with_client
 
-    from gcs_tools.client import VehicleClient
-    from tests.conftest import cli, free_udp_port, wait_until_listening
-
-    port = free_udp_port()
-    process = subprocess.Popen(
-        cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --speed 4 --logs none", *options),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    wait_until_listening(process, port)
-    client = VehicleClient(f"udpout:127.0.0.1:{port}")
-    try:
-        client.connect(timeout=60)
+    with sim_with_client("--speed 4 --logs none", *options, connect_timeout=60) as (client, sim):
         client.arm()
         client.takeoff(2.0)
         client.wait(lambda: client.position_enu()[2] > 1.9, 60, "take-off")
@@ -480,11 +467,7 @@ def _hover_lean(*options: str) -> tuple[np.ndarray, str]:
             leans.append((north, east))
             if q.time_boot_ms - first > 3000:
                 break
-    finally:
-        client.close()
-        process.terminate()
-        out = process.communicate(timeout=20)[0]
-    return np.mean(leans, axis=0), out
+    return np.mean(leans, axis=0), sim.output
 
 
 def test_sim_flies_in_the_wind_it_is_given():
@@ -505,25 +488,10 @@ def test_ground_station_sees_and_sets_the_weather():
     turbulence's variance); a ground station that sets SIM_WIND_SPD to 0 and
     SIM_WIND_TURB to 0 in flight calms the air, and VFR_HUD's airspeed then equals the
     speed over the ground (horizontal and climb)."""
-    import subprocess
+    from tests.conftest import sim_with_client
 
-    from gcs_tools.client import VehicleClient
-    from tests.conftest import cli, free_udp_port, wait_until_listening
-
-    port = free_udp_port()
-    process = subprocess.Popen(
-        cli(
-            f"sim --gcs udpin:127.0.0.1:{port} --api none --speed 4 --logs none",
-            "--wind", "5,270", "--turbulence", "moderate",
-        ),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )  # fmt: skip
-    wait_until_listening(process, port)
-    client = VehicleClient(f"udpout:127.0.0.1:{port}")
-    try:
-        client.connect(timeout=60)
+    options = "--speed 4 --logs none --wind 5,270 --turbulence moderate"
+    with sim_with_client(options, connect_timeout=60) as (client, _):
         params = client.get_params(timeout=30)
         assert params["SIM_WIND_SPD"] == 5 and params["SIM_WIND_DIR"] == 270
         moderate_sigma_w = 0.1 * D.SEVERITY_W20_KT["moderate"] * D.KNOT
@@ -548,10 +516,6 @@ def test_ground_station_sees_and_sets_the_weather():
         assert any(t.startswith("wind 0 m/s from 270 deg") for t in client.texts), client.texts
         hud = client.wait_message("VFR_HUD", timeout=10)
         assert hud.airspeed == pytest.approx(math.hypot(hud.groundspeed, hud.climb), abs=1e-4)
-    finally:
-        client.close()
-        process.terminate()
-        process.communicate(timeout=20)
 
 
 @pytest.mark.slow
