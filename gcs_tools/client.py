@@ -183,21 +183,37 @@ class VehicleClient:
 
     # --- commands ---------------------------------------------------------------------
     def command(
-        self, command: int, *params: float, timeout: float = 3.0, check: bool = True
+        self,
+        command: int,
+        *params: float,
+        timeout: float = 10.0,
+        check: bool = True,
+        resend: float = 1.0,
     ) -> int:
-        """COMMAND_LONG and wait for its COMMAND_ACK; returns the MAV_RESULT."""
+        """COMMAND_LONG and wait for its COMMAND_ACK; returns the MAV_RESULT. Sent again
+        every ``resend`` s without an answer (its ``confirmation`` counting the resends,
+        as the command protocol asks) until ``timeout`` s have passed: a simulator on a
+        busy machine can take more than a second to answer."""
         values = list(params) + [0.0] * (7 - len(params))
-        for _attempt in range(3):
-            self.conn.mav.command_long_send(self.target, 1, command, 0, *values)
+        deadline = time.monotonic() + timeout
+        confirmation = 0
+        while True:
+            self.conn.mav.command_long_send(self.target, 1, command, confirmation, *values)
+            wait = max(0.0, min(resend, deadline - time.monotonic()))
             try:
-                ack = self.wait_message("COMMAND_ACK", timeout / 3, lambda m: m.command == command)
+                ack = self.wait_message("COMMAND_ACK", wait, lambda m: m.command == command)
             except ClientError:
+                if time.monotonic() >= deadline:
+                    raise ClientError(
+                        f"no COMMAND_ACK for command {command} within {timeout:g} s "
+                        f"({confirmation + 1} sent)"
+                    ) from None
+                confirmation = min(confirmation + 1, 255)
                 continue
             if check and ack.result != mav.MAV_RESULT_ACCEPTED:
                 last = self.texts[-1] if self.texts else ""
                 raise ClientError(f"command {command} refused (result {ack.result}): {last}")
             return int(ack.result)
-        raise ClientError(f"no COMMAND_ACK for command {command}")
 
     def arm(self) -> None:
         self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1)
