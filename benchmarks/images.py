@@ -33,7 +33,12 @@ sys.path.insert(0, str(ROOT))
 from benchmarks.headless_viewer import HeadlessViewer  # noqa: E402
 from benchmarks.replay import synthesise  # noqa: E402
 from gcs_tools.client import VehicleClient, mav  # noqa: E402
-from gcs_tools.demo import run_demo, start_simulator, stop_simulator  # noqa: E402
+from gcs_tools.demo import (  # noqa: E402
+    connect_while_starting,
+    run_demo,
+    start_simulator,
+    stop_simulator,
+)
 from gcs_tools.replay import convert  # noqa: E402
 from gcs_tools.scripted_flight import Waypoint, mission_items  # noqa: E402
 from quadsitl.wire.addresses import free_udp_port  # noqa: E402
@@ -82,7 +87,7 @@ def fleet_recording(folder: Path) -> Path:
     ]
     try:
         for client, up in zip(clients, FLEET_HEIGHTS, strict=True):
-            client.connect(timeout=60)
+            connect_while_starting(client, sim)
             client.drain()
             side = up / 2  # m
             square = ((0, 0), (side, 0), (side, side), (0, side), (0, 0))

@@ -41,6 +41,39 @@ def stop_simulator(process: subprocess.Popen[str], timeout: float = 10.0) -> str
     return process.stdout.read() if process.stdout else ""
 
 
+START_LIMIT = 600.0  # s: a hang guard on a simulator that lives but never speaks
+HEARD_WITHIN = 10.0  # s: how often the wait for its heartbeat starts again
+
+
+def connect_while_starting(
+    client: VehicleClient, sim: subprocess.Popen[str], limit: float = START_LIMIT
+) -> None:
+    """Wait for the heartbeat of the simulator ``sim`` as long as it is alive and
+    starting: its first start on a machine compiles the physics (numba's cache), which
+    takes minutes on a busy machine, and it speaks only once that is done. Raises
+    ClientError when it ends first (its exit code), or after ``limit`` s."""
+    deadline = time.monotonic() + limit
+    told = False
+    while True:
+        try:
+            client.connect(timeout=HEARD_WITHIN)
+            return
+        except ClientError:
+            if sim.poll() is not None:
+                raise ClientError(
+                    f"the simulator ended while starting (exit code {sim.returncode})"
+                ) from None
+            if time.monotonic() > deadline:
+                raise ClientError(f"no heartbeat from the simulator within {limit:g} s") from None
+            if not told:
+                print(
+                    "quadsitl demo: the simulator is still starting (a first start compiles "
+                    "the physics: minutes on a busy machine)...",
+                    flush=True,
+                )
+                told = True
+
+
 def run_demo(speed: float = 4.0, logs: str = "logs", sim_args: tuple[str, ...] = ()) -> int:
     """``sim_args``: more options of ``quadsitl sim`` (the weather: ``--wind 5,270``)."""
     port = free_udp_port()
@@ -50,7 +83,7 @@ def run_demo(speed: float = 4.0, logs: str = "logs", sim_args: tuple[str, ...] =
     client = VehicleClient(f"udpin:127.0.0.1:{port}")
     started = time.monotonic()
     try:
-        client.connect(timeout=30)
+        connect_while_starting(client, sim)
         print(f"quadsitl demo: connected to the simulator (speed x{speed:g}); flying a mission:")
         print(
             "  take-off to 5 m, waypoints "

@@ -1,7 +1,8 @@
 """A simulator process's start: the backend, and the tests' own simulators
 (tests/conftest.py: wait_until_listening), wait as long as a live simulator takes to
 open its links (a loaded machine stretches imports and kernel loads past any fixed
-deadline), then for its heartbeats; a simulator that dies while starting is named."""
+deadline), then for its heartbeats; a simulator that dies while starting is named. The
+demo (gcs_tools/demo.py) likewise waits for its simulator's heartbeat while it lives."""
 
 from __future__ import annotations
 
@@ -16,6 +17,8 @@ import numpy as np
 import pytest
 
 import quadsitl  # noqa: F401  (registers the envs)
+from gcs_tools import demo
+from gcs_tools.client import ClientError, VehicleClient
 from quadsitl.envs import mavlink_backend
 from quadsitl.envs.sim_process import SimProcess, udp_port_bound
 from quadsitl.wire.dialect import mavlink
@@ -138,3 +141,36 @@ def test_a_simulator_that_never_opens_its_link_is_killed_and_fails(monkeypatch):
     with pytest.raises(pytest.fail.Exception, match="did not open its links within 1 s"):
         wait_until_listening(process, port)
     assert process.returncode == -signal.SIGKILL
+
+
+# --- the demo's simulator (gcs_tools/demo.py) ------------------------------------------
+def test_the_demo_waits_for_a_simulator_slower_to_start_than_its_heartbeat_wait(monkeypatch):
+    # Before, the demo gave up after 30 s without a heartbeat ("no heartbeat from system
+    # 1"), though the simulator was alive, compiling: here 0.5 s against a 3 s stall.
+    monkeypatch.setattr(demo, "HEARD_WITHIN", 0.5)
+    port = free_udp_port()
+    client = VehicleClient(f"udpin:127.0.0.1:{port}")
+    process, resume = _stalled(f"--api udpout:127.0.0.1:{port} --gcs none --speed 4")
+    try:
+        demo.connect_while_starting(client, process)
+        assert client.latest["HEARTBEAT"] is not None
+    finally:
+        resume.cancel()
+        client.close()
+        conftest.stop_process(process)
+
+
+def test_the_demo_names_a_simulator_that_ends_while_starting():
+    client = VehicleClient(f"udpin:127.0.0.1:{free_udp_port()}")
+    process = subprocess.Popen(
+        cli("sim --logs none --airframe no-such-airframe"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        with pytest.raises(ClientError, match=r"ended while starting \(exit code 2\)"):
+            demo.connect_while_starting(client, process, limit=120)
+    finally:
+        client.close()
+        conftest.stop_process(process)
