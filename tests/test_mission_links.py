@@ -23,8 +23,8 @@ from pymavlink import mavutil
 from gcs_tools.demo import free_udp_port
 from quadsitl.simulator.links import Link
 from quadsitl.wire.dialect import mavlink as mav
-from tests.conftest import cli, wait_until_listening
-from tests.test_ground_station_wire import _item, _stop
+from tests.conftest import cli, stop_process, wait_until_listening
+from tests.test_ground_station_wire import _item
 
 GCS_IDS = (255, 190)  # what QGroundControl and MAVProxy use by default
 TIMEOUT = 15.0  # s to wait for one answer (a loaded machine); never reached when right
@@ -147,7 +147,7 @@ def setup(request: pytest.FixtureRequest) -> Iterator[Setup]:
     try:
         yield Setup(sim, ports, target)
     finally:
-        _stop(sim)
+        stop_process(sim)
 
 
 def _pair(setup: Setup) -> tuple[Uploader, Uploader]:
