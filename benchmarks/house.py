@@ -5,6 +5,8 @@
   (target 3: its module, the task list and its env classes' statements);
 * ``house_largest_file_lines``: lines of the largest module of quadsitl/, policies/ and
   gcs_tools/ (target ≤ 400);
+* ``house_longest_function_lines``: lines of the longest function (nested ones counted
+  inside theirs too), each over the target printed (target ≤ 80);
 * ``house_import_cycles``: import cycles between modules, ``TYPE_CHECKING`` imports
   included (target 0), each printed;
 * ``house_rotor_speed_conversions``: places where a motor command in [0, 1] is turned
@@ -149,6 +151,17 @@ def suite_seconds() -> float:
         spin.kill()
 
 
+def function_lengths() -> list[tuple[int, str]]:
+    """(lines, ``file:line name``) of every function of the packages, longest first."""
+    found = []
+    for path in modules().values():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = (node.end_lineno or node.lineno) - node.lineno + 1
+                found.append((lines, f"{path.relative_to(ROOT)}:{node.lineno} {node.name}"))
+    return sorted(found, reverse=True)
+
+
 def report(name: str, value: float, target: str, ok: bool, details: list[str] = ()) -> None:
     print(f"{name}: {value:g} (target {target}, {'meets' if ok else 'MISSES'})")
     for line in details:
@@ -164,6 +177,9 @@ def main() -> None:
     big = sorted(sizes, key=sizes.get, reverse=True)
     over = [f"{p.relative_to(ROOT)}: {sizes[p]}" for p in big if sizes[p] > 400]
     report("house_largest_file_lines", sizes[big[0]], "≤ 400", sizes[big[0]] <= 400, over)
+    lengths = function_lengths()
+    long = [f"{where}: {lines}" for lines, where in lengths if lines > 80]
+    report("house_longest_function_lines", lengths[0][0], "≤ 80", lengths[0][0] <= 80, long)
     cycles = import_cycles()
     report("house_import_cycles", len(cycles), "0", not cycles, [" ".join(c) for c in cycles])
     conversions = lines_matching(CONVERSION, NOT_CONVERSIONS)
