@@ -135,7 +135,7 @@ def half_versine(u):  # pragma: no cover - compiled
 def fill_normals(rng, out, m, B):  # pragma: no cover - compiled
     """N_NORMALS standard normals per vehicle into rows of ``out``: Box-Muller on one
     splitmix64 draw per pair, its high 32 bits for the radius, its low 32 for the angle
-    (as :func:`quadsitl.physics.wind_streams.normal_pair`)."""
+    (as :func:`quadsitl.physics.wind.normal_pair`)."""
     for pair in range(N_NORMALS // 2):
         a, b = (2 * pair) * B, (2 * pair + 1) * B
         for j in range(m):  # the integer part: draw, split into two uniforms
