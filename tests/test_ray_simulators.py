@@ -87,8 +87,9 @@ def test_simulators_on_the_second_node_fly_as_in_process_and_survive_a_lost_acto
     assert addresses and all(_released(address) for address in addresses)  # close stopped them
 
 
-def _released(address: tuple[str, int], wait: float = 10.0) -> bool:
-    """Whether the UDP port a simulator listened on is free again within ``wait`` s."""
+def _released(address: tuple[str, int], wait: float = 120.0) -> bool:
+    """Whether the UDP port a simulator listened on is free again within ``wait`` s (a
+    hang guard: a loaded machine is slow to end a process)."""
     deadline = time.monotonic() + wait
     while True:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:

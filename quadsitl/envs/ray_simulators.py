@@ -17,12 +17,16 @@ from __future__ import annotations
 import contextlib
 import os
 import socket
+import sys
 from typing import Any
 
 from quadsitl.envs.sim_process import SimProcess
 from quadsitl.lockstep_client.motor_client import SimulatorError
 
-PLACE_TIMEOUT = 60.0  # s for Ray to place an actor and its simulator to start
+PLACE_LIMIT = 600.0  # s for Ray to place the actors and their simulators to start: a hang
+# guard only (a loaded two-core machine took minutes to start Ray's workers); a cluster
+# with too few CPUs in all is said at once
+SLOW_PLACE = 60.0  # s after which a placement still under way is said, once
 CALL_TIMEOUT = 5.0  # s for an actor to answer a question about its simulator
 LOCAL = "local"  # ray=True: a Ray started here, or the cluster named by RAY_ADDRESS
 
@@ -106,19 +110,27 @@ class SimulatorHost:
 
 def place_simulators(commands: list[list[str]], env: dict[str, str]) -> list[RaySimulator]:
     """One simulator per list of ``quadsitl sim`` options, placed by Ray all at once
-    (they start in parallel); SimulatorError when Ray cannot place or start them."""
+    (they start in parallel); SimulatorError when Ray cannot place or start them: at
+    once when the cluster has fewer CPUs than simulators, else after PLACE_LIMIT s
+    (a slow start is waited for, and said after SLOW_PLACE s)."""
     ray = import_ray()
+    total = ray.cluster_resources().get("CPU", 0)
+    if total < len(commands):
+        raise SimulatorError(
+            f"the Ray cluster has {total:g} CPUs in all; {len(commands)} simulators need "
+            "1 each: put more vehicles in each simulator (vehicles_per_sim) or add nodes"
+        )
     actor_class = ray.remote(num_cpus=1, max_restarts=0)(SimulatorHost)
     actors = [
         actor_class.options(scheduling_strategy="SPREAD").remote(args, env) for args in commands
     ]
     try:
-        where = ray.get([actor.address.remote() for actor in actors], timeout=PLACE_TIMEOUT)
+        where = _wait_for_addresses(ray, actors)
     except ray.exceptions.GetTimeoutError:
         free = ray.available_resources().get("CPU", 0)
         error = SimulatorError(
-            f"Ray placed {len(actors)} simulators not within {PLACE_TIMEOUT:g} s (the "
-            f"cluster has {free:g} CPUs free; each simulator needs 1)"
+            f"Ray placed {len(actors)} simulators not within {PLACE_LIMIT:g} s (the "
+            f"cluster has {free:g} of {total:g} CPUs free; each simulator needs 1)"
         )
     except ray.exceptions.RayError as failure:
         error = SimulatorError(f"a Ray simulator actor failed to start: {failure}")
@@ -127,6 +139,22 @@ def place_simulators(commands: list[list[str]], env: dict[str, str]) -> list[Ray
     for actor in actors:
         ray.kill(actor)
     raise error
+
+
+def _wait_for_addresses(ray: Any, actors: list[Any]) -> list[tuple[str, int, str]]:
+    """Each actor's (host, port, node) once its simulator listens; says once on stderr
+    when that takes longer than SLOW_PLACE s; GetTimeoutError after PLACE_LIMIT s."""
+    pending = [actor.address.remote() for actor in actors]
+    try:
+        return ray.get(pending, timeout=SLOW_PLACE)
+    except ray.exceptions.GetTimeoutError:
+        print(
+            f"quadsitl: Ray is still placing or starting {len(actors)} simulators after "
+            f"{SLOW_PLACE:g} s (waiting up to {PLACE_LIMIT:g} s)",
+            file=sys.stderr,
+            flush=True,
+        )
+    return ray.get(pending, timeout=PLACE_LIMIT - SLOW_PLACE)
 
 
 class RaySimulator:

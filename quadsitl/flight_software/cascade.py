@@ -85,6 +85,9 @@ BRAKE_FRACTION = 0.5  # of MPC_ACC_HOR: the deceleration that ends the approach 
 # position setpoint (the rest is the velocity loop's margin; legs plan the same)
 
 _jit = numba.njit(cache=True, error_model="numpy")
+# Parts of rotor_command, inlined into it (numba IR): one machine code, as fast as when
+# it was written in one piece.
+_inline = numba.njit(cache=True, error_model="numpy", inline="always")
 
 
 @_jit
@@ -176,6 +179,118 @@ def _drive(target, omega, g, omega_max, out, i):  # pragma: no cover - compiled
     out[i] = _clamp(target + g[G_MOTOR_BOOST] * (target - omega), 0.0, omega_max)
 
 
+@_inline
+def _offboard_thrust(q, sp, g, m, rate_sp):  # pragma: no cover - compiled
+    """An offboard attitude and/or body-rate setpoint: the body rates it asks into
+    ``rate_sp``; the collective thrust (N) it asks."""
+    thrust_sp = 0.0 if math.isnan(sp[SP_THRUST]) else sp[SP_THRUST]
+    thrust = m[M_MAX_THRUST] * _clamp(thrust_sp, 0.0, 1.0)
+    if not math.isnan(sp[SP_ATT]):
+        a = SP_ATT
+        _attitude_loop(q, sp[a], sp[a + 1], sp[a + 2], sp[a + 3], g, rate_sp)
+        if not math.isnan(sp[SP_RATES]):
+            for k in range(3):
+                rate_sp[k] += sp[SP_RATES + k]
+    else:
+        for k in range(3):
+            rate_sp[k] = sp[SP_RATES + k]
+    return thrust
+
+
+@_inline
+def _velocity_setpoint(state, sp, g, v, accel_ff):  # pragma: no cover - compiled
+    """Position loop: velocity setpoint (m/s) into ``v`` and the acceleration fed forward
+    into ``accel_ff``, limited to the speed limits; the horizontal part on the
+    square-root law (approach_speed), so a far setpoint is reached at rest, braking
+    within the acceleration limit."""
+    for k in range(3):
+        v[k] = sp[SP_VEL + k]
+        accel_ff[k] = sp[SP_ACC + k]
+    if not math.isnan(sp[SP_POS]):
+        ex, ey = sp[SP_POS] - state[L.I_PX], sp[SP_POS + 1] - state[L.I_PY]
+        distance = math.hypot(ex, ey)
+        if distance > 0.0:
+            decel = BRAKE_FRACTION * g[G_MAX_ACCEL_XY]
+            speed = approach_speed(distance, g[G_POS_XY], decel)
+            ux, uy = ex / distance, ey / distance
+            v[0] += speed * ux
+            v[1] += speed * uy
+            closing = state[L.I_VX] * ux + state[L.I_VY] * uy
+            if speed < g[G_POS_XY] * distance and closing > 0.0:
+                # On the square-root curve: feed forward the deceleration that
+                # following it takes (d speed/dt at the current closing speed).
+                accel_ff[0] -= decel * closing / speed * ux
+                accel_ff[1] -= decel * closing / speed * uy
+        v[2] += g[G_POS_Z] * (sp[SP_POS + 2] - state[L.I_PZ])
+    max_xy = g[G_MAX_SPEED_XY]
+    if not math.isnan(sp[SP_MAX_XY]):
+        max_xy = min(sp[SP_MAX_XY], max_xy)
+    speed_xy = math.hypot(v[0], v[1])
+    if speed_xy > max_xy:
+        v[0] *= max_xy / speed_xy
+        v[1] *= max_xy / speed_xy
+    v[2] = _clamp(v[2], -g[G_MAX_SPEED_DOWN], g[G_MAX_SPEED_UP])
+
+
+@_inline
+def _acceleration(state, g, v, accel_ff, integral, dt, accel):  # pragma: no cover - compiled
+    """Velocity loop: acceleration setpoint (m/s²) into ``accel`` from a PI loop on the
+    velocity error; updates ``integral`` (anti-windup: not while saturated)."""
+    vel = state[L.VEL]
+    error = np.empty(3)
+    for k in range(3):
+        error[k] = v[k] - vel[k]
+        gain = g[G_VEL_XY] if k < 2 else g[G_VEL_Z]
+        accel[k] = accel_ff[k] + gain * error[k] + integral[k]
+    accel_xy = math.hypot(accel[0], accel[1])
+    if accel_xy > g[G_MAX_ACCEL_XY]:
+        accel[0] *= g[G_MAX_ACCEL_XY] / accel_xy
+        accel[1] *= g[G_MAX_ACCEL_XY] / accel_xy
+    for k in range(3):
+        if accel_xy <= g[G_MAX_ACCEL_XY]:  # anti-windup: not while saturated
+            gain_i = g[G_VEL_XY_I] if k < 2 else g[G_VEL_Z_I]
+            integral[k] += gain_i * error[k] * dt
+        integral[k] = _clamp(integral[k], -INTEGRAL_LIMIT, INTEGRAL_LIMIT)
+
+
+@_inline
+def _thrust_and_attitude(state, sp, g, m, accel, rate_sp):  # pragma: no cover - compiled
+    """The collective thrust (N) and the attitude that produce ``accel``, drag
+    compensated; the body rates the attitude loop asks into ``rate_sp``."""
+    q, vel = state[L.QUAT], state[L.VEL]
+    qw, qx, qy, qz = q[0], q[1], q[2], q[3]
+    mass, gravity = m[M_MASS], m[M_GRAVITY]
+    speed = math.sqrt(vel[0] ** 2 + vel[1] ** 2 + vel[2] ** 2)
+    f0 = mass * accel[0] + m[M_DRAG] * speed * vel[0]
+    f1 = mass * accel[1] + m[M_DRAG] * speed * vel[1]
+    f2 = mass * (accel[2] + gravity) + m[M_DRAG] * speed * vel[2]
+    f2 = max(f2, 0.1 * mass * gravity)
+    max_horizontal = f2 * math.tan(math.radians(g[G_MAX_TILT_DEG]))
+    horizontal = math.hypot(f0, f1)
+    if horizontal > max_horizontal:
+        f0 *= max_horizontal / horizontal
+        f1 *= max_horizontal / horizontal
+    norm = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+    z0, z1, z2 = f0 / norm, f1 / norm, f2 / norm
+    yaw = sp[SP_YAW]
+    if math.isnan(yaw):
+        yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+    h0, h1 = math.cos(yaw), math.sin(yaw)
+    y0, y1, y2 = -z2 * h1, z2 * h0, z0 * h1 - z1 * h0  # z_body × heading
+    norm = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+    y0, y1, y2 = y0 / norm, y1 / norm, y2 / norm
+    x0, x1, x2 = y1 * z2 - y2 * z1, y2 * z0 - y0 * z2, y0 * z1 - y1 * z0
+    dw, dx, dy, dz = _quat_from_axes(x0, x1, x2, y0, y1, y2, z0, z1, z2)
+    # Thrust along the current body z: a tilted vehicle gets what it can use.
+    up0 = 2 * (qw * qy + qx * qz)
+    up1 = 2 * (qy * qz - qw * qx)
+    up2 = 1 - 2 * (qx * qx + qy * qy)
+    thrust = _clamp(f0 * up0 + f1 * up1 + f2 * up2, 0.0, m[M_MAX_THRUST])
+    _attitude_loop(q, dw, dx, dy, dz, g, rate_sp)
+    rate_sp[2] += sp[SP_YAW_RATE]
+    return thrust
+
+
 @_jit
 def rotor_command(state, sp, g, m, integral, dt):  # pragma: no cover - compiled
     """(4,) rotor-speed commands (rad/s) for the vehicle ``state`` (one row of the
@@ -189,102 +304,15 @@ def rotor_command(state, sp, g, m, integral, dt):  # pragma: no cover - compiled
         for i in range(4):
             _drive(idle, rotors[i], g, m[M_OMEGA_MAX], out, i)
         return out
-    q = state[L.QUAT]
-    qw, qx, qy, qz = q[0], q[1], q[2], q[3]
     rate_sp = np.empty(3)
     if not (math.isnan(sp[SP_ATT]) and math.isnan(sp[SP_RATES])):  # offboard attitude
-        thrust_sp = 0.0 if math.isnan(sp[SP_THRUST]) else sp[SP_THRUST]
-        thrust = m[M_MAX_THRUST] * _clamp(thrust_sp, 0.0, 1.0)
-        if not math.isnan(sp[SP_ATT]):
-            a = SP_ATT
-            _attitude_loop(q, sp[a], sp[a + 1], sp[a + 2], sp[a + 3], g, rate_sp)
-            if not math.isnan(sp[SP_RATES]):
-                for k in range(3):
-                    rate_sp[k] += sp[SP_RATES + k]
-        else:
-            for k in range(3):
-                rate_sp[k] = sp[SP_RATES + k]
+        thrust = _offboard_thrust(state[L.QUAT], sp, g, m, rate_sp)
         integral[:] = 0.0
     else:
-        # Position loop: velocity setpoint (m/s), limited to the speed limits; the
-        # horizontal part on the square-root law (approach_speed), so a far setpoint
-        # is reached at rest, braking within the acceleration limit.
-        v = np.empty(3)
-        accel_ff = np.empty(3)
-        for k in range(3):
-            v[k] = sp[SP_VEL + k]
-            accel_ff[k] = sp[SP_ACC + k]
-        if not math.isnan(sp[SP_POS]):
-            ex, ey = sp[SP_POS] - state[L.I_PX], sp[SP_POS + 1] - state[L.I_PY]
-            distance = math.hypot(ex, ey)
-            if distance > 0.0:
-                decel = BRAKE_FRACTION * g[G_MAX_ACCEL_XY]
-                speed = approach_speed(distance, g[G_POS_XY], decel)
-                ux, uy = ex / distance, ey / distance
-                v[0] += speed * ux
-                v[1] += speed * uy
-                closing = state[L.I_VX] * ux + state[L.I_VY] * uy
-                if speed < g[G_POS_XY] * distance and closing > 0.0:
-                    # On the square-root curve: feed forward the deceleration that
-                    # following it takes (d speed/dt at the current closing speed).
-                    accel_ff[0] -= decel * closing / speed * ux
-                    accel_ff[1] -= decel * closing / speed * uy
-            v[2] += g[G_POS_Z] * (sp[SP_POS + 2] - state[L.I_PZ])
-        max_xy = g[G_MAX_SPEED_XY]
-        if not math.isnan(sp[SP_MAX_XY]):
-            max_xy = min(sp[SP_MAX_XY], max_xy)
-        speed_xy = math.hypot(v[0], v[1])
-        if speed_xy > max_xy:
-            v[0] *= max_xy / speed_xy
-            v[1] *= max_xy / speed_xy
-        v[2] = _clamp(v[2], -g[G_MAX_SPEED_DOWN], g[G_MAX_SPEED_UP])
-        # Velocity loop: acceleration setpoint (m/s²) from a PI loop.
-        vel = state[L.VEL]
-        accel = np.empty(3)
-        error = np.empty(3)
-        for k in range(3):
-            error[k] = v[k] - vel[k]
-            gain = g[G_VEL_XY] if k < 2 else g[G_VEL_Z]
-            accel[k] = accel_ff[k] + gain * error[k] + integral[k]
-        accel_xy = math.hypot(accel[0], accel[1])
-        if accel_xy > g[G_MAX_ACCEL_XY]:
-            accel[0] *= g[G_MAX_ACCEL_XY] / accel_xy
-            accel[1] *= g[G_MAX_ACCEL_XY] / accel_xy
-        for k in range(3):
-            if accel_xy <= g[G_MAX_ACCEL_XY]:  # anti-windup: not while saturated
-                gain_i = g[G_VEL_XY_I] if k < 2 else g[G_VEL_Z_I]
-                integral[k] += gain_i * error[k] * dt
-            integral[k] = _clamp(integral[k], -INTEGRAL_LIMIT, INTEGRAL_LIMIT)
-        # Thrust (N) and attitude that produce the acceleration, drag compensated.
-        mass, gravity = m[M_MASS], m[M_GRAVITY]
-        speed = math.sqrt(vel[0] ** 2 + vel[1] ** 2 + vel[2] ** 2)
-        f0 = mass * accel[0] + m[M_DRAG] * speed * vel[0]
-        f1 = mass * accel[1] + m[M_DRAG] * speed * vel[1]
-        f2 = mass * (accel[2] + gravity) + m[M_DRAG] * speed * vel[2]
-        f2 = max(f2, 0.1 * mass * gravity)
-        max_horizontal = f2 * math.tan(math.radians(g[G_MAX_TILT_DEG]))
-        horizontal = math.hypot(f0, f1)
-        if horizontal > max_horizontal:
-            f0 *= max_horizontal / horizontal
-            f1 *= max_horizontal / horizontal
-        norm = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
-        z0, z1, z2 = f0 / norm, f1 / norm, f2 / norm
-        yaw = sp[SP_YAW]
-        if math.isnan(yaw):
-            yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
-        h0, h1 = math.cos(yaw), math.sin(yaw)
-        y0, y1, y2 = -z2 * h1, z2 * h0, z0 * h1 - z1 * h0  # z_body × heading
-        norm = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
-        y0, y1, y2 = y0 / norm, y1 / norm, y2 / norm
-        x0, x1, x2 = y1 * z2 - y2 * z1, y2 * z0 - y0 * z2, y0 * z1 - y1 * z0
-        dw, dx, dy, dz = _quat_from_axes(x0, x1, x2, y0, y1, y2, z0, z1, z2)
-        # Thrust along the current body z: a tilted vehicle gets what it can use.
-        up0 = 2 * (qw * qy + qx * qz)
-        up1 = 2 * (qy * qz - qw * qx)
-        up2 = 1 - 2 * (qx * qx + qy * qy)
-        thrust = _clamp(f0 * up0 + f1 * up1 + f2 * up2, 0.0, m[M_MAX_THRUST])
-        _attitude_loop(q, dw, dx, dy, dz, g, rate_sp)
-        rate_sp[2] += sp[SP_YAW_RATE]
+        v, accel_ff, accel = np.empty(3), np.empty(3), np.empty(3)
+        _velocity_setpoint(state, sp, g, v, accel_ff)
+        _acceleration(state, g, v, accel_ff, integral, dt, accel)
+        thrust = _thrust_and_attitude(state, sp, g, m, accel, rate_sp)
     # Rate loop: body torque (N·m), P on the rate error plus the gyroscopic term.
     w = state[L.RATES]
     j0, j1, j2 = m[M_JXX], m[M_JYY], m[M_JZZ]

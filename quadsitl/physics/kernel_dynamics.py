@@ -52,12 +52,9 @@ def _rotor(rotor, cmd, thrust_factor, yaw_factor, rate, omega_max):  # pragma: n
 
 @_inline
 def derivative(s, p, cmd, out, m, sums, B, WIND):  # pragma: no cover - compiled
-    """ṡ of the first m vehicles of a block: s, p and cmd hold rows of B values; ``sums``
-    (SUMS_ROWS rows) is scratch for the rotor sums. The compile-time flag WIND builds the
-    world from what ``sums`` holds over the step: the air (rows AIR0..) and each rotor's
-    efficiency and ground effect (the factors of :func:`rotor_factors`); without it, the
-    still-air arithmetic of the paper, unchanged. Each loop runs over vehicles,
-    innermost, so that it is vectorised."""
+    """ṡ of the first m vehicles of a block (rows of B values; ``sums``: scratch for the
+    rotor sums). WIND builds the world from what ``sums`` holds over the step (the air,
+    each rotor's factors of :func:`rotor_factors`); without it, the paper's still air."""
     for j in range(m):  # the four rotors, written out: see _rotor
         rate, omega_max = p[L.P_MOTOR_RATE * B + j], p[L.P_OMEGA_MAX * B + j]
         r0, r1 = s[L.I_ROTOR0 * B + j], s[(L.I_ROTOR0 + 1) * B + j]
@@ -78,17 +75,12 @@ def derivative(s, p, cmd, out, m, sums, B, WIND):  # pragma: no cover - compiled
         out[L.I_ROTOR0 * B + j], out[(L.I_ROTOR0 + 1) * B + j] = lag0, lag1
         out[(L.I_ROTOR0 + 2) * B + j], out[(L.I_ROTOR0 + 3) * B + j] = lag2, lag3
         sums[THRUST * B + j] = t0 + t1 + t2 + t3
+        y, x = L.P_ROTOR_Y0 * B + j, L.P_ROTOR_X0 * B + j  # rotor i's arm: + i·B
         sums[ROLL_MOMENT * B + j] = (
-            p[L.P_ROTOR_Y0 * B + j] * t0
-            + p[(L.P_ROTOR_Y0 + 1) * B + j] * t1
-            + p[(L.P_ROTOR_Y0 + 2) * B + j] * t2
-            + p[(L.P_ROTOR_Y0 + 3) * B + j] * t3
+            p[y] * t0 + p[y + B] * t1 + p[y + 2 * B] * t2 + p[y + 3 * B] * t3
         )
         sums[PITCH_MOMENT * B + j] = (
-            p[L.P_ROTOR_X0 * B + j] * t0
-            + p[(L.P_ROTOR_X0 + 1) * B + j] * t1
-            + p[(L.P_ROTOR_X0 + 2) * B + j] * t2
-            + p[(L.P_ROTOR_X0 + 3) * B + j] * t3
+            p[x] * t0 + p[x + B] * t1 + p[x + 2 * B] * t2 + p[x + 3 * B] * t3
         )
         sums[YAW_SUM * B + j] = y0 + y1 + y2 + y3
     for j in range(m):
