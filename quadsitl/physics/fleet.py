@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from quadsitl.physics import kernel, reference, wind
+from quadsitl.physics import kernel, reference, wind, wind_streams
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe, get_airframe, hover_rotor_speed
 from quadsitl.physics.wind import Wind
@@ -97,7 +97,7 @@ class VehicleStates:
         self.stirred = np.zeros(self.n, bool)  # per vehicle: its Wind is not calm
         self.wind_params = np.stack([wind.CALM.to_params(_span(a)) for a in airframes])
         self.wind_state = np.zeros((self.n, L.N_WIND_STATE))
-        self.wind_streams = wind.seed_streams(0, self.n)
+        self.wind_streams = wind_streams.seed_streams(0, self.n)
 
     # --- named views of the state ---------------------------------------------------
     @property
@@ -235,9 +235,9 @@ class VehicleStates:
             if not all(isinstance(s, (int, np.integer)) and not isinstance(s, bool) for s in seeds):
                 raise ValueError(f"wind seed must be an integer, got {seed!r}")
             if one:
-                self.wind_streams[index] = wind.seed_streams(int(seeds[0]), self.n)[index]
+                self.wind_streams[index] = wind_streams.seed_streams(int(seeds[0]), self.n)[index]
             elif len(seeds) == len(index):
-                self.wind_streams[index] = wind.seed_stream_each(seeds)
+                self.wind_streams[index] = wind_streams.seed_stream_each(seeds)
             else:
                 raise ValueError(f"need one wind seed for each of the {len(index)} vehicles")
         if restart:

@@ -5,7 +5,7 @@ numba here has no vector math library: a call to ``log``, ``exp`` or ``cos`` in 
 over vehicles keeps it scalar. So ``ln`` and ``exp(−x)`` are written below as range
 reduction by selects, then a polynomial, to the last bit or two of float64, and the
 gust's half versine as a Taylor series. The random normals (Box-Muller on splitmix64
-draws, as :func:`quadsitl.physics.wind.normal_pair`) only need float32: their rounding,
+draws, as :func:`quadsitl.physics.wind_streams.normal_pair`) only need float32: their rounding,
 1e-7, is far below any statistic one could measure, and it halves their cost. Used by
 :mod:`quadsitl.physics.wind_kernel`, and tested with it against the reference
 (``tests/test_wind.py``).
@@ -130,7 +130,7 @@ def half_versine(u):  # pragma: no cover - compiled
 def fill_normals(rng, out, m, B):  # pragma: no cover - compiled
     """N_NORMALS standard normals per vehicle into rows of ``out``: Box-Muller on one
     splitmix64 draw per pair, its high 32 bits for the radius, its low 32 for the angle
-    (as :func:`quadsitl.physics.wind.normal_pair`)."""
+    (as :func:`quadsitl.physics.wind_streams.normal_pair`)."""
     for pair in range(N_NORMALS // 2):
         a, b = (2 * pair) * B, (2 * pair + 1) * B
         for j in range(m):  # the integer part: draw, split into two uniforms
