@@ -151,16 +151,20 @@ class FakePx4:
         """The next HIL_SENSOR (reading and keeping whatever comes before it)."""
         deadline = time.monotonic() + timeout
         while not self._pending:
-            self.sock.settimeout(max(0.001, deadline - time.monotonic()))
             try:
-                data = self.sock.recv(65536)
+                self.receive(max(0.001, deadline - time.monotonic()))
             except TimeoutError:
                 raise TimeoutError(f"no HIL_SENSOR within {timeout} s") from None
-            if not data:
-                raise ConnectionError("the simulator closed the connection")
-            for frame in self.reader.feed(data):
-                self._take(frame)
         return self._pending.pop(0)
+
+    def receive(self, timeout: float = 10.0) -> None:
+        """Take what the next read brings (waiting up to ``timeout`` s for it)."""
+        self.sock.settimeout(timeout)
+        data = self.sock.recv(65536)
+        if not data:
+            raise ConnectionError("the simulator closed the connection")
+        for frame in self.reader.feed(data):
+            self._take(frame)
 
     def poll(self) -> None:
         """Take whatever the simulator has sent so far, without waiting for more."""

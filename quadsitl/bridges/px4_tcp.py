@@ -103,6 +103,13 @@ class Px4TcpServer:
         self.listeners = open_ports(self.ports, bind, tcp=True, stack="PX4")
         self.connections: list[Connection | None] = [None] * physics.fleet.n
         self._clock = time.monotonic()  # wall s of the next round on the server's clock
+        # Wall s between the server's rounds while no PX4 leads (the first comes at once);
+        # an env that wants each episode reproducible waits longer for its autopilot.
+        self.wall_round_s = ROUND_US * 1e-6
+        # Lockstep rounds that reach this simulated time (µs) are not sent until
+        # release(): an env holds its autopilot at a step's end (None: never held).
+        self.hold_at_us: list[int | None] = [None] * physics.fleet.n
+        self._held: dict[int, bytes] = {}
 
     def serve(self, timeout: float = WAIT) -> int:
         """One turn of every connection: wait up to ``timeout`` s (none while frames wait
@@ -134,9 +141,13 @@ class Px4TcpServer:
             if current is not None and current.pending:
                 messages[index] = current.turn()
         replies = self.physics.answer(messages) if messages else {}
+        for index in list(replies):
+            hold = self.hold_at_us[index]
+            if hold is not None and self.physics.peers[index].time_us >= hold:
+                self._held[index] = self._held.get(index, b"") + replies.pop(index)
         waiting = self.physics.waiting_for_clock()
         if waiting and time.monotonic() >= self._clock:
-            self._clock = max(self._clock + ROUND_US * 1e-6, time.monotonic() - 0.1)
+            self._clock = max(self._clock + self.wall_round_s, time.monotonic() - 0.1)
             for index, data in self.physics.tick(waiting).items():
                 replies[index] = replies.get(index, b"") + data
         for index, data in replies.items():
@@ -144,6 +155,12 @@ class Px4TcpServer:
             if current is not None:
                 self._guard(index, current, partial(Connection.send, data=data))
         return sum(len(frames) for frames in messages.values())
+
+    def release(self, index: int) -> None:
+        """Send instance ``index`` the round held back (hold_at_us), if any."""
+        data, current = self._held.pop(index, b""), self.connections[index]
+        if data and current is not None:
+            self._guard(index, current, partial(Connection.send, data=data))
 
     def _receive(self, index: int, conn: Connection) -> None:
         """Read what instance ``index``'s PX4 sent into its frames waiting their turn."""
@@ -166,9 +183,12 @@ class Px4TcpServer:
             return
         if self.connections[index] is not None:
             self._drop(index, "a new connection replaces this one")
+        # The server's clock starts now for this vehicle (a clock left from before would
+        # catch up with a burst of rounds), or keeps the pace of those it already moves.
+        now, others = time.monotonic(), self.physics.waiting_for_clock()
         self.connections[index] = Connection(sock, address)
         self.physics.connect(index)
-        self._clock = min(self._clock, time.monotonic())
+        self._clock = min(self._clock, now) if others else now
         self.physics.notice(
             f"vehicle {index}: PX4 connected from {address[0]}:{address[1]} "
             f"(port {self.ports[index]}); its vehicle is at rest at home"
@@ -189,6 +209,7 @@ class Px4TcpServer:
         if conn is None:
             return
         self.connections[index] = None
+        self._held.pop(index, None)
         conn.sock.close()
         self.physics.disconnect(index)
         self.physics.notice(
