@@ -23,7 +23,7 @@ from gymnasium.vector import AutoresetMode
 from gcs_tools.client import VehicleClient
 from gcs_tools.demo import free_udp_port
 from quadsitl.envs.mavlink_backend import START_LIMIT, START_POLL
-from quadsitl.envs.sim_process import UDP_TABLES, udp_port_bound
+from quadsitl.envs.sim_process import UDP_TABLES, terminate, udp_port_bound
 from quadsitl.lockstep_client.motor_client import MotorClient, SimulatorError
 
 # The signing timestamps that simulators keep across restarts go to this session's own
@@ -230,13 +230,7 @@ class RunningSim:
 
     def stop(self) -> str:
         """SIGTERM, wait, return the combined output."""
-        if self.process.poll() is None:
-            self.process.terminate()
-            try:
-                self.process.wait(10)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
+        terminate(self.process, 10.0)
         return self.process.stdout.read() if self.process.stdout else ""
 
 

@@ -38,6 +38,7 @@ from quadsitl.physics import get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.simulator import offboard
 from quadsitl.wire.dialect import mavlink as mav
+from quadsitl.wire.udp_messages import pending_messages
 
 LINK_PORT = 14580  # PX4 instance i listens on 14580 + i ...
 PEER_PORT = 14540  # ... and sends to 14540 + i (px4-rc.mavlink, the onboard link)
@@ -152,13 +153,8 @@ class FakeOffboardPx4:
 
     # --- the MAVLink link -----------------------------------------------------------
     def _read_link(self, now: int) -> None:
-        while True:
-            try:
-                data = self.link.recv(65536)
-            except (BlockingIOError, InterruptedError):
-                return
-            for msg in self.mav.parse_buffer(data) or []:
-                self._handle(msg, now)
+        for msg in pending_messages(self.link, self.mav):
+            self._handle(msg, now)
 
     def _handle(self, msg: object, now: int) -> None:
         kind = msg.get_type()  # type: ignore[attr-defined]

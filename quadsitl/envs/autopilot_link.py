@@ -19,6 +19,7 @@ import socket
 import subprocess
 import sys
 import time
+import weakref
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,8 +29,10 @@ from quadsitl import frames
 from quadsitl.bridges.fake_offboard_px4 import LINK_PORT, PEER_PORT
 from quadsitl.bridges.px4_hil import PORT, ROUND_US, HilPhysics
 from quadsitl.bridges.px4_tcp import Px4TcpServer
+from quadsitl.envs.sim_process import terminate
 from quadsitl.physics.fleet import Fleet
 from quadsitl.wire.dialect import mavlink as mav
+from quadsitl.wire.udp_messages import pending_messages
 
 HANG_GUARD_S = 120.0  # wall s an autopilot may take to answer before it is called stalled
 ESTIMATE_WAIT_S = 1.0  # wall s to wait for the estimate of a step's end (then the last one)
@@ -97,6 +100,8 @@ class AutopilotLink:
         before = self.physics.peers[0]  # a connection makes a new one
         self.server.hold_at_us[0] = 0  # its rounds wait for advance() from the first
         self.process = subprocess.Popen(filled, stdin=subprocess.DEVNULL)
+        # ended with the link, or at exit if the env was never closed
+        self._finalizer = weakref.finalize(self, terminate, self.process, 10.0)
         self.estimate = Estimate()
         deadline = time.monotonic() + HANG_GUARD_S
         while self.physics.peers[0] is before or not self.physics.peers[0].lockstep:
@@ -117,13 +122,8 @@ class AutopilotLink:
         self.start()
 
     def stop_process(self) -> None:
-        if self.process is not None and self.process.poll() is None:
-            self.process.terminate()
-            try:
-                self.process.wait(10)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
+        if self.process is not None:
+            self._finalizer()
 
     def close(self) -> None:
         self.stop_process()
@@ -175,13 +175,8 @@ class AutopilotLink:
 
     def read(self) -> None:
         """Take what the autopilot sent so far."""
-        while True:
-            try:
-                data = self.link.recv(65536)
-            except (BlockingIOError, InterruptedError):
-                return
-            for msg in self.mav.parse_buffer(data) or []:
-                self._take(msg)
+        for msg in pending_messages(self.link, self.mav):
+            self._take(msg)
 
     def read_until(self, time_ms: int, wait_s: float = ESTIMATE_WAIT_S) -> None:
         """Read until the estimate is stamped ``time_ms`` or later (the autopilot sends

@@ -66,11 +66,12 @@ class _Spawner:
 _SPAWNER = _Spawner()
 
 
-def _terminate(process: subprocess.Popen[bytes]) -> None:
+def terminate(process: subprocess.Popen, wait: float = 5.0) -> None:
+    """End ``process``: SIGTERM, then SIGKILL if it has not ended within ``wait`` s."""
     if process.poll() is None:
         process.terminate()
         try:
-            process.wait(5)
+            process.wait(wait)
         except subprocess.TimeoutExpired:
             process.kill()
             process.wait()
@@ -111,7 +112,7 @@ class SimProcess:
             env={**os.environ, **(env or {})},
             preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
         )
-        self._finalizer = weakref.finalize(self, _terminate, self.process)
+        self._finalizer = weakref.finalize(self, terminate, self.process)
         atexit.register(self._finalizer)
 
     @property
