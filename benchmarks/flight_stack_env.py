@@ -1,5 +1,5 @@
 """Training through a flight stack: :class:`~quadsitl.envs.offboard_env.OffboardEnv`
-flying the in-repository fake PX4 (:mod:`quadsitl.bridges.fake_offboard_px4`, a process
+flying the in-repository fake PX4 (:mod:`quadsitl.fake_stacks.offboard_px4`, a process
 speaking PX4's 250 Hz simulator_mavlink and its onboard MAVLink link) in lockstep.
 
 Reports

@@ -1,28 +1,49 @@
 """The env that trains through a flight stack (PX4 offboard), against the in-repository
-fake PX4 (:mod:`quadsitl.bridges.fake_offboard_px4`): a real process on real sockets,
+fake PX4 (:mod:`quadsitl.fake_stacks.offboard_px4`): a real process on real sockets,
 in lockstep with the env."""
 
 from __future__ import annotations
 
+import itertools
 import math
+import os
+import socket
 
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
 from quadsitl import frames
-from quadsitl.bridges.fake_offboard_px4 import MAIN_MODE_OFFBOARD, MAIN_MODE_POSCTL, custom_mode
 from quadsitl.envs import setpoints
 from quadsitl.envs.autopilot_link import AutopilotError
 from quadsitl.envs.offboard_env import OffboardEnv
+from quadsitl.fake_stacks.offboard_px4 import MAIN_MODE_OFFBOARD, MAIN_MODE_POSCTL, custom_mode
 from quadsitl.physics import get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.simulator import offboard
 from quadsitl.wire.dialect import mavlink as mav
 
-# One worker for them all, on ports no other test uses (PX4 instance 37: 4597, 14577, 14617).
+# Each env a PX4 instance whose ports are free now (TCP 4560 + i, UDP 14540 + i and
+# 14580 + i). Instances 37..76 keep the two UDP ranges apart (i and i + 40 would share
+# one); each pytest-xdist worker takes ten of them, in turn.
 pytestmark = pytest.mark.xdist_group("offboard")
-INSTANCE = 37
+_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw") or 0) % 4
+INSTANCES = itertools.cycle(range(37 + 10 * _WORKER, 47 + 10 * _WORKER))
+
+
+def free_instance() -> int:
+    for _, instance in zip(range(100), INSTANCES, strict=False):
+        try:
+            for kind, port in ((socket.SOCK_STREAM, 4560), (socket.SOCK_DGRAM, 14540),
+                               (socket.SOCK_DGRAM, 14580)):  # fmt: skip
+                with socket.socket(socket.AF_INET, kind) as probe:
+                    probe.bind(("127.0.0.1", port + instance))
+        except OSError:
+            continue
+        return instance
+    raise AssertionError("no PX4 instance with free ports")
+
+
 PERIOD = 0.02  # s: the default 50 Hz
 
 
@@ -31,7 +52,7 @@ def make_env():
     made: list[OffboardEnv] = []
 
     def make(**kwargs) -> OffboardEnv:
-        env = OffboardEnv(instance=INSTANCE, **kwargs)
+        env = OffboardEnv(instance=free_instance(), **kwargs)
         made.append(env)
         return env
 

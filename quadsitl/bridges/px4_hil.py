@@ -49,6 +49,8 @@ from quadsitl.wire.units import STANDARD_GRAVITY, rotor_speed
 
 PORT = 4560  # TCP port of instance 0 (PX4's simulator_mavlink default); instance i: + i
 ROUND_US = 4_000  # µs of physics per lockstep round: PX4's 250 Hz IMU (IMU_INTEG_RATE)
+LINK_PORT = 14580  # PX4 instance i listens for its onboard MAVLink link on 14580 + i ...
+PEER_PORT = 14540  # ... and sends to 14540 + i (px4-rc.mavlink)
 PHYSICS_SUBSTEPS = 4  # 1 ms physics steps per round
 # HIL_SENSOR.fields_updated, as SimulatorMavlink.hpp's SensorSource tests them.
 FIELDS_ACCEL = 0b111

@@ -26,8 +26,7 @@ from typing import Any
 import numpy as np
 
 from quadsitl import frames
-from quadsitl.bridges.fake_offboard_px4 import LINK_PORT, PEER_PORT
-from quadsitl.bridges.px4_hil import PORT, ROUND_US, HilPhysics
+from quadsitl.bridges.px4_hil import LINK_PORT, PEER_PORT, PORT, ROUND_US, HilPhysics
 from quadsitl.bridges.px4_tcp import Px4TcpServer
 from quadsitl.envs.sim_process import terminate
 from quadsitl.physics.fleet import Fleet
@@ -218,8 +217,8 @@ class AutopilotLink:
 
 
 def fake_px4_command(airframe: str = "iris") -> list[str]:
-    """The in-repository fake (:mod:`quadsitl.bridges.fake_offboard_px4`) as a process."""
-    module = "quadsitl.bridges.fake_offboard_px4"
+    """The in-repository fake (:mod:`quadsitl.fake_stacks.offboard_px4`) as a process."""
+    module = "quadsitl.fake_stacks.offboard_px4"
     return [sys.executable, "-m", module, "-i", "{instance}", "--port", "{port}",
             "--airframe", airframe]  # fmt: skip
 

@@ -32,7 +32,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from quadsitl import frames
-from quadsitl.bridges.fake_offboard_px4 import MAIN_MODE_OFFBOARD, custom_mode
 from quadsitl.bridges.px4_hil import ROUND_US
 from quadsitl.envs import setpoints
 from quadsitl.envs.autopilot_link import AutopilotError, AutopilotLink, fake_px4_command
@@ -40,6 +39,7 @@ from quadsitl.physics import get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
 from quadsitl.tasks.engine import OUTCOME_NAME_ARRAY
+from quadsitl.wire.modes import MAIN_OFFBOARD, Mode
 
 ALTITUDE = 5.0  # m above the ground: the task's origin (the vehicle takes off to it)
 RESET_LIMIT_S = 30.0  # simulated s a reset may fly before it starts the episode anyway
@@ -114,7 +114,7 @@ class OffboardFleet:
     def _offboard(self) -> None:
         """Armed and in OFFBOARD, holding where it is (a stream of setpoints first)."""
         e = self.link.estimate
-        if e.armed and e.custom_mode == custom_mode(MAIN_MODE_OFFBOARD):
+        if e.armed and e.custom_mode == Mode.OFFBOARD.custom_mode:
             return
         here = self.physical.state[0, L.POS] - self.link.local_origin
         for _ in range(math.ceil(STREAM_FIRST_S / self.control_period)):
@@ -122,7 +122,7 @@ class OffboardFleet:
             self.link.advance(self.control_period)
         mode = self.link.command(
             setpoints.mav.MAV_CMD_DO_SET_MODE,
-            setpoints.mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, MAIN_MODE_OFFBOARD,
+            setpoints.mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, MAIN_OFFBOARD,
         )  # fmt: skip
         arm = self.link.command(setpoints.mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
         accepted = setpoints.mav.MAV_RESULT_ACCEPTED
@@ -143,7 +143,7 @@ class OffboardEnv(gym.Env):
     """Task ``task`` flown through PX4 (offboard) at action level ``action_level``
     (``"velocity"``, ``"attitude"`` or ``"rates"``). ``autopilot``: the command that
     starts PX4 instance ``instance`` (``{port}`` and ``{instance}`` are filled in;
-    None: the in-repository fake, :mod:`quadsitl.bridges.fake_offboard_px4`).
+    None: the in-repository fake, :mod:`quadsitl.fake_stacks.offboard_px4`).
     ``control_rate``: env steps per simulated second. Other keyword arguments are the
     task's options (e.g. ``init_position_noise``)."""
 

@@ -18,7 +18,7 @@ What it does as PX4 does (its "Offboard Mode" docs, ``px4-rc.mavlink``):
   time, and it holds where it is (position control), saying so in a STATUSTEXT.
 
 Its estimate is the truth it is sent (HIL_STATE_QUATERNION every round): a fake has no
-EKF. Run it as ``python -m quadsitl.bridges.fake_offboard_px4 -i 0``.
+EKF. Run it as ``python -m quadsitl.fake_stacks.offboard_px4 -i 0``.
 """
 
 from __future__ import annotations
@@ -31,27 +31,25 @@ import numpy as np
 
 from quadsitl import frames
 from quadsitl.bridges.fake_px4 import FakePx4, HilState, kinematics
-from quadsitl.bridges.px4_hil import PORT, ROUND_US
+from quadsitl.bridges.px4_hil import LINK_PORT, PEER_PORT, PORT, ROUND_US
 from quadsitl.flight_software.controller import CascadedController, Setpoint
 from quadsitl.geo import Home
 from quadsitl.physics import get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.simulator import offboard
 from quadsitl.wire.dialect import mavlink as mav
+from quadsitl.wire.modes import MAIN_OFFBOARD, MAIN_POSCTL, Mode
 from quadsitl.wire.udp_messages import pending_messages
 
-LINK_PORT = 14580  # PX4 instance i listens on 14580 + i ...
-PEER_PORT = 14540  # ... and sends to 14540 + i (px4-rc.mavlink, the onboard link)
 OFFBOARD_LOSS_S = 1.0  # COM_OF_LOSS_T's default
 HEARTBEAT_S = 1.0
-# PX4's custom_mode: main mode in bits 16..23 (px4_custom_mode.h)
-MAIN_MODE_POSCTL, MAIN_MODE_OFFBOARD = 3, 6
+MAIN_MODE_POSCTL, MAIN_MODE_OFFBOARD = MAIN_POSCTL, MAIN_OFFBOARD  # PX4's main modes
 SYSTEM_ID = 1
 _LEVEL = np.eye(1, L.STATE_SIZE, L.QUAT.start)[0]  # a state row at rest, level
 
 
 def custom_mode(main_mode: int) -> int:
-    return main_mode << 16
+    return Mode.from_custom(main_mode).custom_mode
 
 
 class FakeOffboardPx4:
