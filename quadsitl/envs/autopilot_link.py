@@ -14,7 +14,6 @@ autopilot as a companion computer does, over its onboard MAVLink link (UDP: PX4 
 from __future__ import annotations
 
 import contextlib
-import math
 import socket
 import subprocess
 import sys
@@ -221,7 +220,3 @@ def fake_px4_command(airframe: str = "iris") -> list[str]:
     module = "quadsitl.fake_stacks.offboard_px4"
     return [sys.executable, "-m", module, "-i", "{instance}", "--port", "{port}",
             "--airframe", airframe]  # fmt: skip
-
-
-def is_finite(values: tuple[float, ...]) -> bool:
-    return all(math.isfinite(v) for v in values)

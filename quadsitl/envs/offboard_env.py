@@ -39,6 +39,7 @@ from quadsitl.physics import get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
 from quadsitl.tasks.engine import OUTCOME_NAME_ARRAY
+from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.modes import MAIN_OFFBOARD, Mode
 
 ALTITUDE = 5.0  # m above the ground: the task's origin (the vehicle takes off to it)
@@ -121,11 +122,11 @@ class OffboardFleet:
             self.link.send(setpoints.position_message(self.link.mav, here, 0.0, self._ms()))
             self.link.advance(self.control_period)
         mode = self.link.command(
-            setpoints.mav.MAV_CMD_DO_SET_MODE,
-            setpoints.mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, MAIN_OFFBOARD,
+            mav.MAV_CMD_DO_SET_MODE,
+            mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, MAIN_OFFBOARD,
         )  # fmt: skip
-        arm = self.link.command(setpoints.mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
-        accepted = setpoints.mav.MAV_RESULT_ACCEPTED
+        arm = self.link.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+        accepted = mav.MAV_RESULT_ACCEPTED
         if mode != accepted or arm != accepted:
             raise AutopilotError(f"the autopilot refused offboard ({mode}) or arming ({arm})")
 
