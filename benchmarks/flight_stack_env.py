@@ -1,13 +1,17 @@
 """Training through a flight stack: :class:`~quadsitl.envs.offboard_env.OffboardEnv`
-flying the in-repository fake PX4 (:mod:`quadsitl.fake_stacks.offboard_px4`, a process
-speaking PX4's 250 Hz simulator_mavlink and its onboard MAVLink link) in lockstep.
+and :class:`~quadsitl.envs.offboard_vector.OffboardVectorEnv` flying the in-repository
+fake PX4 (:mod:`quadsitl.fake_stacks.offboard_px4`, a process per instance speaking
+PX4's 250 Hz simulator_mavlink and its onboard MAVLink link) in lockstep.
 
 Reports
 
 * ``flight_stack_env_steps_per_s``: env steps per wall second, one instance, 50 Hz
   control (5 lockstep rounds a step), velocity setpoints, hover (target ≥ 1,000 per
-  machine; one instance uses about one core of the two);
-* ``flight_stack_env_realtime_factor``: simulated seconds per wall second of the same;
+  machine);
+* ``flight_stack_env8_steps_per_s``: the same summed over 8 instances behind one vector
+  env (target ≥ 1,000);
+* ``flight_stack_env_realtime_factor`` and ``..._env8_...``: simulated seconds per wall
+  second, summed over the instances;
 * ``flight_stack_reset_wall_s`` (median of 10 unseeded resets to starts ±0.3 m: the
   vehicle flies there under the autopilot's position control; target < 0.5 s) and
   ``flight_stack_reset_simulated_s`` (their median simulated time).
@@ -27,9 +31,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import best_rate, figure, report
 
 from quadsitl.envs.offboard_env import OffboardEnv
+from quadsitl.envs.offboard_vector import OffboardVectorEnv
 
 STEPS = 500  # per timed run: 10 s of simulated time
 INSTANCE = 30
+VECTOR = 8  # instances 20..27 behind one vector env
 
 
 def main() -> None:
@@ -55,6 +61,27 @@ def main() -> None:
         wall = statistics.median(walls)
         print(f"flight_stack_reset_wall_s: {wall:.3f} s (median of 10, target < 0.5)")
         print(f"flight_stack_reset_simulated_s: {statistics.median(simulated):.2f} s (median)")
+    finally:
+        env.close()
+    vector_figures()
+
+
+def vector_figures() -> None:
+    env = OffboardVectorEnv(VECTOR, "hover", "velocity", first_instance=20,
+                            init_position_noise=0.3, episode_seconds=3600.0)  # fmt: skip
+    try:
+        env.reset(seed=0)
+        actions = np.zeros((VECTOR, 4), np.float32)
+
+        def run() -> int:
+            for _ in range(STEPS // VECTOR * 2):
+                env.step(actions)
+            return STEPS // VECTOR * 2 * VECTOR
+
+        rate = best_rate(run, repeats=3)
+        label = f"env steps/s ({VECTOR} instances, 50 Hz, summed)"
+        report("flight_stack_env8_steps_per_s", rate, 1_000, label)
+        figure("flight_stack_env8_realtime_factor", rate * 0.02, "x real time", "summed")
     finally:
         env.close()
 

@@ -357,3 +357,33 @@ def client(sim: RunningSim) -> Iterator[VehicleClient]:
     vehicle.connect(timeout=30)
     yield vehicle
     vehicle.close()
+
+
+# PX4 instances for the flight-stack envs' tests: their ports (TCP 4560 + i, UDP
+# 14540 + i and 14580 + i) must be free. Instances 37..76 keep the two UDP ranges apart
+# (i and i + 40 would share one); each pytest-xdist worker takes ten of them, in turn.
+_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw") or 0) % 4
+_FIRST_PX4, _PX4_PER_WORKER = 37 + 10 * _WORKER, 10
+_next_px4 = [0]
+
+
+def free_px4_instances(n: int = 1) -> int:
+    """The first of ``n`` consecutive PX4 instances whose ports are all free now."""
+    import socket
+
+    def free(instance: int) -> bool:
+        try:
+            for kind, port in ((socket.SOCK_STREAM, 4560), (socket.SOCK_DGRAM, 14540),
+                               (socket.SOCK_DGRAM, 14580)):  # fmt: skip
+                with socket.socket(socket.AF_INET, kind) as probe:
+                    probe.bind(("127.0.0.1", port + instance))
+        except OSError:
+            return False
+        return True
+
+    for _ in range(100):
+        first = _FIRST_PX4 + _next_px4[0] % (_PX4_PER_WORKER - n + 1)
+        _next_px4[0] += n
+        if all(free(first + i) for i in range(n)):
+            return first
+    raise AssertionError(f"no {n} consecutive PX4 instances with free ports")

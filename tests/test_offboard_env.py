@@ -4,10 +4,7 @@ in lockstep with the env."""
 
 from __future__ import annotations
 
-import itertools
 import math
-import os
-import socket
 
 import numpy as np
 import pytest
@@ -15,34 +12,15 @@ from gymnasium.utils.env_checker import check_env
 
 from quadsitl import frames
 from quadsitl.envs import setpoints
-from quadsitl.envs.autopilot_link import AutopilotError
 from quadsitl.envs.offboard_env import OffboardEnv
 from quadsitl.fake_stacks.offboard_px4 import MAIN_MODE_OFFBOARD, MAIN_MODE_POSCTL, custom_mode
 from quadsitl.physics import get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.simulator import offboard
 from quadsitl.wire.dialect import mavlink as mav
+from tests.conftest import free_px4_instances
 
-# Each env a PX4 instance whose ports are free now (TCP 4560 + i, UDP 14540 + i and
-# 14580 + i). Instances 37..76 keep the two UDP ranges apart (i and i + 40 would share
-# one); each pytest-xdist worker takes ten of them, in turn.
 pytestmark = pytest.mark.xdist_group("offboard")
-_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw") or 0) % 4
-INSTANCES = itertools.cycle(range(37 + 10 * _WORKER, 47 + 10 * _WORKER))
-
-
-def free_instance() -> int:
-    for _, instance in zip(range(100), INSTANCES, strict=False):
-        try:
-            for kind, port in ((socket.SOCK_STREAM, 4560), (socket.SOCK_DGRAM, 14540),
-                               (socket.SOCK_DGRAM, 14580)):  # fmt: skip
-                with socket.socket(socket.AF_INET, kind) as probe:
-                    probe.bind(("127.0.0.1", port + instance))
-        except OSError:
-            continue
-        return instance
-    raise AssertionError("no PX4 instance with free ports")
-
 
 PERIOD = 0.02  # s: the default 50 Hz
 
@@ -52,7 +30,7 @@ def make_env():
     made: list[OffboardEnv] = []
 
     def make(**kwargs) -> OffboardEnv:
-        env = OffboardEnv(instance=free_instance(), **kwargs)
+        env = OffboardEnv(instance=free_px4_instances(), **kwargs)
         made.append(env)
         return env
 
@@ -81,7 +59,7 @@ def test_each_action_level_flies_where_it_asks(make_env, level, action):
     env.reset(seed=1)
     for _ in range(round(1.0 / PERIOD)):  # a simulated second
         env.step(np.array(action, np.float32))
-    state = env.link.fleet.state[0]
+    state = env.autopilots.fleet.state[0]
     if level == "rates":
         assert state[L.I_WZ] > 0.6  # rad/s about body up (FLU), asked 1
     else:
@@ -108,29 +86,30 @@ def test_a_step_is_a_fixed_span_of_simulated_time_with_the_autopilots_estimate(m
 def test_the_offboard_loss_failsafe_runs_on_simulated_time(make_env):
     env = make_env(task="hover", action_level="velocity")
     env.reset(seed=3)
-    link = env.link
-    start = link.fleet.state[0, L.POS].copy()
-    assert link.estimate.custom_mode == custom_mode(MAIN_MODE_OFFBOARD)
+    autopilots, estimate = env.autopilots, env.pilot.estimate
+    start = autopilots.fleet.state[0, L.POS].copy()
+    assert estimate.custom_mode == custom_mode(MAIN_MODE_OFFBOARD)
 
     def lost() -> bool:
-        return any("offboard setpoint lost" in text for text in link.estimate.texts)
+        return any("offboard setpoint lost" in text for text in estimate.texts)
 
-    link.advance(0.9)  # no setpoint for 0.9 s of its clock: still offboard (1 s allowed)
+    autopilots.advance(0.9)  # no setpoint for 0.9 s of its clock: still offboard (1 s allowed)
     assert not lost()
-    link.advance(0.2)
+    autopilots.advance(0.2)
     assert lost()
-    link.advance(1.0)  # its next heartbeat
-    assert link.estimate.custom_mode == custom_mode(MAIN_MODE_POSCTL)
-    assert np.linalg.norm(link.fleet.state[0, L.POS] - start) < 0.3  # held where it was
+    autopilots.advance(1.0)  # its next heartbeat
+    assert estimate.custom_mode == custom_mode(MAIN_MODE_POSCTL)
+    assert np.linalg.norm(autopilots.fleet.state[0, L.POS] - start) < 0.3  # held where it was
 
 
-def test_a_dead_autopilot_is_named_and_started_again_at_the_next_reset(make_env):
+def test_a_dead_autopilot_ends_the_episode_named_and_is_started_again_at_the_reset(make_env):
     env = make_env(task="hover", action_level="velocity")
     env.reset(seed=4)
-    env.link.process.kill()
-    env.link.process.wait()
-    with pytest.raises(AutopilotError, match="exited"):
-        env.step(np.zeros(4, np.float32))
+    env.pilot.process.kill()
+    env.pilot.process.wait()
+    _, _, terminated, truncated, info = env.step(np.zeros(4, np.float32))
+    assert truncated and not terminated
+    assert "exited" in info["autopilot_failure"]
     _, info = env.reset()
     assert "exited" in info["reset"]["restarted"]
     assert info["reset"]["reached"]
@@ -141,10 +120,10 @@ def test_a_dead_autopilot_is_named_and_started_again_at_the_next_reset(make_env)
 def test_a_reset_flies_to_the_drawn_start_without_restarting(make_env):
     env = make_env(task="hover", action_level="velocity", init_position_noise=0.3)
     env.reset(seed=5)
-    process = env.link.process
+    process = env.pilot.process
     for _ in range(3):
         _, info = env.reset()
-        assert info["reset"]["restarted"] is None and env.link.process is process
+        assert info["reset"]["restarted"] is None and env.pilot.process is process
         assert info["reset"]["reached"] and info["reset"]["position_error_m"] < 0.05
         start = env.engine.fleet.state[0, L.POS]
         assert np.all(np.abs(start) < 0.35)  # the drawn start: ±0.3 m about the goal

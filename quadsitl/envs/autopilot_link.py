@@ -1,14 +1,19 @@
-"""One autopilot flown from outside, in lockstep: its simulator, its process and its
-MAVLink link, owned by the env that trains through it.
+"""Autopilots flown from outside, in lockstep: their simulator, their processes and their
+MAVLink links, owned by the env that trains through them.
 
-The env is the autopilot's simulator (PX4's simulator_mavlink over TCP 4560 + i, served
-here by :class:`~quadsitl.bridges.px4_tcp.Px4TcpServer`), so it holds the autopilot's
-clock: in lockstep PX4 waits for each HIL_SENSOR, and it gets the next one only while
-:meth:`AutopilotLink.advance` serves rounds. Between env steps the autopilot is paused,
-however long the learner takes; every timeout of the autopilot (offboard loss, the
-setpoint stream's rate, heartbeats) runs on simulated time. The env talks to the
-autopilot as a companion computer does, over its onboard MAVLink link (UDP: PX4 sends to
-14540 + i and listens on 14580 + i), and reads the autopilot's own estimate there.
+The env is the autopilots' simulator (PX4's simulator_mavlink over TCP 4560 + i, served
+here by :class:`~quadsitl.bridges.px4_tcp.Px4TcpServer` around one batched physics), so
+it holds each autopilot's clock: in lockstep PX4 waits for each HIL_SENSOR, and it gets
+the next one only while :meth:`Autopilots.advance` serves rounds. Between env steps the
+autopilots are paused, however long the learner takes; every timeout of an autopilot
+(offboard loss, the setpoint stream's rate, heartbeats) runs on simulated time. The env
+talks to each autopilot as a companion computer does, over its onboard MAVLink link
+(UDP: PX4 sends to 14540 + i and listens on 14580 + i), and reads the autopilot's own
+estimate there.
+
+An autopilot that exits, disconnects or stops answering is marked failed and no longer
+waited for: the others fly on (:meth:`Autopilots.advance` returns who failed), and
+:meth:`Autopilots.restart` starts it again.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ import subprocess
 import sys
 import time
 import weakref
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,7 +38,8 @@ from quadsitl.physics.fleet import Fleet
 from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.udp_messages import pending_messages
 
-HANG_GUARD_S = 120.0  # wall s an autopilot may take to answer before it is called stalled
+BOOT_GUARD_S = 120.0  # wall s an autopilot may take to start and lead in lockstep
+STALL_S = 10.0  # wall s without a round, once in lockstep, before it is called stalled
 ESTIMATE_WAIT_S = 1.0  # wall s to wait for the estimate of a step's end (then the last one)
 HEARTBEAT_S = 1.0  # simulated s between the companion's heartbeats
 STARTING_ROUND_S = 1.0  # wall s between rounds until the autopilot leads in lockstep
@@ -62,21 +69,17 @@ class Estimate:
     def armed(self) -> bool:
         return bool(self.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
 
+    @property
+    def time_ms(self) -> int:
+        """The clock of its oldest part (position or attitude)."""
+        return min(self.position_time_ms, self.attitude_time_ms)
 
-class AutopilotLink:
-    """PX4 instance ``instance`` started with ``command`` (a list; ``{port}`` and
-    ``{instance}`` in it are filled in), flying a vehicle of ``airframe``."""
 
-    def __init__(self, command: list[str], instance: int = 0, airframe: str = "iris") -> None:
-        self.instance, self.airframe, self.start_command = instance, airframe, command
-        self.notices: list[str] = []
-        self.physics = HilPhysics(Fleet(1, airframe), notice=self.notices.append)
-        self.fleet = self.physics.fleet
-        self.server = Px4TcpServer(self.physics, "127.0.0.1", PORT + instance)
-        # One round when the autopilot connects, then only those it answers: the rounds
-        # before it leads in lockstep are then the same every time (the fake answers the
-        # first; a real PX4 that does not is sent another each second).
-        self.server.wall_round_s = STARTING_ROUND_S
+class Autopilot:
+    """One autopilot instance: its process and its onboard MAVLink link."""
+
+    def __init__(self, instance: int) -> None:
+        self.instance = instance
         self.link = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.link.bind(("127.0.0.1", PEER_PORT + instance))
         self.link.setblocking(False)
@@ -85,86 +88,33 @@ class AutopilotLink:
         self.mav.robust_parsing = True
         self.estimate = Estimate()
         self.process: subprocess.Popen[bytes] | None = None
+        self.failure: str | None = None  # why it is no longer flown (None: it flies)
         self.next_heartbeat_us = 0
-        # How much older than the step's end the estimate may be stamped: the fake sends
-        # the state of every round; a real PX4 stamps its estimator's output.
-        self.estimate_lag_ms = 0
-        self.start()
+        self.local_origin = np.zeros(3)  # its local frame's origin in the simulator's (ENU)
 
-    # --- the autopilot's process ------------------------------------------------------
-    def start(self) -> None:
-        """Start the autopilot and serve it until its estimate comes (a vehicle at rest)."""
-        filled = [a.format(port=PORT, instance=self.instance) for a in self.start_command]
-        before = self.physics.peers[0]  # a connection makes a new one
-        self.server.hold_at_us[0] = 0  # its rounds wait for advance() from the first
+    def start_process(self, command: list[str]) -> None:
+        self.stop_process()
+        self.read()  # what the old one sent and did not deliver is dropped
+        filled = [a.format(port=PORT, instance=self.instance) for a in command]
         self.process = subprocess.Popen(filled, stdin=subprocess.DEVNULL)
         # ended with the link, or at exit if the env was never closed
         self._finalizer = weakref.finalize(self, terminate, self.process, 10.0)
         self.estimate = Estimate()
-        deadline = time.monotonic() + HANG_GUARD_S
-        while self.physics.peers[0] is before or not self.physics.peers[0].lockstep:
-            self._check_alive(deadline)
-            self.server.serve(0.05)  # until its first answer: it leads from now on
-        self.read_until((self.time_us - ROUND_US) // 1000 - self.estimate_lag_ms, HANG_GUARD_S)
-        # Where the autopilot's local frame has its origin in the simulator's (ENU, m):
-        # PX4 puts it where its estimator started, at ground level (not the centre of
-        # mass, which rests at the gear's height). Measured now, at rest.
-        truth = self.fleet.state[0, :3]
-        self.local_origin = truth - frames.ned_to_enu(np.array(self.estimate.position))
-
-    def restart(self) -> None:
-        """A new autopilot process; what the old one sent and did not deliver is dropped."""
-        self.stop_process()
-        self.read()
+        self.failure = None
         self.next_heartbeat_us = 0
-        self.start()
 
     def stop_process(self) -> None:
         if self.process is not None:
             self._finalizer()
 
+    def exited(self) -> str | None:
+        """Why it is gone, if its process has exited."""
+        code = self.process.poll() if self.process is not None else 1
+        return None if code is None else f"the autopilot exited with code {code}"
+
     def close(self) -> None:
         self.stop_process()
-        self.server.close()
         self.link.close()
-
-    def _check_alive(self, deadline: float) -> None:
-        code = self.process.poll() if self.process is not None else 1
-        if code is not None:
-            raise AutopilotError(f"the autopilot exited with code {code}")
-        if time.monotonic() > deadline:
-            raise AutopilotError(f"the autopilot did not answer within {HANG_GUARD_S:g} s")
-
-    # --- time ---------------------------------------------------------------------
-    @property
-    def time_us(self) -> int:
-        """The vehicle's simulated time (the autopilot's clock)."""
-        return self.physics.peers[0].time_us
-
-    def advance(self, seconds: float) -> None:
-        """Let the autopilot fly ``seconds`` of simulated time (whole rounds of 4 ms),
-        then hold it there and read its estimate of that instant."""
-        target = self.time_us + round(seconds * 1e6 / ROUND_US) * ROUND_US
-        deadline = time.monotonic() + HANG_GUARD_S
-        # The round of the last step's end was held back: the autopilot gets it now,
-        # after what the env sent since, and the round of this step's end is held.
-        self.server.hold_at_us[0] = target
-        self.server.release(0)
-        while self.time_us < target:
-            if self.server.connections[0] is None:
-                self._check_alive(0.0)  # exited: say so; else it disconnected
-                raise AutopilotError("the autopilot disconnected from its simulator")
-            if self.time_us >= self.next_heartbeat_us:
-                self.next_heartbeat_us = self.time_us + int(HEARTBEAT_S * 1e6)
-                kind, none = mav.MAV_TYPE_ONBOARD_CONTROLLER, mav.MAV_AUTOPILOT_INVALID
-                self.send(self.mav.heartbeat_encode(kind, none, 0, 0, 0))
-            if self.server.serve(0.05) == 0:
-                self._check_alive(deadline)
-            else:
-                deadline = time.monotonic() + HANG_GUARD_S
-        # The estimate of the round before the step's end: its telemetry came before the
-        # motor outputs that ended the step (the round of the end itself is held).
-        self.read_until((target - ROUND_US) // 1000 - self.estimate_lag_ms)
 
     # --- the MAVLink link ---------------------------------------------------------
     def send(self, msg: Any) -> None:
@@ -175,18 +125,6 @@ class AutopilotLink:
         """Take what the autopilot sent so far."""
         for msg in pending_messages(self.link, self.mav):
             self._take(msg)
-
-    def read_until(self, time_ms: int, wait_s: float = ESTIMATE_WAIT_S) -> None:
-        """Read until the estimate is stamped ``time_ms`` or later (the autopilot sends
-        it from its own thread), waiting at most ``wait_s``."""
-        deadline = time.monotonic() + wait_s
-        e = self.estimate
-        self.read()
-        while min(e.position_time_ms, e.attitude_time_ms) < time_ms:
-            if time.monotonic() > deadline:
-                return
-            time.sleep(0.0002)
-            self.read()
 
     def _take(self, msg: Any) -> None:
         kind, e = msg.get_type(), self.estimate
@@ -204,15 +142,174 @@ class AutopilotLink:
         elif kind == "STATUSTEXT":
             e.texts.append(msg.text)
 
-    def command(self, command: int, *params: float, within_s: float = 1.0) -> int:
-        """COMMAND_LONG, answered within ``within_s`` simulated s; the result (or -1)."""
+
+class Autopilots:
+    """Autopilot instances ``first_instance`` .. ``first_instance + n - 1`` started with
+    ``command`` (a list; ``{port}`` and ``{instance}`` in it are filled in), each flying a
+    vehicle of ``airframe`` on one batched physics."""
+
+    def __init__(
+        self, command: list[str], n: int = 1, first_instance: int = 0, airframe: str = "iris"
+    ) -> None:
+        self.start_command, self.airframe = command, airframe
+        self.notices: list[str] = []
+        self.physics = HilPhysics(Fleet(n, airframe), notice=self.notices.append)
+        self.fleet = self.physics.fleet
+        self.server = Px4TcpServer(self.physics, "127.0.0.1", PORT + first_instance)
+        # One round when an autopilot connects, then only those it answers: the rounds
+        # before it leads in lockstep are then the same every time (the fake answers the
+        # first; a real PX4 that does not is sent another each second).
+        self.server.wall_round_s = STARTING_ROUND_S
+        self.pilots: list[Autopilot] = []
+        try:
+            for i in range(n):
+                self.pilots.append(Autopilot(first_instance + i))
+        except OSError:
+            self.close()
+            raise
+        # How much older than the step's end an estimate may be stamped: the fake sends
+        # the state of every round; a real PX4 stamps its estimator's output.
+        self.estimate_lag_ms = 0
+
+    @property
+    def n(self) -> int:
+        return len(self.pilots)
+
+    def time_us(self, row: int) -> int:
+        """Vehicle ``row``'s simulated time (its autopilot's clock)."""
+        return self.physics.peers[row].time_us
+
+    # --- the processes --------------------------------------------------------------
+    def start(self, rows: Sequence[int] | None = None) -> list[int]:
+        """Start the autopilots of ``rows`` (all) and serve them until each leads in
+        lockstep and its estimate of the vehicle at rest comes; the rows that failed
+        (each one's ``failure`` says why)."""
+        rows = list(range(self.n)) if rows is None else list(rows)
+        before = {row: self.physics.peers[row] for row in rows}  # a connection makes anew
+        for row in rows:
+            self.server.hold_at_us[row] = 0  # its rounds wait for advance() from the first
+            self.pilots[row].start_process(self.start_command)
+        deadline = time.monotonic() + BOOT_GUARD_S
+        waiting = set(rows)
+        while waiting:
+            for row in list(waiting):
+                pilot, peer = self.pilots[row], self.physics.peers[row]
+                if peer is not before[row] and peer.lockstep:
+                    waiting.discard(row)  # it leads from now on
+                elif pilot.exited() or time.monotonic() > deadline:
+                    pilot.failure = pilot.exited() or (
+                        f"the autopilot did not start within {BOOT_GUARD_S:g} s"
+                    )
+                    waiting.discard(row)
+            self.server.serve(0.05)
+        live = [row for row in rows if self.pilots[row].failure is None]
+        self._read_estimates(live, BOOT_GUARD_S)
+        for row in live:
+            # Where the autopilot's local frame has its origin in the simulator's (ENU,
+            # m): PX4 puts it where its estimator started, at ground level (not the centre
+            # of mass, which rests at the gear's height). Measured now, at rest.
+            pilot = self.pilots[row]
+            local = frames.ned_to_enu(np.array(pilot.estimate.position))
+            pilot.local_origin = self.fleet.state[row, :3] - local
+        return [row for row in rows if self.pilots[row].failure is not None]
+
+    def restart(self, rows: Sequence[int]) -> list[int]:
+        """New autopilot processes for ``rows``; the rows that failed to start."""
+        for row in rows:
+            self.pilots[row].stop_process()
+        return self.start(rows)
+
+    def close(self) -> None:
+        for pilot in self.pilots:
+            pilot.close()
+        self.server.close()
+
+    # --- time ---------------------------------------------------------------------
+    def advance(self, seconds: float, rows: Sequence[int] | None = None) -> list[int]:
+        """Let the autopilots of ``rows`` (all that fly) fly ``seconds`` of simulated time
+        (whole rounds of 4 ms) while the others wait, then hold each there and read its
+        estimate of that instant. The rows whose autopilot failed meanwhile (marked, and
+        no longer waited for: the others fly on)."""
+        if rows is None:
+            rows = range(self.n)
+        rows = [row for row in rows if self.pilots[row].failure is None]
+        rounds = round(seconds * 1e6 / ROUND_US)
+        target = {row: self.time_us(row) + rounds * ROUND_US for row in rows}
+        for row in rows:
+            # The round of the last step's end was held back: the autopilot gets it now,
+            # after what the env sent since, and the round of this step's end is held.
+            self.server.hold_at_us[row] = target[row]
+            self.server.release(row)
+        flying, failed = set(rows), []
+        progress = {row: (self.time_us(row), time.monotonic()) for row in rows}
+        while flying:
+            for row in list(flying):
+                why = self._fault(row, progress)
+                if why is not None:
+                    self.pilots[row].failure = why
+                    flying.discard(row)
+                    failed.append(row)
+                elif self.time_us(row) >= target[row]:
+                    flying.discard(row)
+                else:
+                    self._heartbeat(row)
+            if flying:
+                self.server.serve(0.05)
+        # The estimate of the round before the step's end: its telemetry came before the
+        # motor outputs that ended the step (the round of the end itself is held).
+        self._read_estimates([row for row in rows if row not in failed], ESTIMATE_WAIT_S)
+        return failed
+
+    def _fault(self, row: int, progress: dict[int, tuple[int, float]]) -> str | None:
+        """Why the autopilot of ``row`` cannot fly on, if it cannot."""
+        if self.server.connections[row] is None:
+            return self.pilots[row].exited() or "the autopilot disconnected from its simulator"
+        now, (last_us, since) = time.monotonic(), progress[row]
+        if self.time_us(row) != last_us:
+            progress[row] = (self.time_us(row), now)
+        elif now - since > STALL_S:
+            return self.pilots[row].exited() or f"the autopilot stalled for {STALL_S:g} s"
+        return None
+
+    def _heartbeat(self, row: int) -> None:
+        pilot = self.pilots[row]
+        if self.time_us(row) >= pilot.next_heartbeat_us:
+            pilot.next_heartbeat_us = self.time_us(row) + int(HEARTBEAT_S * 1e6)
+            kind, none = mav.MAV_TYPE_ONBOARD_CONTROLLER, mav.MAV_AUTOPILOT_INVALID
+            pilot.send(pilot.mav.heartbeat_encode(kind, none, 0, 0, 0))
+
+    def _read_estimates(self, rows: Sequence[int], wait_s: float) -> None:
+        """Read until each estimate is stamped at its vehicle's last round or later (an
+        autopilot sends it from its own thread), waiting at most ``wait_s``."""
+        stamp = {r: (self.time_us(r) - ROUND_US) // 1000 - self.estimate_lag_ms for r in rows}
+        deadline = time.monotonic() + wait_s
+        waiting = list(rows)
+        while True:
+            for row in waiting:
+                self.pilots[row].read()
+            waiting = [r for r in waiting if self.pilots[r].estimate.time_ms < stamp[r]]
+            if not waiting or time.monotonic() > deadline:
+                return
+            time.sleep(0.0002)
+
+    # --- commands -----------------------------------------------------------------
+    def command(self, rows: Sequence[int], command: int, *params: float) -> dict[int, int]:
+        """COMMAND_LONG to the autopilots of ``rows``, each answered within a simulated
+        second; each one's result (-1: none came)."""
         values = [*params, *[0.0] * (7 - len(params))]
-        self.estimate.acks.pop(command, None)
-        self.send(self.mav.command_long_encode(1, 1, command, 0, *values))
-        end = self.time_us + within_s * 1e6
-        while command not in self.estimate.acks and self.time_us < end:
-            self.advance(ROUND_US * 1e-6)
-        return self.estimate.acks.get(command, -1)
+        for row in rows:
+            pilot = self.pilots[row]
+            pilot.estimate.acks.pop(command, None)
+            pilot.send(pilot.mav.command_long_encode(1, 1, command, 0, *values))
+        waiting = list(rows)
+        for _ in range(round(1e6 / ROUND_US)):
+            waiting = [r for r in waiting if command not in self.pilots[r].estimate.acks]
+            if not waiting:
+                break
+            self.advance(ROUND_US * 1e-6, waiting)
+            for row in waiting:
+                self.pilots[row].read()
+        return {row: self.pilots[row].estimate.acks.get(command, -1) for row in rows}
 
 
 def fake_px4_command(airframe: str = "iris") -> list[str]:

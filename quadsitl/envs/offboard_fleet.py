@@ -1,0 +1,202 @@
+"""The vehicles that autopilots fly, as the task engine sees a fleet: their state in the
+task's frame, stepped by letting the autopilots fly, reset by flying each to its
+episode's start under the autopilot's own position control.
+
+A reset does not restart an autopilot: it arms and enters offboard if need be (a stream
+of setpoints first, as PX4 asks), then streams position setpoints to the drawn start
+until the vehicle has settled there, in simulated time; every vehicle being reset flies
+at once, the others wait (in lockstep, they are paused). An autopilot that failed, or
+one the env asks to start again (a seeded reset), gets a new process first: the one
+fallback, said in each vehicle's ``reports``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from quadsitl import frames
+from quadsitl.bridges.px4_hil import ROUND_US
+from quadsitl.envs import setpoints
+from quadsitl.envs.autopilot_link import AutopilotError, Autopilots
+from quadsitl.physics import layout as L
+from quadsitl.wire.dialect import mavlink as mav
+from quadsitl.wire.modes import MAIN_OFFBOARD, Mode
+
+RESET_LIMIT_S = 30.0  # simulated s a reset may fly before it starts the episode anyway
+STREAM_FIRST_S = 1.0  # simulated s of setpoints before asking for OFFBOARD (PX4 >= 1.14)
+SETTLED_POSITION = 0.05  # m from the drawn start ...
+SETTLED_SPEED = 0.1  # ... and m/s, rad/s: the start is reached ...
+SETTLED_FOR_S = 0.2  # ... for this long
+START_TRIES = 2  # new processes a reset tries before it gives up on an autopilot
+
+
+class OffboardFleet:
+    """The vehicles of ``autopilots`` in the task's frame (origin ``altitude`` above the
+    ground where each took off). The env sets ``active`` (the rows the next step flies)
+    and ``restart`` (row -> why its next reset starts a new autopilot); ``failed`` holds
+    why each row's autopilot failed during the episode (None: it flies)."""
+
+    def __init__(self, autopilots: Autopilots, control_period: float, altitude: float) -> None:
+        self.autopilots, self.physical = autopilots, autopilots.fleet
+        self.n = self.physical.n
+        self.control_period = control_period
+        self.origin = np.array([0.0, 0.0, altitude])
+        self.params = self.physical.params
+        self.contact = self.physical.contact
+        self.touchdown_speed = self.physical.touchdown_speed
+        self.wind_state = self.physical.wind_state
+        self.state = np.zeros_like(self.physical.state)
+        self.active = np.ones(self.n, bool)
+        self.failed: list[str | None] = [None] * self.n
+        self.restart: dict[int, str] = {}
+        self.reports: list[dict[str, Any]] = [{} for _ in range(self.n)]
+        self.sync()
+
+    @property
+    def hover_rotor_speed(self) -> NDArray[np.float64]:
+        return self.physical.hover_rotor_speed
+
+    @property
+    def windy(self) -> bool:
+        return False
+
+    def sync(self) -> None:
+        self.state[:] = self.physical.state
+        self.state[:, L.POS] -= self.origin
+
+    def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
+        """The setpoints were sent (the env's step); the autopilots of the active rows fly
+        ``n_substeps`` rounds. The engine's rotor commands are not used: theirs are."""
+        rows = [r for r in np.flatnonzero(self.active).tolist() if self.failed[r] is None]
+        for row in self.autopilots.advance(n_substeps * ROUND_US * 1e-6, rows):
+            self.failed[row] = self.autopilots.pilots[row].failure
+        self.sync()
+
+    # --- the estimate -------------------------------------------------------------------
+    def estimated_state(self) -> NDArray[np.float64]:
+        """The state rows of what each autopilot estimates (in the task's frame); the
+        rotor speeds, which it does not report, from the simulator (as ESC telemetry)."""
+        state = self.state.copy()
+        for row, pilot in enumerate(self.autopilots.pilots):
+            e = pilot.estimate
+            local = frames.ned_to_enu(np.array(e.position))
+            state[row, L.POS] = local + pilot.local_origin - self.origin
+            state[row, L.VEL] = frames.ned_to_enu(np.array(e.velocity))
+            state[row, L.QUAT] = frames.quat_ned_frd_to_enu_flu(np.array(e.quaternion))
+            state[row, L.RATES] = frames.frd_to_flu(np.array(e.rates))
+        return state
+
+    # --- resets ---------------------------------------------------------------------
+    def reset(
+        self, state: ArrayLike | None = None, contact: Any = L.AIRBORNE, mask: Any = None
+    ) -> None:
+        rows = list(range(self.n)) if mask is None else np.flatnonzero(mask).tolist()
+        starts = np.zeros((len(rows), 3)) if state is None else np.asarray(state)[:, L.POS]
+        targets = dict(zip(rows, starts + self.origin, strict=True))
+        wall = time.monotonic()
+        began = {row: self.autopilots.time_us(row) for row in rows}
+        restarted = self._restart_failed(rows)
+        for row in rows:
+            if row in restarted:
+                began[row] = self.autopilots.time_us(row)
+        settled = self._fly_to(targets, began)
+        for row in rows:
+            self.failed[row] = None
+            position = self.physical.state[row, L.POS]
+            self.reports[row] = {
+                "simulated_s": (self.autopilots.time_us(row) - began[row]) * 1e-6,
+                "wall_s": time.monotonic() - wall,
+                "position_error_m": float(np.linalg.norm(position - targets[row])),
+                "reached": settled[row] >= SETTLED_FOR_S,
+                "restarted": restarted.get(row),
+            }
+        self.sync()
+
+    def _restart_failed(self, rows: list[int]) -> dict[int, str]:
+        """Start new autopilots for the rows that failed or are asked to; row -> why."""
+        why: dict[int, str] = {}
+        for row in rows:
+            failure = self.failed[row] or self.autopilots.pilots[row].failure
+            failure = failure or self.autopilots.pilots[row].exited()
+            reason = self.restart.pop(row, None)
+            if failure or reason:
+                why[row] = str(failure or reason)
+        todo = list(why)
+        for _ in range(START_TRIES):
+            todo = self.autopilots.restart(todo) if todo else []
+        if todo:
+            failures = {row: self.autopilots.pilots[row].failure for row in todo}
+            raise AutopilotError(f"autopilots could not be started again: {failures}")
+        return why
+
+    def _fly_to(self, targets: dict[int, NDArray], began: dict[int, int]) -> dict[int, float]:
+        """Fly each row to its target (the simulator's ENU, m) until settled there; how
+        long each was settled at the end (simulated s)."""
+        self._offboard(list(targets))
+        settled = dict.fromkeys(targets, 0.0)
+        flying = list(targets)
+        while flying:
+            for row in flying:
+                local = targets[row] - self.autopilots.pilots[row].local_origin
+                self._send(row, setpoints.position_message, local, 0.0)
+            failed = self.autopilots.advance(self.control_period, flying)
+            if failed:
+                failures = {row: self.autopilots.pilots[row].failure for row in failed}
+                raise AutopilotError(f"autopilots failed while a reset flew them: {failures}")
+            for row in flying:
+                s = self.physical.state[row]
+                still = max(np.linalg.norm(s[L.VEL]), np.linalg.norm(s[L.RATES]))
+                near = np.linalg.norm(s[L.POS] - targets[row]) < SETTLED_POSITION
+                ok = near and still < SETTLED_SPEED
+                settled[row] = settled[row] + self.control_period if ok else 0.0
+            flying = [
+                row for row in flying
+                if settled[row] < SETTLED_FOR_S
+                and (self.autopilots.time_us(row) - began[row]) * 1e-6 < RESET_LIMIT_S
+            ]  # fmt: skip
+        return settled
+
+    def _send(self, row: int, make: Any, *args: Any) -> None:
+        pilot = self.autopilots.pilots[row]
+        pilot.send(make(pilot.mav, *args, self.autopilots.time_us(row) // 1000))
+
+    def _offboard(self, rows: list[int]) -> None:
+        """Armed and in OFFBOARD, holding where each is (a stream of setpoints first)."""
+        pilots = self.autopilots.pilots
+        custom = Mode.OFFBOARD.custom_mode
+        rows = [
+            r
+            for r in rows
+            if not (pilots[r].estimate.armed and pilots[r].estimate.custom_mode == custom)
+        ]
+        if not rows:
+            return
+        for _ in range(math.ceil(STREAM_FIRST_S / self.control_period)):
+            for row in rows:
+                here = self.physical.state[row, L.POS] - pilots[row].local_origin
+                self._send(row, setpoints.position_message, here, 0.0)
+            self.autopilots.advance(self.control_period, rows)
+        mode = self.autopilots.command(
+            rows, mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, MAIN_OFFBOARD
+        )
+        arm = self.autopilots.command(rows, mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+        accepted = mav.MAV_RESULT_ACCEPTED
+        refused = {r: (mode[r], arm[r]) for r in rows if (mode[r], arm[r]) != (accepted,) * 2}
+        if refused:
+            raise AutopilotError(
+                f"autopilots refused offboard or arming (row: (mode, arm) results): {refused}"
+            )
+
+    def set_wind(self, *args: Any, **kwargs: Any) -> None:
+        raise ValueError("weather is not available through an autopilot yet")
+
+    def set_ground_effect(self, on: bool, mask: Any = None) -> None:
+        raise ValueError("ground effect is not available through an autopilot yet")
+
+    def set_motor_efficiency(self, efficiency: ArrayLike, mask: Any = None) -> None:
+        raise ValueError("motor faults are not available through an autopilot yet")
