@@ -60,6 +60,28 @@ def _add_train_parser(commands: argparse._SubParsersAction) -> None:
         "cluster (ADDR, e.g. 10.0.0.1:6379; without it: RAY_ADDRESS's cluster, else a "
         "private local Ray); see docs/distributed.md",
     )
+    px4 = train.add_argument_group("with --backend px4")
+    px4.add_argument(
+        "--action-level",
+        choices=("velocity", "attitude", "rates"),
+        help="the setpoints the policy sends PX4 (default: velocity)",
+    )
+    px4.add_argument(
+        "--px4-build",
+        metavar="DIR",
+        help="PX4's SITL build folder (build/px4_sitl_default); default: the in-repository "
+        "fake PX4",
+    )
+    px4.add_argument(
+        "--first-instance",
+        type=_count(0),
+        help="the envs fly PX4 instances I .. I + num-envs - 1 (default: 0)",
+    )
+    px4.add_argument(
+        "--sensor-noise",
+        type=float,
+        help="scale of the sensor noise PX4's estimator sees, 0 .. 100 (default: 1)",
+    )
     train.add_argument(
         "--steps",
         type=_steps,
@@ -139,8 +161,9 @@ def _add_backend_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--backend",
         default="inprocess",
-        choices=("inprocess", "mavlink"),
-        help="physics in-process, or in quadsitl sim processes over MAVLink",
+        choices=("inprocess", "mavlink", "px4"),
+        help="physics in-process, in quadsitl sim processes over MAVLink, or flown through "
+        "PX4 by its setpoints (docs/autopilots.md, 'Training through the flight stack')",
     )
 
 

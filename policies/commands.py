@@ -122,6 +122,10 @@ def _train(args: argparse.Namespace) -> int:
         backend=args.backend,
         vehicles_per_sim=args.vehicles_per_sim,
         ray=args.ray,
+        action_level=args.action_level,
+        px4_build=args.px4_build,
+        first_instance=args.first_instance,
+        sensor_noise=args.sensor_noise,
         total_steps=args.steps,
         num_envs=args.num_envs,
         init_from=args.init,
@@ -178,7 +182,8 @@ def _next_steps(config: TrainConfig, run_dir: Path, best_success: float) -> list
         ]
         chosen = best
     if config.task in TASK_NAMES and chosen.is_file():
-        lines.append(f"next: quadsitl eval {shlex.quote(str(chosen))}")
+        backend = " --backend px4" if config.backend == "px4" else ""
+        lines.append(f"next: quadsitl eval {shlex.quote(str(chosen))}{backend}")
     return lines
 
 

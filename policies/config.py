@@ -18,15 +18,17 @@ from typing import Any
 
 from policies.algos import ALGORITHMS
 from quadsitl.envs.mavlink_backend import fleet_sizes
+from quadsitl.envs.setpoints import check_level
 from quadsitl.perturbations.randomization import DEFAULT_AIRFRAME_SPREAD
 from quadsitl.tasks import TASKS
 
-BACKENDS = ("inprocess", "mavlink")
+BACKENDS = ("inprocess", "mavlink", "px4")
 TASK_NAMES = tuple(TASKS)  # the tasks' registry, in its order
 # The largest step budget of a run: 10 billion steps, about 10 days at the fast preset's
 # 10,000-20,000 steps/s on two cores (the longest preset budget is 12 million). Beyond
 # it a budget is a typing slip, not a plan.
 MAX_TOTAL_STEPS = 10_000_000_000
+MAX_PX4_INSTANCES = 40  # PX4 instance i sends to UDP 14540 + i and listens on 14580 + i
 
 
 @dataclass(frozen=True)
@@ -40,6 +42,11 @@ class TrainConfig:
     backend: str = "inprocess"  # or "mavlink": the vehicles fly in simulator processes
     vehicles_per_sim: int = 64  # with backend "mavlink": vehicles in each simulator process
     ray: str = ""  # with backend "mavlink": simulators as Ray actors ("local" or an address)
+    # With backend "px4" (the policy flies PX4 by its setpoints, docs/autopilots.md):
+    action_level: str = "velocity"  # "velocity", "attitude" or "rates"
+    px4_build: str = ""  # a PX4 SITL build folder ("": the in-repository fake PX4)
+    first_instance: int = 0  # PX4 instances first_instance .. + num_envs - 1
+    sensor_noise: float = 1.0  # scale of the sensor models' noise PX4's estimator sees
     num_envs: int = 1  # parallel envs collecting each batch
     steps_per_env: int = 256  # rollout length; batch = num_envs * steps_per_env
     total_steps: int = 1_280_000  # environment steps (the paper: 5000 x 256)
@@ -104,6 +111,16 @@ class TrainConfig:
         return cls(**values)
 
 
+def flight_stack_options(config: TrainConfig) -> dict[str, Any]:
+    """The env options of a run's backend "px4" (its autopilots and setpoints)."""
+    return {
+        "action_level": config.action_level,
+        "autopilot": config.px4_build or None,
+        "first_instance": config.first_instance,
+        "sensor_noise": config.sensor_noise,
+    }
+
+
 def run_name(task: str, algo: str, preset: str, seed: int, backend: str = "inprocess") -> str:
     """``TASK-ALGO-PRESET-seedN[-mavlink]``; a Gymnasium id's namespace slash becomes ``_``."""
     suffix = "" if backend == "inprocess" else f"-{backend}"
@@ -124,7 +141,7 @@ _POSITIVE_INTS = (
     "epochs",
     "minibatches",
 )
-_NON_NEGATIVE_INTS = ("seed", "eval_every")
+_NON_NEGATIVE_INTS = ("seed", "eval_every", "first_instance")
 _FLOATS = {  # name: (low, high), inclusive
     "gamma": (0.0, 1.0),
     "gae_lambda": (0.0, 1.0),
@@ -140,6 +157,7 @@ _FLOATS = {  # name: (low, high), inclusive
     "reward_scale": (1e-12, 1e6),
     "init_log_std": (-20.0, 5.0),
     "fine_offset_scale": (0.0, 100.0),
+    "sensor_noise": (0.0, 100.0),
 }
 _BOOLS = ("anneal_lr", "normalize_obs", "normalize_advantages")
 
@@ -147,7 +165,8 @@ _BOOLS = ("anneal_lr", "normalize_obs", "normalize_advantages")
 def _check(config: TrainConfig) -> None:
     """A clear ValueError for any value a run cannot use (types included: a checkpoint's
     config comes from a file)."""
-    for name in ("task", "algo", "preset", "backend", "ray", "init_from"):
+    for name in ("task", "algo", "preset", "backend", "ray", "init_from", "action_level",
+                 "px4_build"):  # fmt: skip
         if not isinstance(getattr(config, name), str):
             raise ValueError(f"{name} must be a string, got {getattr(config, name)!r}")
     check_task(config.task)
@@ -157,6 +176,12 @@ def _check(config: TrainConfig) -> None:
         raise ValueError(f"unknown backend {config.backend!r}; choose one of {BACKENDS}")
     if config.ray and config.backend != "mavlink":
         raise ValueError("ray places simulators: it needs backend 'mavlink'")
+    if config.backend == "px4":
+        check_level(config.action_level)
+        if config.task not in TASK_NAMES:
+            raise ValueError(f"backend 'px4' flies a quadsitl task; {config.task!r} is not one")
+    elif config.px4_build:
+        raise ValueError("px4_build is the autopilot of backend 'px4'")
     for name in (*_POSITIVE_INTS, *_NON_NEGATIVE_INTS):
         value = getattr(config, name)
         least = 1 if name in _POSITIVE_INTS else 0
@@ -379,7 +404,17 @@ def make_config(
                 f"simulator would start {processes} simulator processes; at most "
                 f"{MAX_SIMULATORS} (raise --vehicles-per-sim)"
             )
+    if values.get("backend") == "px4":
+        # A periodic evaluation would need autopilots of its own; the success rate of the
+        # training episodes is logged instead (quadsitl eval is not yet wired to PX4).
+        values["eval_every"] = 0
     config = TrainConfig(**values)
+    if config.backend == "px4" and config.first_instance + config.num_envs > MAX_PX4_INSTANCES:
+        raise ValueError(
+            f"backend 'px4' flies PX4 instances {config.first_instance}.."
+            f"{config.first_instance + config.num_envs - 1}; their onboard ports "
+            f"(14540 + i, 14580 + i) meet from instance {MAX_PX4_INSTANCES}"
+        )
     if config.total_steps < config.batch_size:
         raise ValueError(
             f"total_steps ({config.total_steps:,}) is less than one batch "

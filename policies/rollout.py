@@ -75,8 +75,16 @@ def make_vector_env(
     SAME_STEP autoreset (an episode that ends is reset in the same step; its last
     observation is ``info["final_obs"]``). ``task``: a quadsitl task name (its native
     vector env: every env in one batched call) or any registered Gymnasium env id with
-    a Box action space (its envs in a SyncVectorEnv). Seeding: ``reset(seed=s)`` gives
+    a Box action space (its envs in a SyncVectorEnv). ``backend="px4"``: the task flown
+    through PX4 by its setpoints (:class:`~quadsitl.envs.offboard_vector.OffboardVectorEnv`,
+    whose options ``options`` then include). Seeding: ``reset(seed=s)`` gives
     env i the seed ``s + i``."""
+    if backend == "px4":
+        if task not in TASKS:
+            raise ValueError(f"backend 'px4' flies a quadsitl task; {task!r} is not one")
+        from quadsitl.envs.offboard_vector import OffboardVectorEnv
+
+        return OffboardVectorEnv(num_envs, task, autoreset_mode=AutoresetMode.SAME_STEP, **options)
     if task in TASKS:
         return gym.make_vec(
             task_env_spec(task),

@@ -32,7 +32,7 @@ import torch
 
 from policies import checkpoint
 from policies.algos.base import Algorithm, algorithm_class
-from policies.config import TrainConfig
+from policies.config import TrainConfig, flight_stack_options
 from policies.evaluate import VALIDATION_SEED, evaluate
 from policies.fine_tune import start_from
 from policies.folders import check_writable
@@ -129,6 +129,8 @@ def train(
     wire: dict[str, Any] = {}
     if config.backend == "mavlink":
         wire = {"vehicles_per_sim": config.vehicles_per_sim, "ray": config.ray or None}
+    if config.backend == "px4":
+        wire = flight_stack_options(config)
     env = make_vector_env(
         config.task, config.num_envs, config.backend, **wire, **config.task_options
     )

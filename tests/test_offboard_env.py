@@ -97,7 +97,7 @@ def test_the_offboard_loss_failsafe_runs_on_simulated_time(make_env):
     assert not lost()
     autopilots.advance(0.2)
     assert lost()
-    autopilots.advance(1.0)  # its next heartbeat
+    autopilots.advance(1.2)  # its next heartbeat (one a second; the last round is held)
     assert estimate.custom_mode == custom_mode(MAIN_MODE_POSCTL)
     assert np.linalg.norm(autopilots.fleet.state[0, L.POS] - start) < 0.3  # held where it was
 

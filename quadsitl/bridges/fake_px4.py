@@ -129,6 +129,7 @@ class FakePx4:
         self.reader = FrameReader()
         self.received = Received()
         self._pending: list[HilSensor] = []
+        self.clock_us = 0  # the time_usec of the last HIL_SENSOR taken (PX4's clock)
         self._seq = 0
         heartbeat = (0, mav.MAV_TYPE_GENERIC, mav.MAV_AUTOPILOT_PX4, 0, 0, 3)
         self._send(mav.MAVLink_heartbeat_message, heartbeat)
@@ -145,7 +146,8 @@ class FakePx4:
         values += [0.0] * (16 - len(values))
         mode = MODE_CUSTOM | (ARMED_FLAG if armed else 0)
         flags = LOCKSTEP_FLAG if self.lockstep else 0
-        self._send(mav.MAVLink_hil_actuator_controls_message, (0, flags, *values, mode))
+        message = mav.MAVLink_hil_actuator_controls_message
+        self._send(message, (self.clock_us, flags, *values, mode))
 
     def next_sensor(self, timeout: float = 10.0) -> HilSensor:
         """The next HIL_SENSOR (reading and keeping whatever comes before it)."""
@@ -155,7 +157,9 @@ class FakePx4:
                 self.receive(max(0.001, deadline - time.monotonic()))
             except TimeoutError:
                 raise TimeoutError(f"no HIL_SENSOR within {timeout} s") from None
-        return self._pending.pop(0)
+        sensor = self._pending.pop(0)
+        self.clock_us = sensor.time_usec  # PX4's clock in lockstep: its last HIL_SENSOR's
+        return sensor
 
     def receive(self, timeout: float = 10.0) -> None:
         """Take what the next read brings (waiting up to ``timeout`` s for it)."""

@@ -75,6 +75,7 @@ class Peer:
     lockstep: bool = False  # PX4 said so: each actuator message steps one round
     armed: bool = False
     time_us: int = 0  # physics time of this vehicle since PX4 connected
+    answered_us: int = -1  # PX4's clock in its last HIL_ACTUATOR_CONTROLS (time_usec)
     rounds: int = 0  # rounds stepped since this process started
     state_interval_us: int | None = DEFAULT_STATE_INTERVAL_US  # None: not sent
     next_state_us: int = 0
@@ -187,6 +188,7 @@ class HilPhysics:
         values = frame.unpack()  # time_usec, flags, controls[16], mode
         flags, controls, mode = values[1], values[2:18], values[18]
         peer = self.peers[index]
+        peer.answered_us = values[0]
         peer.armed = bool(mode & ARMED_FLAG)
         commands, bad = motor_commands(controls, self._omega_max[index])
         if bad:

@@ -19,18 +19,23 @@ waited for: the others fly on (:meth:`Autopilots.advance` returns who failed), a
 from __future__ import annotations
 
 import contextlib
+import os
+import shutil
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from quadsitl import frames
+from quadsitl.bridges.px4_airframe import parameter_folder
 from quadsitl.bridges.px4_hil import LINK_PORT, PEER_PORT, PORT, ROUND_US, HilPhysics
 from quadsitl.bridges.px4_tcp import Px4TcpServer
 from quadsitl.envs.sim_process import terminate
@@ -39,6 +44,8 @@ from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.udp_messages import pending_messages
 
 BOOT_GUARD_S = 120.0  # wall s an autopilot may take to start and lead in lockstep
+ESTIMATE_LIMIT_S = 60.0  # simulated s a new autopilot may take to report an estimate
+ESTIMATE_STEP_S = 0.1  # simulated s between looks for it
 STALL_S = 10.0  # wall s without a round, once in lockstep, before it is called stalled
 ESTIMATE_WAIT_S = 1.0  # wall s to wait for the estimate of a step's end (then the last one)
 HEARTBEAT_S = 1.0  # simulated s between the companion's heartbeats
@@ -48,6 +55,72 @@ COMPANION_SYSTEM, COMPANION_COMPONENT = 255, mav.MAV_COMP_ID_ONBOARD_COMPUTER
 
 class AutopilotError(RuntimeError):
     """The autopilot exited, disconnected or stalled (the message says which)."""
+
+
+@dataclass(frozen=True)
+class AutopilotCommand:
+    """How an autopilot instance starts: ``argv`` (``{port}`` and ``{instance}`` in it
+    are filled in) with ``environment`` added to this process's; ``own_folder``: it runs
+    in a new folder of its own (PX4 writes its parameters and logs there), where its
+    output goes to ``autopilot.log``; ``streams_us``: message id -> interval (µs) asked
+    for on its onboard link; ``estimate_lag_ms``: how much older than a step's end its
+    estimate may be stamped (a real PX4 stamps its estimator's output)."""
+
+    argv: list[str]
+    environment: dict[str, str] = field(default_factory=dict)
+    own_folder: bool = False
+    streams_us: dict[int, int] = field(default_factory=dict)
+    estimate_lag_ms: int = 0
+
+
+def autopilot_command(autopilot: Any, airframe: str = "iris") -> AutopilotCommand:
+    """``autopilot`` as a command: None, the in-repository fake PX4; a folder, a PX4 SITL
+    build (``build/px4_sitl_default``); a list, the argv of anything else; or an
+    :class:`AutopilotCommand` as it is."""
+    if autopilot is None:
+        return fake_px4_command(airframe)
+    if isinstance(autopilot, AutopilotCommand):
+        return autopilot
+    if isinstance(autopilot, (str, os.PathLike)):
+        return px4_build_command(autopilot, airframe)
+    return AutopilotCommand([str(a) for a in autopilot])
+
+
+def fake_px4_command(airframe: str = "iris") -> AutopilotCommand:
+    """The in-repository fake (:mod:`quadsitl.fake_stacks.offboard_px4`) as a process."""
+    module = "quadsitl.fake_stacks.offboard_px4"
+    return AutopilotCommand([sys.executable, "-m", module, "-i", "{instance}", "--port",
+                             "{port}", "--airframe", airframe])  # fmt: skip
+
+
+# What a real PX4 sends its onboard link by default is too slow for 50 Hz control (its
+# "onboard" MAVLink mode: LOCAL_POSITION_NED at 30 Hz); the env asks for every round's.
+PX4_STREAMS_US = {
+    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: ROUND_US,
+    mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: ROUND_US,
+}
+PX4_ESTIMATE_LAG_MS = 12  # PX4 publishes its estimate a few rounds after the IMU's
+
+
+def px4_build_command(build: str | os.PathLike[str], airframe: str = "iris") -> AutopilotCommand:
+    """A real PX4 from its SITL build folder, on quadsitl's parameter file for
+    ``airframe`` (airframe none_iris: PX4's quad X without a simulator of its own), as
+    docs/autopilots.md starts it by hand."""
+    build = Path(build).expanduser().resolve()
+    binary, etc = build / "bin" / "px4", build / "etc"
+    if not (binary.is_file() and etc.is_dir()):
+        raise ValueError(f"{build} is not a PX4 SITL build (no bin/px4 and etc/ in it)")
+    folder = parameter_folder(airframe)
+    if folder is None:
+        raise ValueError(f"no PX4 parameter file ships for airframe {airframe!r}")
+    path = f"{folder}{os.pathsep}{os.environ.get('PATH', '')}"
+    return AutopilotCommand(
+        [str(binary), "-d", "-i", "{instance}", str(etc)],
+        {"PATH": path, "PX4_SIM_MODEL": "none_iris"},
+        own_folder=True,
+        streams_us=dict(PX4_STREAMS_US),
+        estimate_lag_ms=PX4_ESTIMATE_LAG_MS,
+    )
 
 
 @dataclass
@@ -88,19 +161,35 @@ class Autopilot:
         self.mav.robust_parsing = True
         self.estimate = Estimate()
         self.process: subprocess.Popen[bytes] | None = None
+        self.folder: str | None = None
         self.failure: str | None = None  # why it is no longer flown (None: it flies)
+        self.flown = False  # has flown since its process started (it is not fresh)
+        self.system_id = instance + 1  # PX4's MAV_SYS_ID; its heartbeat says for sure
         self.next_heartbeat_us = 0
         self.local_origin = np.zeros(3)  # its local frame's origin in the simulator's (ENU)
 
-    def start_process(self, command: list[str]) -> None:
+    def start_process(self, command: AutopilotCommand) -> None:
         self.stop_process()
         self.read()  # what the old one sent and did not deliver is dropped
-        filled = [a.format(port=PORT, instance=self.instance) for a in command]
-        self.process = subprocess.Popen(filled, stdin=subprocess.DEVNULL)
-        # ended with the link, or at exit if the env was never closed
-        self._finalizer = weakref.finalize(self, terminate, self.process, 10.0)
+        filled = [a.format(port=PORT, instance=self.instance) for a in command.argv]
+        folder, output = None, None
+        if command.own_folder:
+            folder = tempfile.mkdtemp(prefix=f"quadsitl-autopilot{self.instance}-")
+            output = open(Path(folder) / "autopilot.log", "wb")  # noqa: SIM115
+        try:
+            self.process = subprocess.Popen(
+                filled, stdin=subprocess.DEVNULL, stdout=output, stderr=output, cwd=folder,
+                env={**os.environ, **command.environment},
+            )  # fmt: skip
+        finally:
+            if output is not None:
+                output.close()  # the process holds its own
+        # ended with the link, or at exit if the env was never closed; its folder goes
+        self._finalizer = weakref.finalize(self, _end, self.process, folder)
+        self.folder = folder
         self.estimate = Estimate()
         self.failure = None
+        self.flown = False
         self.next_heartbeat_us = 0
 
     def stop_process(self) -> None:
@@ -110,7 +199,19 @@ class Autopilot:
     def exited(self) -> str | None:
         """Why it is gone, if its process has exited."""
         code = self.process.poll() if self.process is not None else 1
-        return None if code is None else f"the autopilot exited with code {code}"
+        if code is None:
+            return None
+        return f"the autopilot exited with code {code}{self._last_words()}"
+
+    def _last_words(self) -> str:
+        """The end of its output, where it was kept (its folder goes with it)."""
+        if self.folder is None:
+            return ""
+        with contextlib.suppress(OSError):
+            text = (Path(self.folder) / "autopilot.log").read_text(errors="replace")
+            lines = [line for line in text.splitlines() if line.strip()][-3:]
+            return "; its last words: " + " | ".join(lines) if lines else ""
+        return ""
 
     def close(self) -> None:
         self.stop_process()
@@ -137,6 +238,7 @@ class Autopilot:
             e.rates = (msg.rollspeed, msg.pitchspeed, msg.yawspeed)
         elif kind == "HEARTBEAT" and msg.autopilot != mav.MAV_AUTOPILOT_INVALID:
             e.base_mode, e.custom_mode = msg.base_mode, msg.custom_mode
+            self.system_id = msg.get_srcSystem()
         elif kind == "COMMAND_ACK":
             e.acks[msg.command] = msg.result
         elif kind == "STATUSTEXT":
@@ -145,15 +247,17 @@ class Autopilot:
 
 class Autopilots:
     """Autopilot instances ``first_instance`` .. ``first_instance + n - 1`` started with
-    ``command`` (a list; ``{port}`` and ``{instance}`` in it are filled in), each flying a
-    vehicle of ``airframe`` on one batched physics."""
+    ``command``, each flying a vehicle of ``airframe`` on one batched physics, sensed with
+    the sensor models' noise scaled by ``sensor_noise`` (0: the truth)."""
 
     def __init__(
-        self, command: list[str], n: int = 1, first_instance: int = 0, airframe: str = "iris"
-    ) -> None:
+        self, command: AutopilotCommand, n: int = 1, first_instance: int = 0,
+        airframe: str = "iris", sensor_noise: float = 1.0,
+    ) -> None:  # fmt: skip
         self.start_command, self.airframe = command, airframe
         self.notices: list[str] = []
-        self.physics = HilPhysics(Fleet(n, airframe), notice=self.notices.append)
+        fleet = Fleet(n, airframe)
+        self.physics = HilPhysics(fleet, noise_scale=sensor_noise, notice=self.notices.append)
         self.fleet = self.physics.fleet
         self.server = Px4TcpServer(self.physics, "127.0.0.1", PORT + first_instance)
         # One round when an autopilot connects, then only those it answers: the rounds
@@ -167,9 +271,7 @@ class Autopilots:
         except OSError:
             self.close()
             raise
-        # How much older than the step's end an estimate may be stamped: the fake sends
-        # the state of every round; a real PX4 stamps its estimator's output.
-        self.estimate_lag_ms = 0
+        self.estimate_lag_ms = command.estimate_lag_ms
 
     @property
     def n(self) -> int:
@@ -203,15 +305,49 @@ class Autopilots:
                     waiting.discard(row)
             self.server.serve(0.05)
         live = [row for row in rows if self.pilots[row].failure is None]
-        self._read_estimates(live, BOOT_GUARD_S)
+        self._await_estimates(live)
+        live = [row for row in live if self.pilots[row].failure is None]
+        for message, interval in self.start_command.streams_us.items():
+            # once its MAVLink is up (it sent an estimate): each stream at its rate
+            self.command(live, mav.MAV_CMD_SET_MESSAGE_INTERVAL, message, interval)
         for row in live:
-            # Where the autopilot's local frame has its origin in the simulator's (ENU,
-            # m): PX4 puts it where its estimator started, at ground level (not the centre
-            # of mass, which rests at the gear's height). Measured now, at rest.
-            pilot = self.pilots[row]
-            local = frames.ned_to_enu(np.array(pilot.estimate.position))
-            pilot.local_origin = self.fleet.state[row, :3] - local
+            self.measure_origin(row)
+            self.pilots[row].flown = False  # what it flew to start is not an episode
         return [row for row in rows if self.pilots[row].failure is not None]
+
+    def _await_estimates(self, rows: list[int]) -> None:
+        """Let the autopilots of ``rows`` run, their vehicles at rest, until each reports
+        an estimate (a real PX4 sends one once its estimator has started)."""
+        limit = ESTIMATE_LIMIT_S * 1e6
+        waiting = [r for r in rows if self.pilots[r].estimate.time_ms < 0]
+        while waiting:
+            for row in self.advance(ESTIMATE_STEP_S, waiting):
+                waiting.remove(row)  # failed: said in its failure
+            for row in waiting:
+                if self.time_us(row) > limit:
+                    self.pilots[
+                        row
+                    ].failure = (
+                        f"the autopilot sent no estimate in {ESTIMATE_LIMIT_S:g} simulated s"
+                    )
+            waiting = [
+                r for r in waiting
+                if self.pilots[r].failure is None and self.pilots[r].estimate.time_ms < 0
+            ]  # fmt: skip
+
+    def estimated_position(self, row: int) -> np.ndarray:
+        """Where the autopilot of ``row`` estimates its vehicle is, in the simulator's
+        frame (ENU, m)."""
+        pilot = self.pilots[row]
+        return frames.ned_to_enu(np.array(pilot.estimate.position)) + pilot.local_origin
+
+    def measure_origin(self, row: int) -> None:
+        """Where the autopilot's local frame has its origin in the simulator's (ENU, m),
+        measured with the vehicle at rest: PX4 puts it where its estimator started, at
+        ground level (not the centre of mass, which rests at the gear's height)."""
+        pilot = self.pilots[row]
+        local = frames.ned_to_enu(np.array(pilot.estimate.position))
+        pilot.local_origin = self.fleet.state[row, :3] - local
 
     def restart(self, rows: Sequence[int]) -> list[int]:
         """New autopilot processes for ``rows``; the rows that failed to start."""
@@ -236,6 +372,7 @@ class Autopilots:
         rounds = round(seconds * 1e6 / ROUND_US)
         target = {row: self.time_us(row) + rounds * ROUND_US for row in rows}
         for row in rows:
+            self.pilots[row].flown = True
             # The round of the last step's end was held back: the autopilot gets it now,
             # after what the env sent since, and the round of this step's end is held.
             self.server.hold_at_us[row] = target[row]
@@ -253,6 +390,7 @@ class Autopilots:
                     flying.discard(row)
                 else:
                     self._heartbeat(row)
+                    self.pilots[row].read()  # a long advance would overflow its socket
             if flying:
                 self.server.serve(0.05)
         # The estimate of the round before the step's end: its telemetry came before the
@@ -279,15 +417,18 @@ class Autopilots:
             pilot.send(pilot.mav.heartbeat_encode(kind, none, 0, 0, 0))
 
     def _read_estimates(self, rows: Sequence[int], wait_s: float) -> None:
-        """Read until each estimate is stamped at its vehicle's last round or later (an
-        autopilot sends it from its own thread), waiting at most ``wait_s``."""
-        stamp = {r: (self.time_us(r) - ROUND_US) // 1000 - self.estimate_lag_ms for r in rows}
+        """Read until each estimate is stamped at the last round its autopilot answered
+        or later (it sends its telemetry before its motor outputs, maybe from another
+        thread), waiting at most ``wait_s``."""
+        peers = self.physics.peers
+        stamp = {r: peers[r].answered_us // 1000 - self.estimate_lag_ms for r in rows}
         deadline = time.monotonic() + wait_s
         waiting = list(rows)
         while True:
             for row in waiting:
                 self.pilots[row].read()
-            waiting = [r for r in waiting if self.pilots[r].estimate.time_ms < stamp[r]]
+            # (one that has sent none yet is not waited for: its estimator is starting)
+            waiting = [r for r in waiting if 0 <= self.pilots[r].estimate.time_ms < stamp[r]]
             if not waiting or time.monotonic() > deadline:
                 return
             time.sleep(0.0002)
@@ -300,7 +441,7 @@ class Autopilots:
         for row in rows:
             pilot = self.pilots[row]
             pilot.estimate.acks.pop(command, None)
-            pilot.send(pilot.mav.command_long_encode(1, 1, command, 0, *values))
+            pilot.send(pilot.mav.command_long_encode(pilot.system_id, 1, command, 0, *values))
         waiting = list(rows)
         for _ in range(round(1e6 / ROUND_US)):
             waiting = [r for r in waiting if command not in self.pilots[r].estimate.acks]
@@ -312,8 +453,7 @@ class Autopilots:
         return {row: self.pilots[row].estimate.acks.get(command, -1) for row in rows}
 
 
-def fake_px4_command(airframe: str = "iris") -> list[str]:
-    """The in-repository fake (:mod:`quadsitl.fake_stacks.offboard_px4`) as a process."""
-    module = "quadsitl.fake_stacks.offboard_px4"
-    return [sys.executable, "-m", module, "-i", "{instance}", "--port", "{port}",
-            "--airframe", airframe]  # fmt: skip
+def _end(process: subprocess.Popen[bytes], folder: str | None) -> None:
+    terminate(process, 10.0)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)

@@ -26,6 +26,8 @@ one batched physics behind one vector env.
 
 from __future__ import annotations
 
+import math
+import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,7 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from quadsitl.bridges.px4_hil import ROUND_US
 from quadsitl.envs import setpoints
-from quadsitl.envs.autopilot_link import Autopilots, fake_px4_command
+from quadsitl.envs.autopilot_link import Autopilots, autopilot_command
 from quadsitl.envs.offboard_fleet import OffboardFleet
 from quadsitl.physics import get_airframe
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
@@ -62,11 +64,12 @@ class Offboard:
         task: str,
         n: int,
         action_level: str,
-        autopilot: list[str] | None,
+        autopilot: Any,
         first_instance: int,
         airframe: str,
         control_rate: float,
         task_options: dict[str, Any],
+        sensor_noise: float = 1.0,
     ) -> Offboard:
         level = setpoints.check_level(action_level)
         spec = get_task(task)
@@ -77,8 +80,10 @@ class Offboard:
             airframe=airframe, physics_dt=ROUND_US * 1e-6, control_period=period, **task_options
         )
         hover = get_airframe(airframe).hover_thrust_fraction
-        command = autopilot or fake_px4_command(airframe)
-        autopilots = Autopilots(command, n, first_instance, airframe)
+        command = autopilot_command(autopilot, airframe)
+        if not (math.isfinite(sensor_noise) and sensor_noise >= 0):
+            raise ValueError(f"sensor_noise must be a number ≥ 0, got {sensor_noise!r}")
+        autopilots = Autopilots(command, n, first_instance, airframe, sensor_noise)
         try:
             failed = autopilots.start()
             if failed:
@@ -97,7 +102,7 @@ class Offboard:
             pilot = self.autopilots.pilots[row]
             ms = self.autopilots.time_us(row) // 1000
             pilot.send(setpoints.message(pilot.mav, self.level, actions[row], ms,
-                                         self.hover_thrust))  # fmt: skip
+                                         self.hover_thrust, pilot.system_id))  # fmt: skip
 
     def observe(self, out: NDArray[np.float32]) -> NDArray[np.float32]:
         """The task's observation of each autopilot's estimate, into ``out`` (N, size)."""
@@ -134,11 +139,14 @@ def checked_actions(actions: ArrayLike, n: int) -> NDArray[np.float64]:
 
 class OffboardEnv(gym.Env):
     """Task ``task`` flown through PX4 (offboard) at action level ``action_level``
-    (``"velocity"``, ``"attitude"`` or ``"rates"``). ``autopilot``: the command that
-    starts PX4 instance ``instance`` (``{port}`` and ``{instance}`` are filled in;
-    None: the in-repository fake, :mod:`quadsitl.fake_stacks.offboard_px4`).
-    ``control_rate``: env steps per simulated second. Other keyword arguments are the
-    task's options (e.g. ``init_position_noise``)."""
+    (``"velocity"``, ``"attitude"`` or ``"rates"``). ``autopilot``: PX4 instance
+    ``instance``, from a PX4 SITL build folder (``build/px4_sitl_default``); None: the
+    in-repository fake (:mod:`quadsitl.fake_stacks.offboard_px4`); a list: the command
+    that starts one (``{port}`` and ``{instance}`` in it are filled in).
+    ``control_rate``: env steps per simulated second. ``sensor_noise``: the scale of the
+    sensor models' noise the autopilot's estimator works with (1: a hobby-grade GPS,
+    barometer and IMU; 0: exact readings). Other keyword arguments are the task's options
+    (e.g. ``init_position_noise``)."""
 
     metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012
 
@@ -146,17 +154,18 @@ class OffboardEnv(gym.Env):
         self,
         task: str = "hover",
         action_level: str = "velocity",
-        autopilot: list[str] | None = None,
+        autopilot: str | os.PathLike[str] | list[str] | None = None,
         instance: int = 0,
         airframe: str = "iris",
         control_rate: float = 50.0,
+        sensor_noise: float = 1.0,
         render_mode: str | None = None,
         **task_options: Any,
     ) -> None:
         if render_mode is not None:
             raise ValueError(f"render_mode {render_mode!r} is not supported (use None)")
         self.offboard = Offboard.build(task, 1, action_level, autopilot, instance, airframe,
-                                       control_rate, task_options)  # fmt: skip
+                                       control_rate, task_options, sensor_noise)  # fmt: skip
         self.autopilots, self.fleet = self.offboard.autopilots, self.offboard.fleet
         self.engine = self.offboard.engine
         size = self.engine.obs_size

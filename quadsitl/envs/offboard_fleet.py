@@ -29,9 +29,10 @@ from quadsitl.wire.modes import MAIN_OFFBOARD, Mode
 
 RESET_LIMIT_S = 30.0  # simulated s a reset may fly before it starts the episode anyway
 STREAM_FIRST_S = 1.0  # simulated s of setpoints before asking for OFFBOARD (PX4 >= 1.14)
-SETTLED_POSITION = 0.05  # m from the drawn start ...
+SETTLED_POSITION = 0.05  # m from the drawn start by the autopilot's estimate ...
 SETTLED_SPEED = 0.1  # ... and m/s, rad/s: the start is reached ...
 SETTLED_FOR_S = 0.2  # ... for this long
+ARM_LIMIT_S = 60.0  # simulated s a new autopilot may refuse to arm (its estimator converging)
 START_TRIES = 2  # new processes a reset tries before it gives up on an autopilot
 
 
@@ -112,6 +113,9 @@ class OffboardFleet:
                 "simulated_s": (self.autopilots.time_us(row) - began[row]) * 1e-6,
                 "wall_s": time.monotonic() - wall,
                 "position_error_m": float(np.linalg.norm(position - targets[row])),
+                "estimate_error_m": float(
+                    np.linalg.norm(self.autopilots.estimated_position(row) - position)
+                ),
                 "reached": settled[row] >= SETTLED_FOR_S,
                 "restarted": restarted.get(row),
             }
@@ -124,6 +128,8 @@ class OffboardFleet:
             failure = self.failed[row] or self.autopilots.pilots[row].failure
             failure = failure or self.autopilots.pilots[row].exited()
             reason = self.restart.pop(row, None)
+            if not self.autopilots.pilots[row].flown:
+                reason = None  # a new process already: it has not flown since it started
             if failure or reason:
                 why[row] = str(failure or reason)
         todo = list(why)
@@ -149,9 +155,11 @@ class OffboardFleet:
                 failures = {row: self.autopilots.pilots[row].failure for row in failed}
                 raise AutopilotError(f"autopilots failed while a reset flew them: {failures}")
             for row in flying:
-                s = self.physical.state[row]
+                # There by the autopilot's own estimate (all its position control can
+                # reach), and still in truth.
+                s, there = self.physical.state[row], self.autopilots.estimated_position(row)
                 still = max(np.linalg.norm(s[L.VEL]), np.linalg.norm(s[L.RATES]))
-                near = np.linalg.norm(s[L.POS] - targets[row]) < SETTLED_POSITION
+                near = np.linalg.norm(there - targets[row]) < SETTLED_POSITION
                 ok = near and still < SETTLED_SPEED
                 settled[row] = settled[row] + self.control_period if ok else 0.0
             flying = [
@@ -163,34 +171,42 @@ class OffboardFleet:
 
     def _send(self, row: int, make: Any, *args: Any) -> None:
         pilot = self.autopilots.pilots[row]
-        pilot.send(make(pilot.mav, *args, self.autopilots.time_us(row) // 1000))
+        ms = self.autopilots.time_us(row) // 1000
+        pilot.send(make(pilot.mav, *args, ms, pilot.system_id))
 
     def _offboard(self, rows: list[int]) -> None:
-        """Armed and in OFFBOARD, holding where each is (a stream of setpoints first)."""
-        pilots = self.autopilots.pilots
-        custom = Mode.OFFBOARD.custom_mode
-        rows = [
-            r
-            for r in rows
-            if not (pilots[r].estimate.armed and pilots[r].estimate.custom_mode == custom)
-        ]
-        if not rows:
-            return
-        for _ in range(math.ceil(STREAM_FIRST_S / self.control_period)):
-            for row in rows:
-                here = self.physical.state[row, L.POS] - pilots[row].local_origin
-                self._send(row, setpoints.position_message, here, 0.0)
-            self.autopilots.advance(self.control_period, rows)
-        mode = self.autopilots.command(
-            rows, mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, MAIN_OFFBOARD
-        )
-        arm = self.autopilots.command(rows, mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+        """Armed and in OFFBOARD, holding where each is: a stream of setpoints first, then
+        the mode and arming asked for each simulated second until every autopilot takes
+        them (a PX4 just started refuses until its estimator has converged)."""
+        pilots, custom = self.autopilots.pilots, Mode.OFFBOARD.custom_mode
+        began = {row: self.autopilots.time_us(row) for row in rows}
         accepted = mav.MAV_RESULT_ACCEPTED
-        refused = {r: (mode[r], arm[r]) for r in rows if (mode[r], arm[r]) != (accepted,) * 2}
-        if refused:
-            raise AutopilotError(
-                f"autopilots refused offboard or arming (row: (mode, arm) results): {refused}"
+        results: dict[int, tuple[int, int]] = {}
+        rows = [
+            r for r in rows
+            if not (pilots[r].estimate.armed and pilots[r].estimate.custom_mode == custom)
+        ]  # fmt: skip
+        while rows:
+            late = [r for r in rows if self.autopilots.time_us(r) - began[r] > ARM_LIMIT_S * 1e6]
+            if late:
+                raise AutopilotError(
+                    f"autopilots refused offboard or arming for {ARM_LIMIT_S:g} simulated s "
+                    f"(row: (mode, arm) results): { {r: results.get(r) for r in late} }"
+                )
+            for _ in range(math.ceil(STREAM_FIRST_S / self.control_period)):
+                for row in rows:
+                    here = self.physical.state[row, L.POS] - pilots[row].local_origin
+                    self._send(row, setpoints.position_message, here, 0.0)
+                self.autopilots.advance(self.control_period, rows)
+            for row in rows:
+                if not pilots[row].estimate.armed:  # at rest on the ground: measure again
+                    self.autopilots.measure_origin(row)
+            mode = self.autopilots.command(
+                rows, mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, MAIN_OFFBOARD
             )
+            arm = self.autopilots.command(rows, mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+            results = {r: (mode[r], arm[r]) for r in rows}
+            rows = [r for r in rows if results[r] != (accepted, accepted)]
 
     def set_wind(self, *args: Any, **kwargs: Any) -> None:
         raise ValueError("weather is not available through an autopilot yet")

@@ -16,6 +16,7 @@ Autoreset as the native vector env (:mod:`.vector`): NEXT_STEP (default) or SAME
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import numpy as np
@@ -41,10 +42,11 @@ class OffboardVectorEnv(VectorEnv):
         num_envs: int = 1,
         task: str = "hover",
         action_level: str = "velocity",
-        autopilot: list[str] | None = None,
+        autopilot: str | os.PathLike[str] | list[str] | None = None,
         first_instance: int = 0,
         airframe: str = "iris",
         control_rate: float = 50.0,
+        sensor_noise: float = 1.0,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
         **task_options: Any,
@@ -60,7 +62,7 @@ class OffboardVectorEnv(VectorEnv):
         self.num_envs, self.render_mode = int(num_envs), render_mode
         self.offboard = Offboard.build(
             task, self.num_envs, action_level, autopilot, first_instance, airframe,
-            control_rate, task_options,
+            control_rate, task_options, sensor_noise,
         )  # fmt: skip
         self.engine, self.fleet = self.offboard.engine, self.offboard.fleet
         size = self.engine.obs_size

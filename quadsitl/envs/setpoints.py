@@ -64,15 +64,18 @@ def thrust(a: float, hover: float) -> float:
     return hover * (1.0 + a) if a < 0 else hover + a * (1.0 - hover)
 
 
-def message(link: Any, level: str, action: np.ndarray, time_ms: int, hover: float) -> Any:
+def message(
+    link: Any, level: str, action: np.ndarray, time_ms: int, hover: float, system: int = 1
+) -> Any:
     """The setpoint message of ``action`` (4,) at ``level``, encoded by ``link`` (a
-    pymavlink MAVLink object), stamped ``time_ms`` (the autopilot's clock)."""
+    pymavlink MAVLink object), stamped ``time_ms`` (the autopilot's clock), for the
+    autopilot of MAVLink system ``system``."""
     a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
     if level == "velocity":
         east, north, up = a[0] * MAX_SPEED_XY, a[1] * MAX_SPEED_XY, a[2] * MAX_SPEED_Z
         yaw_rate_down = -a[3] * MAX_YAW_RATE  # ENU about up -> NED about down
         return link.set_position_target_local_ned_encode(
-            time_ms, 1, 1, mav.MAV_FRAME_LOCAL_NED, _IGNORE_ALL_BUT_VELOCITY_AND_YAW_RATE,
+            time_ms, system, 1, mav.MAV_FRAME_LOCAL_NED, _IGNORE_ALL_BUT_VELOCITY_AND_YAW_RATE,
             0, 0, 0, north, east, -up, 0, 0, 0, 0, yaw_rate_down,
         )  # fmt: skip
     collective = thrust(float(a[3]), hover)
@@ -80,22 +83,24 @@ def message(link: Any, level: str, action: np.ndarray, time_ms: int, hover: floa
         q_enu = frames.quat_from_euler(a[0] * MAX_TILT, a[1] * MAX_TILT, a[2] * math.pi)
         q = frames.quat_enu_flu_to_ned_frd(q_enu)
         ignore = 0b111  # body rates
-        return link.set_attitude_target_encode(time_ms, 1, 1, ignore, q, 0, 0, 0, collective)
+        return link.set_attitude_target_encode(time_ms, system, 1, ignore, q, 0, 0, 0, collective)
     check_level(level)
     rates = frames.flu_to_frd(
         np.array([a[0] * MAX_RATE_RP, a[1] * MAX_RATE_RP, a[2] * MAX_RATE_YAW])
     )
     ignore = mav.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
     return link.set_attitude_target_encode(
-        time_ms, 1, 1, ignore, [1.0, 0.0, 0.0, 0.0], *rates, collective
+        time_ms, system, 1, ignore, [1.0, 0.0, 0.0, 0.0], *rates, collective
     )
 
 
-def position_message(link: Any, east_north_up: np.ndarray, yaw_enu: float, time_ms: int) -> Any:
+def position_message(
+    link: Any, east_north_up: np.ndarray, yaw_enu: float, time_ms: int, system: int = 1
+) -> Any:
     """A position setpoint (local NED) holding heading ``yaw_enu``: how a reset flies the
     vehicle to an episode's start under the autopilot's own position control."""
     east, north, up = (float(v) for v in east_north_up)
     return link.set_position_target_local_ned_encode(
-        time_ms, 1, 1, mav.MAV_FRAME_LOCAL_NED, _POSITION_AND_YAW,
+        time_ms, system, 1, mav.MAV_FRAME_LOCAL_NED, _POSITION_AND_YAW,
         north, east, -up, 0, 0, 0, 0, 0, 0, float(frames.yaw_enu_to_ned(yaw_enu)), 0,
     )  # fmt: skip

@@ -6,6 +6,7 @@ What it does as PX4 does (its "Offboard Mode" docs, ``px4-rc.mavlink``):
 
 * It connects to the simulator (TCP 4560 + i) and flies in lockstep: its clock is the
   ``time_usec`` of the HIL_SENSOR it was sent, and every timeout below runs on it.
+* It is MAVLink system i + 1 (PX4's MAV_SYS_ID), and ignores messages for another.
 * It listens for MAVLink on UDP 14580 + i and sends to 14540 + i (PX4's onboard link),
   every round (4 ms): LOCAL_POSITION_NED and ATTITUDE_QUATERNION stamped with its clock,
   HEARTBEAT once a simulated second, COMMAND_ACK for each command.
@@ -44,7 +45,6 @@ from quadsitl.wire.udp_messages import pending_messages
 OFFBOARD_LOSS_S = 1.0  # COM_OF_LOSS_T's default
 HEARTBEAT_S = 1.0
 MAIN_MODE_POSCTL, MAIN_MODE_OFFBOARD = MAIN_POSCTL, MAIN_OFFBOARD  # PX4's main modes
-SYSTEM_ID = 1
 _LEVEL = np.eye(1, L.STATE_SIZE, L.QUAT.start)[0]  # a state row at rest, level
 
 
@@ -67,7 +67,7 @@ class FakeOffboardPx4:
         self.link.bind(("127.0.0.1", LINK_PORT + instance))
         self.link.setblocking(False)
         self.peer = ("127.0.0.1", PEER_PORT + instance)
-        self.mav = mav.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=1)
+        self.mav = mav.MAVLink(None, srcSystem=instance + 1, srcComponent=1)  # PX4's MAV_SYS_ID
         self.mav.robust_parsing = True
         self.armed = False
         self.main_mode = MAIN_MODE_POSCTL
@@ -156,6 +156,9 @@ class FakeOffboardPx4:
 
     def _handle(self, msg: object, now: int) -> None:
         kind = msg.get_type()  # type: ignore[attr-defined]
+        target = getattr(msg, "target_system", 0)
+        if target not in (0, self.mav.srcSystem):
+            return  # another vehicle's, as PX4's MAVLink receiver ignores it
         if kind == "SET_POSITION_TARGET_LOCAL_NED":
             yaw = float(frames.euler_from_quat(self.state[L.QUAT])[2])
             gear = 0.0  # the fake's NED z is the simulator's: no gear offset
