@@ -409,11 +409,10 @@ def make_config(
         # training episodes is logged instead (quadsitl eval is not yet wired to PX4).
         values["eval_every"] = 0
     config = TrainConfig(**values)
-    if config.backend == "px4" and config.first_instance + config.num_envs > MAX_PX4_INSTANCES:
+    if config.backend == "px4" and config.num_envs > MAX_PX4_INSTANCES:
         raise ValueError(
-            f"backend 'px4' flies PX4 instances {config.first_instance}.."
-            f"{config.first_instance + config.num_envs - 1}; their onboard ports "
-            f"(14540 + i, 14580 + i) meet from instance {MAX_PX4_INSTANCES}"
+            f"backend 'px4' flies one PX4 instance per env; at most {MAX_PX4_INSTANCES} "
+            "(instances i and i + 40 share an onboard port: 14540 + i + 40 = 14580 + i)"
         )
     if config.total_steps < config.batch_size:
         raise ValueError(

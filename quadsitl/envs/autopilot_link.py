@@ -50,6 +50,7 @@ STALL_S = 10.0  # wall s without a round, once in lockstep, before it is called 
 ESTIMATE_WAIT_S = 1.0  # wall s to wait for the estimate of a step's end (then the last one)
 HEARTBEAT_S = 1.0  # simulated s between the companion's heartbeats
 STARTING_ROUND_S = 1.0  # wall s between rounds until the autopilot leads in lockstep
+GCS_PORT = 14550  # where every PX4 instance sends its ground-station link
 COMPANION_SYSTEM, COMPANION_COMPONENT = 255, mav.MAV_COMP_ID_ONBOARD_COMPUTER
 
 
@@ -152,6 +153,12 @@ class Autopilot:
     """One autopilot instance: its process and its onboard MAVLink link."""
 
     def __init__(self, instance: int) -> None:
+        if not 0 <= instance < 255 or PEER_PORT + instance == GCS_PORT:
+            raise ValueError(
+                f"PX4 instance {instance} cannot be flown from here: instances are 0 .. 254 "
+                f"(system id i + 1), and instance {GCS_PORT - PEER_PORT}'s onboard port is "
+                f"{GCS_PORT}, where every PX4 sends to its ground station"
+            )
         self.instance = instance
         self.link = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.link.bind(("127.0.0.1", PEER_PORT + instance))
@@ -164,7 +171,7 @@ class Autopilot:
         self.folder: str | None = None
         self.failure: str | None = None  # why it is no longer flown (None: it flies)
         self.flown = False  # has flown since its process started (it is not fresh)
-        self.system_id = instance + 1  # PX4's MAV_SYS_ID; its heartbeat says for sure
+        self.system_id = instance + 1  # PX4's MAV_SYS_ID (px4-rc.mavlink), and the fake's
         self.next_heartbeat_us = 0
         self.local_origin = np.zeros(3)  # its local frame's origin in the simulator's (ENU)
 
@@ -228,6 +235,8 @@ class Autopilot:
             self._take(msg)
 
     def _take(self, msg: Any) -> None:
+        if msg.get_srcSystem() != self.system_id:
+            return  # another vehicle's (a port shared by mistake must not mix them)
         kind, e = msg.get_type(), self.estimate
         if kind == "LOCAL_POSITION_NED":
             e.position_time_ms = msg.time_boot_ms
@@ -238,7 +247,6 @@ class Autopilot:
             e.rates = (msg.rollspeed, msg.pitchspeed, msg.yawspeed)
         elif kind == "HEARTBEAT" and msg.autopilot != mav.MAV_AUTOPILOT_INVALID:
             e.base_mode, e.custom_mode = msg.base_mode, msg.custom_mode
-            self.system_id = msg.get_srcSystem()
         elif kind == "COMMAND_ACK":
             e.acks[msg.command] = msg.result
         elif kind == "STATUSTEXT":
