@@ -25,6 +25,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from quadsitl.envs.offboard_env import SEEDED, Offboard, checked_actions
+from quadsitl.envs.vector import episode_columns
 
 
 class OffboardVectorEnv(VectorEnv):
@@ -112,11 +113,14 @@ class OffboardVectorEnv(VectorEnv):
             if ended.any():
                 info["final_obs"] = self._observe()
                 info["_final_obs"] = ended.copy()
-                info["final_info"] = {**self._metrics(ended), **self._failures(failed)}
+                info["final_info"] = {
+                    **episode_columns(self.engine, ended),
+                    **self._failures(failed),
+                }
                 info["_final_info"] = ended.copy()
                 self._reset(ended)
         else:
-            info.update(self._metrics(ended))
+            info.update(episode_columns(self.engine, ended))
             resetting = self._autoreset
             if resetting.any():
                 self._reset(resetting)
@@ -137,19 +141,6 @@ class OffboardVectorEnv(VectorEnv):
             return {}
         why = np.array([w or "" for w in self.fleet.failed], dtype=object)
         return {"autopilot_failure": why, "_autopilot_failure": failed.copy()}
-
-    def _metrics(self, ended: np.ndarray) -> dict[str, Any]:
-        """The ended episodes' metrics, as full-width columns with ``_key`` masks."""
-        info: dict[str, Any] = {}
-        rows = np.flatnonzero(ended)
-        if rows.size == 0:
-            return info
-        for key, values in self.engine.episode_metrics(rows).items():
-            column = np.zeros(self.num_envs, dtype=values.dtype)
-            column[rows] = values
-            info[key] = column
-            info[f"_{key}"] = ended.copy()
-        return info
 
     def close_extras(self, **kwargs: Any) -> None:
         offboard = getattr(self, "offboard", None)

@@ -127,7 +127,7 @@ class QuadVectorEnv(VectorEnv):
         ended = (terminated | truncated) & ~resetting
         info: dict[str, Any] = {}
         if ended.any():
-            info = self._metrics(np.flatnonzero(ended), ended)
+            info = episode_columns(self.engine, ended)
         if resetting.any():
             self.engine.reset_envs(resetting)
             reward[resetting] = 0.0
@@ -143,23 +143,27 @@ class QuadVectorEnv(VectorEnv):
         ended = terminated | truncated
         info: dict[str, Any] = {}
         if ended.any():
-            rows = np.flatnonzero(ended)
             info["final_obs"] = self.engine.obs.copy()
             info["_final_obs"] = ended.copy()
-            info["final_info"] = self._metrics(rows, ended)
+            info["final_info"] = episode_columns(self.engine, ended)
             info["_final_info"] = ended.copy()
             self.engine.reset_envs(ended)
         return self.engine.obs.copy(), reward, terminated, truncated, info
 
-    def _metrics(self, rows: np.ndarray, ended: np.ndarray) -> dict[str, Any]:
-        """The ended episodes' metrics, as full-width columns with ``_key`` masks."""
-        info: dict[str, Any] = {}
-        for key, values in self.engine.episode_metrics(rows).items():
-            column = np.zeros(self.num_envs, dtype=values.dtype)
-            column[rows] = values
-            info[key] = column
-            info[f"_{key}"] = ended.copy()
+
+def episode_columns(engine: Any, ended: np.ndarray) -> dict[str, Any]:
+    """The metrics of the episodes that ended (mask ``ended``), as full-width columns
+    with ``_key`` masks, as Gymnasium's vector envs give per-env info."""
+    info: dict[str, Any] = {}
+    rows = np.flatnonzero(ended)
+    if rows.size == 0:
         return info
+    for key, values in engine.episode_metrics(rows).items():
+        column = np.zeros(ended.size, dtype=values.dtype)
+        column[rows] = values
+        info[key] = column
+        info[f"_{key}"] = ended.copy()
+    return info
 
 
 def _copies(arrays: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
