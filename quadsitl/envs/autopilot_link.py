@@ -291,7 +291,8 @@ class Autopilots:
 
     # --- the processes --------------------------------------------------------------
     def start(self, rows: Sequence[int] | None = None) -> list[int]:
-        """Start the autopilots of ``rows`` (all) and serve them until each leads in
+        """Start the autopilots of ``rows`` (all; a running one is stopped first: a
+        restart) and serve them until each leads in
         lockstep and its estimate of the vehicle at rest comes; the rows that failed
         (each one's ``failure`` says why)."""
         rows = list(range(self.n)) if rows is None else list(rows)
@@ -356,12 +357,6 @@ class Autopilots:
         pilot = self.pilots[row]
         local = frames.ned_to_enu(np.array(pilot.estimate.position))
         pilot.local_origin = self.fleet.state[row, :3] - local
-
-    def restart(self, rows: Sequence[int]) -> list[int]:
-        """New autopilot processes for ``rows``; the rows that failed to start."""
-        for row in rows:
-            self.pilots[row].stop_process()
-        return self.start(rows)
 
     def close(self) -> None:
         for pilot in self.pilots:
@@ -455,9 +450,7 @@ class Autopilots:
             waiting = [r for r in waiting if command not in self.pilots[r].estimate.acks]
             if not waiting:
                 break
-            self.advance(ROUND_US * 1e-6, waiting)
-            for row in waiting:
-                self.pilots[row].read()
+            self.advance(ROUND_US * 1e-6, waiting)  # (which reads what they sent)
         return {row: self.pilots[row].estimate.acks.get(command, -1) for row in rows}
 
 

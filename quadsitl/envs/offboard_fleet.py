@@ -39,8 +39,7 @@ START_TRIES = 2  # new processes a reset tries before it gives up on an autopilo
 class OffboardFleet:
     """The vehicles of ``autopilots`` in the task's frame (origin ``altitude`` above the
     ground where each took off). The env sets ``active`` (the rows the next step flies)
-    and ``restart`` (row -> why its next reset starts a new autopilot); ``failed`` holds
-    why each row's autopilot failed during the episode (None: it flies)."""
+    and ``restart`` (row -> why its next reset starts a new autopilot)."""
 
     def __init__(self, autopilots: Autopilots, control_period: float, altitude: float) -> None:
         self.autopilots, self.physical = autopilots, autopilots.fleet
@@ -53,7 +52,6 @@ class OffboardFleet:
         self.wind_state = self.physical.wind_state
         self.state = np.zeros_like(self.physical.state)
         self.active = np.ones(self.n, bool)
-        self.failed: list[str | None] = [None] * self.n
         self.restart: dict[int, str] = {}
         self.reports: list[dict[str, Any]] = [{} for _ in range(self.n)]
         self.sync()
@@ -61,6 +59,11 @@ class OffboardFleet:
     @property
     def hover_rotor_speed(self) -> NDArray[np.float64]:
         return self.physical.hover_rotor_speed
+
+    @property
+    def failed(self) -> list[str | None]:
+        """Why each row's autopilot failed (None: it flies); a reset starts it again."""
+        return [pilot.failure for pilot in self.autopilots.pilots]
 
     @property
     def windy(self) -> bool:
@@ -73,9 +76,7 @@ class OffboardFleet:
     def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
         """The setpoints were sent (the env's step); the autopilots of the active rows fly
         ``n_substeps`` rounds. The engine's rotor commands are not used: theirs are."""
-        rows = [r for r in np.flatnonzero(self.active).tolist() if self.failed[r] is None]
-        for row in self.autopilots.advance(n_substeps * ROUND_US * 1e-6, rows):
-            self.failed[row] = self.autopilots.pilots[row].failure
+        self.autopilots.advance(n_substeps * ROUND_US * 1e-6, np.flatnonzero(self.active).tolist())
         self.sync()
 
     # --- the estimate -------------------------------------------------------------------
@@ -85,8 +86,7 @@ class OffboardFleet:
         state = self.state.copy()
         for row, pilot in enumerate(self.autopilots.pilots):
             e = pilot.estimate
-            local = frames.ned_to_enu(np.array(e.position))
-            state[row, L.POS] = local + pilot.local_origin - self.origin
+            state[row, L.POS] = self.autopilots.estimated_position(row) - self.origin
             state[row, L.VEL] = frames.ned_to_enu(np.array(e.velocity))
             state[row, L.QUAT] = frames.quat_ned_frd_to_enu_flu(np.array(e.quaternion))
             state[row, L.RATES] = frames.frd_to_flu(np.array(e.rates))
@@ -107,7 +107,6 @@ class OffboardFleet:
                 began[row] = self.autopilots.time_us(row)
         settled = self._fly_to(targets, began)
         for row in rows:
-            self.failed[row] = None
             position = self.physical.state[row, L.POS]
             self.reports[row] = {
                 "simulated_s": (self.autopilots.time_us(row) - began[row]) * 1e-6,
@@ -125,8 +124,8 @@ class OffboardFleet:
         """Start new autopilots for the rows that failed or are asked to; row -> why."""
         why: dict[int, str] = {}
         for row in rows:
-            failure = self.failed[row] or self.autopilots.pilots[row].failure
-            failure = failure or self.autopilots.pilots[row].exited()
+            pilot = self.autopilots.pilots[row]
+            failure = pilot.failure or pilot.exited()
             reason = self.restart.pop(row, None)
             if not self.autopilots.pilots[row].flown:
                 reason = None  # a new process already: it has not flown since it started
@@ -134,7 +133,7 @@ class OffboardFleet:
                 why[row] = str(failure or reason)
         todo = list(why)
         for _ in range(START_TRIES):
-            todo = self.autopilots.restart(todo) if todo else []
+            todo = self.autopilots.start(todo) if todo else []
         if todo:
             failures = {row: self.autopilots.pilots[row].failure for row in todo}
             raise AutopilotError(f"autopilots could not be started again: {failures}")
