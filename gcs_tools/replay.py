@@ -22,8 +22,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from gcs_tools.dataflash_reader import MAGIC as DATAFLASH_MAGIC
+from gcs_tools.dataflash_reader import read_dataflash
+from gcs_tools.dataflash_view import dataflash_system
 from gcs_tools.replay_scene import System, route, send_fleet, send_one, vehicles_of
 from gcs_tools.tlog_reader import ReadStats, read_tlog
+from gcs_tools.ulog_reader import MAGIC as ULOG_MAGIC
+from gcs_tools.ulog_reader import read_ulog
+from gcs_tools.ulog_view import ulog_system
 from quadsitl.viz.viewer import check_output_path
 
 DUPLICATE_US = 10_000  # a message repeated within 10 ms on another link is the same one
@@ -38,16 +44,56 @@ class ReplayResult:
 
 
 def convert(
-    tlog: str | Path,
+    log: str | Path,
     out: str | Path | None = None,
     spawn: bool = False,
     web: bool = False,
     progress: Callable[[float], None] | None = None,
 ) -> ReplayResult:
-    """Convert ``tlog``; save to ``out`` (.rrd), or open the viewer (``spawn``), or serve
-    the web viewer (``web``). A log without a MAVLink message gives no recording at all.
-    ``progress(fraction read)`` is called as the log is read."""
+    """Convert the flight log ``log`` (.tlog, PX4's .ulg or ArduPilot's .bin, told apart
+    by their first bytes); save to ``out`` (.rrd), or open the viewer (``spawn``), or
+    serve the web viewer (``web``). A log without a message gives no recording at all.
+    ``progress(fraction read)`` is called as a .tlog is read."""
     started = time.perf_counter()
+    kind = log_format(log)
+    if kind == "ulog":
+        stats, vehicles, warnings = ulog_flights(log)
+    elif kind == "dataflash":
+        stats, vehicles, warnings = dataflash_flights(log)
+    else:
+        stats, vehicles, warnings = tlog_flights(log, progress)
+    if stats.messages == 0:
+        return ReplayResult(stats, {}, time.perf_counter() - started, [])
+    for system in vehicles.values():
+        system.columns.normalise_rotors()
+    send = send_fleet if len(vehicles) > 1 else send_one
+    rec, entities = send(vehicles, out, spawn, web)
+    rec.send_recording_name(Path(log).name)
+    rec.flush()
+    if out is not None:
+        rec.disconnect()
+    if stats.damaged:
+        warnings.append(f"the log is damaged ({stats.describe()}); converted what was readable")
+    if not any(system.track for system in vehicles.values()):
+        warnings.append("no position messages: the 3-D view has no motion")
+    return ReplayResult(stats, entities, time.perf_counter() - started, warnings)
+
+
+def log_format(path: str | Path) -> str:
+    """ "ulog", "dataflash" or "tlog", by the file's first bytes."""
+    with open(path, "rb") as f:
+        head = f.read(8)
+    if head.startswith(ULOG_MAGIC):
+        return "ulog"
+    if head.startswith(DATAFLASH_MAGIC):
+        return "dataflash"
+    return "tlog"
+
+
+def tlog_flights(
+    tlog: str | Path, progress: Callable[[float], None] | None
+) -> tuple[ReadStats, dict[int, System], list[str]]:
+    """The vehicles of a MAVLink telemetry log, by system id."""
     stats = ReadStats()
     systems: dict[int, System] = {}
     last: dict[tuple[int, int, int], tuple[int, bytes]] = {}  # -> (stamp, payload)
@@ -62,23 +108,19 @@ def convert(
         if previous is not None and previous[1] == payload and stamp - previous[0] < DUPLICATE_US:
             continue
         route(message, systems).add(stamp, message)
-    if stats.messages == 0:
-        return ReplayResult(stats, {}, time.perf_counter() - started, [])
-    vehicles = vehicles_of(systems)
-    for system in vehicles.values():
-        system.columns.normalise_rotors()
-    send = send_fleet if len(vehicles) > 1 else send_one
-    rec, entities = send(vehicles, out, spawn, web)
-    rec.send_recording_name(Path(tlog).name)
-    rec.flush()
-    if out is not None:
-        rec.disconnect()
-    warnings = []
-    if stats.damaged:
-        warnings.append(f"the log is damaged ({stats.describe()}); converted what was readable")
-    if not any(system.track for system in vehicles.values()):
-        warnings.append("no position messages: the 3-D view has no motion")
-    return ReplayResult(stats, entities, time.perf_counter() - started, warnings)
+    return stats, vehicles_of(systems), []
+
+
+def ulog_flights(path: str | Path) -> tuple[ReadStats, dict[int, System], list[str]]:
+    """The vehicle of a PX4 ULog (one per log: system id 1)."""
+    log = read_ulog(path)
+    return log.stats, {1: ulog_system(log, path)}, list(log.warnings)
+
+
+def dataflash_flights(path: str | Path) -> tuple[ReadStats, dict[int, System], list[str]]:
+    """The vehicle of an ArduPilot DataFlash log (one per log: system id 1)."""
+    log = read_dataflash(path)
+    return log.stats, {1: dataflash_system(log, path)}, list(log.warnings)
 
 
 def input_problem(path: str) -> str | None:

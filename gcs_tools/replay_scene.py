@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from quadsitl.viz import palette
 from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
 from quadsitl.viz.flight_view import FlightView, Sample
 from quadsitl.viz.plot_fit import PanelFit, fit
@@ -38,6 +39,22 @@ class Columns:
         times.append(stamp_us)
         values.append(sample.value)
         levels.append(sample.level)
+
+    def extend(
+        self, entity: str, kind: str, stamps_us: Any, values: Any, levels: Any = "INFO"
+    ) -> None:
+        """Many samples of one series at once (a binary log's columns): ``values`` one
+        per stamp (rows of an array for vectors), ``levels`` one or one per stamp."""
+        stamps = np.asarray(stamps_us, dtype=np.int64)
+        if len(stamps) == 0:
+            return
+        times, values_, levels_ = self.series.setdefault((entity, kind), ([], [], []))
+        times.extend(stamps.tolist())
+        if kind == "scalar":
+            values_.extend(np.asarray(values, dtype=np.float64).tolist())
+        else:
+            values_.extend(list(values))
+        levels_.extend([levels] * len(stamps) if isinstance(levels, str) else list(levels))
 
     def panels(self) -> set[str]:
         """The time-series panels (``plots/<panel>/...``) that have data."""
@@ -122,6 +139,7 @@ class System:
         self.view = FlightView()
         self.columns = Columns()
         self.track: list[np.ndarray] = []  # m, ENU, in its own local frame
+        self.truth_track: list[np.ndarray] = []  # the same, the simulator's (where logged)
 
     def add(self, stamp_us: int, message: Any) -> None:
         for sample in self.view.samples(message):
@@ -280,6 +298,14 @@ def log_statics(rec: rr.RecordingStream, system: System, member: Member | None =
         rec.log(
             path("world/trajectory"),
             rr.LineStrips3D([np.asarray(system.track)], colors=color, radii=width),
+            static=True,
+        )
+    if system.truth_track:  # where the vehicle really went: the estimate's colour, darker
+        r, g, b = color[0]
+        truth = [palette.darker((r, g, b))]
+        rec.log(
+            path("world/trajectory_truth"),
+            rr.LineStrips3D([np.asarray(system.truth_track)], colors=truth, radii=width),
             static=True,
         )
     rec.log(

@@ -124,19 +124,8 @@ class FlightView:
                 return []
         armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
         state = (armed, _mode_name(msg))
-        band = f"plots/state/mode/{state[1]}"
-        out = []
-        if self.last_mode is not None and state != self.last_mode:
-            was_armed, was_mode = self.last_mode
-            out.append(Sample("plots/state/armed", "scalar", float(was_armed)))
-            if was_mode != state[1]:
-                old_band = f"plots/state/mode/{was_mode}"
-                out += [Sample(old_band, "scalar", 2.0), Sample(old_band, "scalar", math.nan)]
-        out += [Sample("plots/state/armed", "scalar", float(armed)), Sample(band, "scalar", 2.0)]
-        if state != self.last_mode:
-            self.last_mode = state
-            text = f"{'ARMED' if armed else 'disarmed'}, mode {state[1]}"
-            out.append(Sample("events", "text", text))
+        out = state_samples(self.last_mode, state)
+        self.last_mode = state
         return out
 
     def _angle(self, entity: str, radians: float) -> Sample:
@@ -251,7 +240,8 @@ class FlightView:
         return self._position_target(msg)
 
     def _position_target(self, msg: Any) -> list[Sample]:
-        """Altitude and climb-rate setpoints (and the commanded point) of a local target."""
+        """Altitude, climb-rate and velocity setpoints (and the commanded point) of a local
+        target."""
         out = []
         if not msg.type_mask & 7:  # position given
             point = frames.ned_to_enu([msg.x, msg.y, msg.z])
@@ -259,6 +249,9 @@ class FlightView:
             out.append(Sample("plots/altitude/setpoint", "scalar", float(point[2])))
         if not msg.type_mask & 0x20 and math.isfinite(msg.vz):  # vz given
             out.append(Sample("plots/climb_rate/setpoint", "scalar", -float(msg.vz)))
+        if not msg.type_mask & 0x18 and math.isfinite(msg.vx) and math.isfinite(msg.vy):
+            out.append(Sample("plots/velocity/east_setpoint", "scalar", float(msg.vy)))
+            out.append(Sample("plots/velocity/north_setpoint", "scalar", float(msg.vx)))
         return out
 
     def _mission_current(self, msg: Any) -> list[Sample]:
@@ -340,6 +333,28 @@ class FlightView:
     def _statustext(self, msg: Any) -> list[Sample]:
         level = SEVERITY[min(max(msg.severity, 0), 7)]
         return [Sample("events", "text", str(msg.text).rstrip("\x00"), level)]
+
+
+def state_samples(last: tuple[bool, str] | None, state: tuple[bool, str]) -> list[Sample]:
+    """The flight-state band's samples at a report of ``state`` = (armed, mode name)
+    after ``last`` (None: the first): armed 0/1, 2 on the current mode's series (NaN
+    ending the previous mode's), and an event when the state changes. The same for
+    every source: heartbeats, a ULog's vehicle_status, a DataFlash log's MODE and ARM."""
+    armed, mode = state
+    out = []
+    if last is not None and state != last:
+        was_armed, was_mode = last
+        out.append(Sample("plots/state/armed", "scalar", float(was_armed)))
+        if was_mode != mode:
+            old_band = f"plots/state/mode/{was_mode}"
+            out += [Sample(old_band, "scalar", 2.0), Sample(old_band, "scalar", math.nan)]
+    out += [
+        Sample("plots/state/armed", "scalar", float(armed)),
+        Sample(f"plots/state/mode/{mode}", "scalar", 2.0),
+    ]
+    if state != last:
+        out.append(Sample("events", "text", f"{'ARMED' if armed else 'disarmed'}, mode {mode}"))
+    return out
 
 
 def _imu_samples(accel: tuple, rates: tuple) -> list[Sample]:

@@ -3,7 +3,8 @@
 Tableau 10 (matplotlib's ``tab10``, readable on Rerun's dark background and on white):
 the series of one plot take its colours in order, so that no two of them share one.
 Red is kept for what must stand out (armed, the front rotors, a crash), grey for what
-was commanded rather than flown (setpoints, a moving target's track). No Rerun and no
+was commanded rather than flown (a moving target's track). A quantity's three traces
+share its colour: the estimate as it is, the setpoint lighter, the truth darker. No Rerun and no
 matplotlib here: both sides import it.
 """
 
@@ -48,6 +49,13 @@ def lighter(color: RGB, amount: float = 0.55) -> RGB:
     """``color`` moved ``amount`` of the way to white: what was asked of a series (its
     setpoint) beside what it did."""
     r, g, b = (round(c + (255 - c) * amount) for c in color)
+    return (r, g, b)
+
+
+def darker(color: RGB, amount: float = 0.45) -> RGB:
+    """``color`` moved ``amount`` of the way to black: what the vehicle really did (the
+    simulator's ground truth) beside what its estimator believed."""
+    r, g, b = (round(c * (1.0 - amount)) for c in color)
     return (r, g, b)
 
 

@@ -32,7 +32,7 @@ from quadsitl import frames
 from quadsitl.viz import palette
 from quadsitl.viz.plot_fit import PanelFit
 from quadsitl.viz.plot_layout import column_shares, plot_grid
-from quadsitl.viz.series_colors import mode_color, series_color
+from quadsitl.viz.series_colors import mode_color, series_color, trace_role
 
 ARM = 0.17  # m, drawn arm length (centre to rotor), about the paper's airframe
 ROTOR_RADIUS = 0.1  # m
@@ -171,7 +171,7 @@ def series_style(entity: str) -> Any | None:
         return rr.SeriesLines(colors=[palette.RED], widths=[2.0], names=["armed"])
     if not entity.startswith("plots/"):
         return None
-    width = 1.5 if name.endswith("setpoint") else 2.0
+    width = 1.5 if trace_role(name) else 2.0  # the estimate stands out
     return rr.SeriesLines(colors=[series_color(entity)], widths=[width], names=[name])
 
 

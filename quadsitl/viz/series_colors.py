@@ -17,7 +17,10 @@ REWARD_TERMS = ("position (m)", "attitude (sin/cos)", "velocity (m/s)", "rates (
 # Each panel's series in legend order (entity ``plots/<panel>/<name>``): the k-th takes
 # the palette's k-th colour, so that the series of a panel never share one, and a name
 # keeps its colour across panels (east, roll, x: blue; north, pitch, y: orange ...). A
-# setpoint (``setpoint``, ``roll_setpoint`` ...) is its series' colour, lighter.
+# setpoint (``setpoint``, ``roll_setpoint`` ...) is its series' colour, lighter; the
+# ground truth (``altitude_truth``, ``roll_truth`` ...: the simulator's own state, where a
+# log has it) darker.
+SETPOINT, TRUTH = "setpoint", "truth"
 SERIES_NAMES: dict[str, tuple[str, ...]] = {
     "altitude": ("altitude",),
     "climb_rate": ("climb",),
@@ -67,15 +70,27 @@ MODE_COLORS: dict[str, palette.RGB] = {
 def series_color(entity: str) -> palette.RGB:
     """The colour of the time series at ``entity`` (``plots/<panel>/<name>``)."""
     _, panel, name = [*entity.split("/", 2), "", ""][:3]
-    base = name.removesuffix("setpoint").removesuffix("_")
+    role = trace_role(name)
+    base = name.removesuffix(role).removesuffix("_") if role else name
     names = SERIES_NAMES.get(panel, ())
     if base in names:
         color = palette.series(names.index(base))
-    elif not base and names:  # ``setpoint``: of the panel's first series
+    elif not base and names:  # ``setpoint``, ``truth``: of the panel's first series
         color = palette.series(0)
     else:
         color = palette.series(zlib.crc32(base.encode()))
-    return palette.lighter(color) if name.endswith("setpoint") else color
+    if role == SETPOINT:
+        return palette.lighter(color)
+    return palette.darker(color) if role == TRUTH else color
+
+
+def trace_role(name: str) -> str:
+    """Which trace of its quantity a series is: SETPOINT, TRUTH or "" (the estimate,
+    what the vehicle measured or believed)."""
+    for role in (SETPOINT, TRUTH):
+        if name == role or name.endswith(f"_{role}"):
+            return role
+    return ""
 
 
 def mode_color(mode: str) -> palette.RGB:

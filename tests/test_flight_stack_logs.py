@@ -1,0 +1,158 @@
+"""Replay of the flight stacks' own logs: PX4's ULog and ArduPilot's DataFlash.
+
+The logs in tests/data/ were written by the real autopilots flying quadsitl's physics
+(docs/replay.md says how): ``px4_mission.ulg`` and ``px4_mission.tlog`` are the same PX4
+flight (take-off to 3 m, an 8 m square, landing), the log PX4 wrote and the telemetry a
+ground station recorded (thinned to 10 Hz per message). The reader is checked against
+pyulog, PX4's own reader, on every field.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gcs_tools.replay import convert, main
+from gcs_tools.ulog_reader import read_ulog
+from tests.test_rerun import check_attitude, check_panels, rows_per_entity, scalars
+
+DATA = Path(__file__).resolve().parent / "data"
+PX4_ULOG, PX4_TLOG = DATA / "px4_mission.ulg", DATA / "px4_mission.tlog"
+FLIGHT_MODES = ["LOITER", "TAKEOFF", "MISSION", "LAND"]  # PX4's, as the flight went
+
+
+def pyulog_columns(rows: np.ndarray, prefix: str = "") -> dict[str, np.ndarray]:
+    """A structured array's columns under pyulog's flat names (``q[0]``, ``esc[0].rpm``)."""
+    out: dict[str, np.ndarray] = {}
+    for name in rows.dtype.names or ():
+        column = rows[name]
+        nested = rows.dtype.fields[name][0].base.names  # type: ignore[index]
+        if column.dtype.kind == "S":
+            continue  # text: pyulog splits it into characters
+        parts = (
+            [(f"{name}[{i}]", column[:, i]) for i in range(column.shape[1])]
+            if (column.ndim > 1)
+            else [(name, column)]
+        )
+        for label, part in parts:
+            if nested:
+                out.update(pyulog_columns(part, f"{prefix}{label}."))
+            else:
+                out[prefix + label] = part
+    return out
+
+
+def test_the_ulog_reader_agrees_with_pyulog_on_every_field():
+    pyulog = pytest.importorskip("pyulog")
+    theirs = pyulog.ULog(str(PX4_ULOG))
+    ours = read_ulog(PX4_ULOG)
+    assert not ours.stats.damaged and not ours.warnings
+    assert len(ours.topic_names) == len(theirs.data_list) >= 15
+    compared = 0
+    for dataset in theirs.data_list:
+        rows = ours.topic(dataset.name, dataset.multi_id)
+        assert rows is not None, dataset.name
+        columns = pyulog_columns(rows)
+        for field, values in dataset.data.items():
+            if field in columns:
+                np.testing.assert_array_equal(columns[field], values, err_msg=field)
+                compared += 1
+    assert compared > 300
+    assert ours.info["sys_name"] == theirs.msg_info_dict["sys_name"] == "PX4"
+    assert ours.parameters.keys() == theirs.initial_parameters.keys()
+    assert [(t, m) for t, _, m in ours.messages] == [
+        (m.timestamp, m.message) for m in theirs.logged_messages
+    ]
+
+
+def test_a_px4_ulog_replays_estimate_setpoint_and_truth(tmp_path):
+    out = tmp_path / "px4.rrd"
+    result = convert(PX4_ULOG, out)
+    assert not result.warnings, result.warnings
+    shown = check_panels(
+        out, {"plots/altitude", "plots/attitude", "plots/rates", "plots/rotors", "plots/state"}
+    )
+    assert {kind for kind, _ in shown.values()} >= {"3D", "Map", "TextLog"}
+    rows = rows_per_entity(out)
+    for quantity in ("altitude/altitude", "attitude/roll", "rates/pitch", "climb_rate/climb"):
+        panel, name = quantity.split("/")
+        for entity in (quantity, f"{panel}/{name}_truth"):
+            assert rows.get(f"/plots/{entity}", 0) > 100, entity
+        named = panel in ("attitude", "rates")  # roll_setpoint; else the panel's setpoint
+        setpoint = f"/plots/{panel}/{name + '_setpoint' if named else 'setpoint'}"
+        assert rows.get(setpoint, 0) > 50, setpoint
+    check_attitude(out)
+    # The estimate follows the truth: PX4's EKF2 within decimetres of quadsitl's state.
+    altitude, truth = (
+        scalars(out, "/plots/altitude/altitude"),
+        scalars(out, "/plots/altitude/altitude_truth"),
+    )
+    assert 2.5 < altitude.max() < 3.5 and 2.5 < truth.max() < 3.5
+    assert abs(altitude.max() - truth.max()) < 0.3
+    # Absent, not zero: the log has no wind estimate and no servo outputs.
+    assert not any(e.startswith(("/plots/wind", "/plots/servo_pwm")) for e in rows)
+
+
+def test_a_ulog_and_a_tlog_of_one_flight_show_the_same_views(tmp_path):
+    """What a ground station recorded and what PX4 logged: the same panels (those the
+    telemetry carries), the same flight modes in order, the same square in 3-D."""
+    recordings = {}
+    for log in (PX4_ULOG, PX4_TLOG):
+        out = tmp_path / f"{log.suffix[1:]}.rrd"
+        convert(log, out)
+        recordings[log.suffix] = out
+    panels = {
+        suffix: {
+            origin for kind, origin in check_panels(rrd, set()).values() if kind == "TimeSeries"
+        }
+        for suffix, rrd in recordings.items()
+    }
+    common = {"plots/altitude", "plots/climb_rate", "plots/velocity", "plots/attitude",
+              "plots/rates", "plots/battery_voltage", "plots/gps", "plots/state"}  # fmt: skip
+    assert common <= panels[".ulg"] & panels[".tlog"]
+    for rrd in recordings.values():
+        modes = [e.rsplit("/", 1)[-1] for e in rows_per_entity(rrd) if "/plots/state/mode/" in e]
+        assert sorted(modes) == sorted(FLIGHT_MODES)
+    ulog_system, tlog_system = (convert_system(log) for log in (PX4_ULOG, PX4_TLOG))
+    for system in (ulog_system, tlog_system):
+        track = np.asarray(system.track)
+        extent = track.max(axis=0) - track.min(axis=0)
+        assert 7.0 < extent[0] < 9.5 and 7.0 < extent[1] < 9.5, extent  # the 8 m square
+        assert 2.5 < extent[2] < 3.6, extent
+    assert ulog_system.columns.modes() == tlog_system.columns.modes() == FLIGHT_MODES
+
+
+def convert_system(log: Path):  # type: ignore[no-untyped-def]
+    from gcs_tools.replay import tlog_flights, ulog_flights
+
+    _, vehicles, _ = ulog_flights(log) if log.suffix == ".ulg" else tlog_flights(log, None)
+    (system,) = vehicles.values()
+    return system
+
+
+def test_a_damaged_ulog_shows_what_is_readable_and_names_the_damage(tmp_path, capsys):
+    whole = read_ulog(PX4_ULOG)
+    data = bytearray(PX4_ULOG.read_bytes())
+    middle = len(data) // 2
+    data[middle : middle + 500] = bytes(range(250)) * 2  # garbage in the middle
+    damaged = tmp_path / "damaged.ulg"
+    damaged.write_bytes(bytes(data[:-11]))  # and cut short
+    log = read_ulog(damaged)
+    assert log.stats.damaged and log.stats.truncated and log.stats.skipped_bytes >= 500
+    assert 0.7 * whole.stats.messages < log.stats.messages < whole.stats.messages
+    out = tmp_path / "damaged.rrd"
+    assert main([str(damaged), "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    warnings = [line for line in err.splitlines() if "damaged" in line]
+    assert len(warnings) == 1 and "truncated" in warnings[0], err
+    assert rows_per_entity(out)["/plots/altitude/altitude"] > 100
+
+
+def test_a_file_cut_inside_the_ulog_header_is_a_clear_error(tmp_path, capsys):
+    cut = tmp_path / "cut.ulg"
+    cut.write_bytes(PX4_ULOG.read_bytes()[:12])
+    assert main([str(cut), "-o", str(tmp_path / "cut.rrd")]) == 2
+    err = capsys.readouterr().err
+    assert "not a ULog file" in err and "Traceback" not in err
