@@ -133,10 +133,14 @@ def flight_state(
     system: System, stamps: Sequence[int], armed: Sequence[bool], modes: Sequence[str]
 ) -> None:
     """The flight-state band and its events from (armed, mode) reports, as the live
-    view draws them from heartbeats."""
+    view draws them from heartbeats: at each change of state and at the last report
+    (a report repeating the state would only add a point on the band's line)."""
     last: tuple[bool, str] | None = None
-    for stamp, is_armed, mode in zip(stamps, armed, modes, strict=True):
+    count = len(stamps)
+    for row, (stamp, is_armed, mode) in enumerate(zip(stamps, armed, modes, strict=True)):
         state = (bool(is_armed), str(mode))
+        if state == last and row < count - 1:
+            continue
         for sample in state_samples(last, state):
             system.columns.add(int(stamp), sample)
         last = state

@@ -1,6 +1,8 @@
-"""``gcs-replay FLIGHT.tlog [-o FLIGHT.rrd]``: a MAVLink telemetry log as a Rerun recording.
+"""``gcs-replay FLIGHT.tlog|.ulg|.bin [-o FLIGHT.rrd]``: a flight log as a Rerun recording.
 
-Any .tlog (quadsitl, QGroundControl, MAVProxy; PX4 or ArduPilot vehicles): the vehicle
+Any .tlog (quadsitl, QGroundControl, MAVProxy; PX4 or ArduPilot vehicles), and the
+autopilots' own logs, PX4's ULog and ArduPilot's DataFlash, into the same entities and
+views (:mod:`gcs_tools.ulog_view`, :mod:`gcs_tools.dataflash_view`): the vehicle
 posed in 3-D with its trajectory, home, mission and setpoints, time series of altitude,
 velocity, attitude, rotors and battery, and flight mode, arming and STATUSTEXT as a
 text log (scene: :mod:`quadsitl.viz.scene`). Each series is sent as one column
@@ -170,9 +172,15 @@ PROGRESS_BYTES = 20_000_000  # logs larger than this show progress (about 250,00
 def main(argv: Sequence[str] | None = None, prog: str = "gcs-replay") -> int:
     parser = argparse.ArgumentParser(
         prog=prog,
-        description="Turn a MAVLink telemetry log (.tlog) into a Rerun recording.",
+        description="Turn a flight log into a Rerun recording: a MAVLink telemetry log "
+        "(.tlog), a PX4 ULog (.ulg) or an ArduPilot DataFlash log (.bin).",
     )
-    parser.add_argument("tlog", help="the telemetry log (QGroundControl, MAVProxy, quadsitl)")
+    parser.add_argument(
+        "tlog",
+        metavar="LOG",
+        help="the flight log: .tlog (QGroundControl, MAVProxy, quadsitl), .ulg (PX4) or "
+        ".bin (ArduPilot); told apart by their content",
+    )
     parser.add_argument(
         "-o", "--output", metavar="RRD", help="write the recording here (default: open the viewer)"
     )
@@ -207,7 +215,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "gcs-replay") -> int:
             progress.done()
     if result.stats.messages == 0:
         print(
-            f"{prog}: error: no MAVLink messages found in {args.tlog}: is it a .tlog?",
+            f"{prog}: error: no MAVLink messages found in {args.tlog}: is it a .tlog, "
+            "a .ulg or a .bin?",
             file=sys.stderr,
         )
         return 1

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from gcs_tools.series_buffer import Series
 from quadsitl.viz import palette
 from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
 from quadsitl.viz.flight_view import FlightView, Sample
@@ -32,13 +33,11 @@ class Columns:
     """Samples gathered per (entity, kind), sent as columns at the end."""
 
     def __init__(self) -> None:
-        self.series: dict[tuple[str, str], tuple[list[int], list[Any], list[str]]] = {}
+        self.series: dict[tuple[str, str], Series] = {}
 
     def add(self, stamp_us: int, sample: Sample) -> None:
-        times, values, levels = self.series.setdefault((sample.entity, sample.kind), ([], [], []))
-        times.append(stamp_us)
-        values.append(sample.value)
-        levels.append(sample.level)
+        key = (sample.entity, sample.kind)
+        self.series.setdefault(key, Series()).add(stamp_us, sample.value, sample.level)
 
     def extend(
         self, entity: str, kind: str, stamps_us: Any, values: Any, levels: Any = "INFO"
@@ -48,13 +47,11 @@ class Columns:
         stamps = np.asarray(stamps_us, dtype=np.int64)
         if len(stamps) == 0:
             return
-        times, values_, levels_ = self.series.setdefault((entity, kind), ([], [], []))
-        times.extend(stamps.tolist())
         if kind == "scalar":
-            values_.extend(np.asarray(values, dtype=np.float64).tolist())
-        else:
-            values_.extend(list(values))
-        levels_.extend([levels] * len(stamps) if isinstance(levels, str) else list(levels))
+            values = np.asarray(values, dtype=np.float64)
+        elif kind == "text":
+            values = np.asarray(list(values), dtype=object)
+        self.series.setdefault((entity, kind), Series()).extend(stamps, values, levels)
 
     def panels(self) -> set[str]:
         """The time-series panels (``plots/<panel>/...``) that have data."""
@@ -66,21 +63,20 @@ class Columns:
         rotors = [key for key in self.series if key[0].startswith("plots/rotors/")]
         if not rotors:
             return
-        values = np.concatenate([np.asarray(self.series[key][1], float) for key in rotors])
+        values = np.concatenate([self.series[key].arrays()[1].astype(float) for key in rotors])
         moving = values[np.isfinite(values) & (np.abs(values) > 1e-6)]
         if len(moving) == 0:
             return
         hover = float(np.median(np.abs(moving)))
         for key in rotors:
-            times, values_, levels = self.series[key]
-            self.series[key] = (times, list(np.asarray(values_, float) / hover), levels)
+            self.series[key].replace_values(self.series[key].arrays()[1].astype(float) / hover)
 
     def modes(self) -> list[str]:
         """The flight modes the log went through, in the order of their first sample."""
         prefix = f"plots/{STATE_PANEL}/mode/"
         firsts = {
-            entity.removeprefix(prefix): min(times)
-            for (entity, _), (times, _, _) in self.series.items()
+            entity.removeprefix(prefix): int(series.arrays()[0].min())
+            for (entity, _), series in self.series.items()
             if entity.startswith(prefix)
         }
         return sorted(firsts, key=firsts.__getitem__)
@@ -91,8 +87,9 @@ class Columns:
         whole recording (the state band keeps its own: see ``modes``)."""
         by_panel: dict[str, list[tuple[str, np.ndarray, np.ndarray]]] = {}
         starts, ends = [], []
-        for (entity, kind), (times, values, _) in self.series.items():
-            stamps = np.asarray(times, dtype=np.float64) / 1e6  # s, as the layout's axes
+        for (entity, kind), series in self.series.items():
+            times, values = series.arrays()
+            stamps = times / 1e6  # s, as the layout's axes
             starts.append(stamps.min())
             ends.append(stamps.max())
             head, panel, *_ = [*entity.split("/"), ""]
@@ -101,10 +98,10 @@ class Columns:
                 by_panel.setdefault(panel, []).append(sample)
         fits = {}
         for panel, size in zip(shown, plot_sizes(len(shown)), strict=True):
-            series = by_panel.get(panel, [])
+            in_panel = by_panel.get(panel, [])
             fitted = fit(
-                [(times, values) for _, times, values in series],
-                [name for name, _, _ in series],
+                [(times, values) for _, times, values in in_panel],
+                [name for name, _, _ in in_panel],
                 size,
                 (min(starts), max(ends)),
             )
@@ -115,7 +112,9 @@ class Columns:
     def send(self, rec: rr.RecordingStream, member: Member | None = None) -> dict[str, int]:
         """Every series as one column; a fleet's ``member`` under its system id."""
         rows: dict[str, int] = {}
-        for (entity, kind), (times, values, levels) in self.series.items():
+        for (entity, kind), series in self.series.items():
+            times, values = series.arrays()
+            levels = series.levels() if kind == "text" else []
             path, style = entity, series_style(entity) if kind == "scalar" else None
             if member is not None:
                 path, style = (
@@ -123,10 +122,10 @@ class Columns:
                     member.style(entity) if kind == "scalar" else None,
                 )
                 if member.changes_values(entity):
-                    values = [member.value(entity, value) for value in values]
+                    values = np.asarray([member.value(entity, value) for value in values])
             if style is not None:
                 rec.log(path, style, static=True)
-            index = rr.TimeColumn(TIMELINE, timestamp=np.array(times, dtype="datetime64[us]"))
+            index = rr.TimeColumn(TIMELINE, timestamp=times.astype("datetime64[us]"))
             rec.send_columns(path, indexes=[index], columns=column(kind, values, levels))
             rows[path] = rows.get(path, 0) + len(times)
         return rows
@@ -183,7 +182,7 @@ def vehicles_of(systems: dict[int, System]) -> dict[int, System]:
     return posed or {k: systems[k] for k in sorted(systems) if systems[k].columns.series}
 
 
-def column(kind: str, values: list[Any], levels: list[str]) -> Any:
+def column(kind: str, values: Any, levels: list[str]) -> Any:
     if kind == "scalar":
         return rr.Scalars.columns(scalars=np.asarray(values, dtype=np.float64))
     if kind == "translation":
@@ -290,7 +289,7 @@ def log_statics(rec: rr.RecordingStream, system: System, member: Member | None =
         rec.log(
             path("map/path"),
             rr.GeoLineStrings(
-                lat_lon=[np.asarray(geo[1])], colors=color, radii=rr.Radius.ui_points(2.0)
+                lat_lon=[geo.arrays()[1]], colors=color, radii=rr.Radius.ui_points(2.0)
             ),
             static=True,
         )

@@ -65,9 +65,10 @@ def _build_parser() -> argparse.ArgumentParser:
         add_policy_parsers(commands)
     replay = commands.add_parser(
         "replay",
-        help="turn a MAVLink telemetry log (.tlog) into a Rerun recording (as gcs-replay)",
+        help="turn a flight log (.tlog, PX4 .ulg, ArduPilot .bin) into a Rerun recording "
+        "(as gcs-replay)",
     )
-    replay.add_argument("tlog", help="the telemetry log")
+    replay.add_argument("tlog", metavar="LOG", help="the flight log (.tlog, .ulg or .bin)")
     replay.add_argument(
         "-o", "--output", metavar="RRD", help="write the recording here (default: open the viewer)"
     )
