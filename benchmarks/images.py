@@ -5,7 +5,8 @@
 
 Each recording is made the way a user makes it — the mission demo (``quadsitl demo``,
 in still air and in wind with moderate turbulence, replayed), a replay of a
-foreign-style (PX4-like) log, ``quadsitl eval --rerun`` of each shipped policy, a
+foreign-style (PX4-like) log, of the real PX4's and ArduPilot's own logs of
+tests/data/, ``quadsitl eval --rerun`` of each shipped policy, a
 4-vehicle fleet (``quadsitl sim --vehicles 4``, each vehicle flying its own mission,
 its log replayed) — and rendered by the Rerun viewer itself, headless
 (:mod:`benchmarks.headless_viewer`), a fresh viewer per picture. The flights are
@@ -62,6 +63,14 @@ def foreign_recording(folder: Path) -> Path:
     log = folder / "px4_style.tlog"
     synthesise(log, seconds=120)
     out = folder / "px4_style.rrd"
+    convert(log, out)
+    return out
+
+
+def flight_stack_log_recording(folder: Path, log: Path) -> Path:
+    """A real autopilot's own log (tests/data: PX4's ULog, ArduPilot's DataFlash, of a
+    flight on quadsitl), replayed: estimate, setpoint and truth."""
+    out = folder / f"{log.stem}.rrd"
     convert(log, out)
     return out
 
@@ -129,6 +138,10 @@ def eval_recording(folder: Path, task: str) -> Path:
     return out
 
 
+PX4_ULOG = ROOT / "tests" / "data" / "px4_mission.ulg"
+ARDUPILOT_LOG = ROOT / "tests" / "data" / "ardupilot_mission.bin"
+
+
 def recordings(folder: Path) -> dict[str, Callable[[], Path]]:
     """Picture name -> how its recording is made."""
     made: dict[str, Callable[[], Path]] = {
@@ -136,7 +149,10 @@ def recordings(folder: Path) -> dict[str, Callable[[], Path]]:
         "rerun_wind": lambda: demo_recording(folder, "--wind", "5,270", "--turbulence", "moderate"),
         "rerun_replay_px4": lambda: foreign_recording(folder),
         "rerun_fleet": lambda: fleet_recording(folder),
+        "rerun_replay_ulog": lambda: flight_stack_log_recording(folder, PX4_ULOG),
     }
+    if ARDUPILOT_LOG.exists():
+        made["rerun_replay_dataflash"] = lambda: flight_stack_log_recording(folder, ARDUPILOT_LOG)
     for task in POLICIES:
         made[f"rerun_eval_{task}"] = lambda task=task: eval_recording(folder, task)
     return made
