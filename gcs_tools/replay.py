@@ -27,7 +27,14 @@ from pathlib import Path
 from gcs_tools.dataflash_reader import MAGIC as DATAFLASH_MAGIC
 from gcs_tools.dataflash_reader import read_dataflash
 from gcs_tools.dataflash_view import dataflash_system
-from gcs_tools.replay_scene import System, route, send_fleet, send_one, vehicles_of
+from gcs_tools.replay_scene import (
+    System,
+    align_take_offs,
+    route,
+    send_fleet,
+    send_one,
+    vehicles_of,
+)
 from gcs_tools.tlog_reader import ReadStats, read_tlog
 from gcs_tools.ulog_reader import MAGIC as ULOG_MAGIC
 from gcs_tools.ulog_reader import read_ulog
@@ -56,21 +63,47 @@ def convert(
     by their first bytes); save to ``out`` (.rrd), or open the viewer (``spawn``), or
     serve the web viewer (``web``). A log without a message gives no recording at all.
     ``progress(fraction read)`` is called as a .tlog is read."""
+    return compare([log], out, spawn, web, progress)
+
+
+def compare(
+    logs: Sequence[str | Path],
+    out: str | Path | None = None,
+    spawn: bool = False,
+    web: bool = False,
+    progress: Callable[[float], None] | None = None,
+) -> ReplayResult:
+    """Several flight logs in one recording (one log: :func:`convert`): each flight
+    named by its log's file name, all overlaid at one origin, each one's clock moved so
+    that it arms when the first one does (a policy before and after training, flown
+    in the same wind). A log of several vehicles adds each, named ``LOG sysN``."""
     started = time.perf_counter()
-    kind = log_format(log)
-    if kind == "ulog":
-        stats, vehicles, warnings = ulog_flights(log)
-    elif kind == "dataflash":
-        stats, vehicles, warnings = dataflash_flights(log)
-    else:
-        stats, vehicles, warnings = tlog_flights(log, progress)
+    stats, warnings = ReadStats(), []
+    vehicles: dict[int, System] = {}
+    labels: dict[int, str] = {}
+    for log in logs:
+        one_stats, flights, notes = read_flights(log, progress)
+        if one_stats.messages == 0 and len(logs) > 1:
+            raise EmptyLogError(log)
+        _add_stats(stats, one_stats)
+        warnings += [f"{Path(log).name}: {note}" if len(logs) > 1 else note for note in notes]
+        for system_id, system in flights.items():
+            key = len(vehicles) + 1
+            vehicles[key] = system
+            name = Path(log).name
+            labels[key] = name if len(flights) == 1 else f"{name} sys{system_id}"
     if stats.messages == 0:
         return ReplayResult(stats, {}, time.perf_counter() - started, [])
     for system in vehicles.values():
         system.columns.normalise_rotors()
-    send = send_fleet if len(vehicles) > 1 else send_one
-    rec, entities = send(vehicles, out, spawn, web)
-    rec.send_recording_name(Path(log).name)
+    if len(logs) > 1:
+        align_take_offs(list(vehicles.values()))
+        rec, entities = send_fleet(vehicles, out, spawn, web, labels)
+    elif len(vehicles) > 1:
+        rec, entities = send_fleet(vehicles, out, spawn, web)
+    else:
+        rec, entities = send_one(vehicles, out, spawn, web)
+    rec.send_recording_name(" vs ".join(Path(log).name for log in logs))
     rec.flush()
     if out is not None:
         rec.disconnect()
@@ -79,6 +112,32 @@ def convert(
     if not any(system.track for system in vehicles.values()):
         warnings.append("no position messages: the 3-D view has no motion")
     return ReplayResult(stats, entities, time.perf_counter() - started, warnings)
+
+
+class EmptyLogError(ValueError):
+    """A log in which no message was found."""
+
+    def __init__(self, log: str | Path) -> None:
+        super().__init__(f"no MAVLink messages found in {log}: is it a .tlog, a .ulg or a .bin?")
+
+
+def read_flights(
+    log: str | Path, progress: Callable[[float], None] | None = None
+) -> tuple[ReadStats, dict[int, System], list[str]]:
+    """The vehicles of one log of any format, by system id."""
+    kind = log_format(log)
+    if kind == "ulog":
+        return ulog_flights(log)
+    if kind == "dataflash":
+        return dataflash_flights(log)
+    return tlog_flights(log, progress)
+
+
+def _add_stats(total: ReadStats, one: ReadStats) -> None:
+    total.messages += one.messages
+    total.bad_records += one.bad_records
+    total.skipped_bytes += one.skipped_bytes
+    total.truncated = total.truncated or one.truncated
 
 
 def log_format(path: str | Path) -> str:
@@ -176,10 +235,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "gcs-replay") -> int:
         "(.tlog), a PX4 ULog (.ulg) or an ArduPilot DataFlash log (.bin).",
     )
     parser.add_argument(
-        "tlog",
+        "logs",
         metavar="LOG",
+        nargs="+",
         help="the flight log: .tlog (QGroundControl, MAVProxy, quadsitl), .ulg (PX4) or "
-        ".bin (ArduPilot); told apart by their content",
+        ".bin (ArduPilot), told apart by their content; several: their flights overlaid "
+        "in one recording, aligned at arming",
     )
     parser.add_argument(
         "-o", "--output", metavar="RRD", help="write the recording here (default: open the viewer)"
@@ -191,22 +252,27 @@ def main(argv: Sequence[str] | None = None, prog: str = "gcs-replay") -> int:
         "print its URL; Ctrl-C stops it",
     )
     args = parser.parse_args(argv)
-    problem = input_problem(args.tlog)
-    if problem is not None:
-        print(f"{prog}: error: {problem}", file=sys.stderr)
-        return 2
-    size = Path(args.tlog).stat().st_size
-    progress = _Progress(Path(args.tlog).name, size) if size > PROGRESS_BYTES else None
+    for log in args.logs:
+        problem = input_problem(log)
+        if problem is not None:
+            print(f"{prog}: error: {problem}", file=sys.stderr)
+            return 2
+    size = sum(Path(log).stat().st_size for log in args.logs)
+    name = Path(args.logs[0]).name if len(args.logs) == 1 else f"{len(args.logs)} logs"
+    progress = _Progress(name, size) if size > PROGRESS_BYTES and len(args.logs) == 1 else None
     try:
         if args.output is not None:
             check_output_path(args.output)
-        result = convert(
-            args.tlog,
+        result = compare(
+            args.logs,
             args.output,
             spawn=args.output is None and not args.web,
             web=args.web,
             progress=progress,
         )
+    except EmptyLogError as empty:
+        print(f"{prog}: error: {empty}", file=sys.stderr)
+        return 1
     except (OSError, ValueError, RuntimeError) as error:  # rerun's sinks raise RuntimeError
         print(f"{prog}: error: {error}", file=sys.stderr)
         return 2
@@ -214,11 +280,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "gcs-replay") -> int:
         if progress is not None:
             progress.done()
     if result.stats.messages == 0:
-        print(
-            f"{prog}: error: no MAVLink messages found in {args.tlog}: is it a .tlog, "
-            "a .ulg or a .bin?",
-            file=sys.stderr,
-        )
+        print(f"{prog}: error: {EmptyLogError(args.logs[0])}", file=sys.stderr)
         return 1
     for warning in result.warnings:
         print(f"{prog}: warning: {warning}", file=sys.stderr)

@@ -231,31 +231,40 @@ def send_one(
 
 
 def send_fleet(
-    vehicles: dict[int, System], out: str | Path | None, spawn: bool, web: bool
+    vehicles: dict[int, System],
+    out: str | Path | None,
+    spawn: bool,
+    web: bool,
+    labels: dict[int, str] | None = None,
 ) -> tuple[rr.RecordingStream, dict[str, int]]:
     """The recording of several vehicles, each under its system id, placed by their
-    homes (where the log has them) in the first one's local frame."""
+    homes (where the log has them) in the first one's local frame. With ``labels``
+    (key -> name: flights compared, one per log), each is named by its label and all
+    share one origin, overlaid."""
     reference = next(iter(vehicles.values())).view
     members, points, panels = [], [], set()
     for row, (system_id, system) in enumerate(vehicles.items(), start=1):
         view = system.view
         offset = (0.0, 0.0, 0.0)
-        if reference.home is not None and view.home is not None:
+        if labels is None and reference.home is not None and view.home is not None:
             offset = origin_offset(
                 reference.home, reference.home_local_enu, view.home, view.home_local_enu
             )
-        members.append(Member(system_id, row, offset))
+        label = (labels or {}).get(system_id, "")
+        members.append(Member(system_id, row, offset, label))
         local = [np.asarray(system.track).reshape(-1, 3), system.mission_points()]
         points.append(np.concatenate(local) + offset)
         panels |= system.columns.panels()
     frame = framing(np.concatenate(points))
     modes = [mode for system in vehicles.values() for mode in system.columns.modes()]
+    subject = f"{len(members)} flights overlaid, labelled by log" if labels else ""
     layout = fleet_blueprint(
         members,
         panels - {STATE_PANEL},
         frame=frame,
         map_view=any(("map/track", "geo") in s.columns.series for s in vehicles.values()),
         modes=list(dict.fromkeys(modes)),
+        subject=subject,
     )
     rec = open_recording(
         "quadsitl_replay",
@@ -272,6 +281,29 @@ def send_fleet(
         entities.update(system.columns.send(rec, member))
         log_statics(rec, system, member)
     return rec, entities
+
+
+def take_off_us(system: System) -> int | None:
+    """When the flight armed (µs), else its first sample's time; None without data."""
+    armed = system.columns.series.get(("plots/state/armed", "scalar"))
+    if armed is not None:
+        times, values = armed.arrays()
+        on = np.flatnonzero(values > 0.5)
+        if len(on):
+            return int(times[on[0]])
+    starts = [int(series.arrays()[0].min()) for series in system.columns.series.values()]
+    return min(starts) if starts else None
+
+
+def align_take_offs(systems: list[System]) -> None:
+    """Move each flight's clock so that it arms when the first one does."""
+    reference = take_off_us(systems[0]) if systems else None
+    for system in systems[1:]:
+        own = take_off_us(system)
+        if reference is None or own is None:
+            continue
+        for series in system.columns.series.values():
+            series.shift(reference - own)
 
 
 def log_statics(rec: rr.RecordingStream, system: System, member: Member | None = None) -> None:

@@ -70,6 +70,12 @@ class Series:
         order = self._order(np.concatenate([t for t, _, _ in parts]), len(parts))
         return levels if order is None else [levels[i] for i in order]
 
+    def shift(self, microseconds: int) -> None:
+        """Every time stamp moved by ``microseconds`` (flights compared side by side)."""
+        self._times = [t + microseconds for t in self._times]
+        self._blocks = [(t + microseconds, v, level) for t, v, level in self._blocks]
+        self._merged = None
+
     def replace_values(self, values: np.ndarray) -> None:
         """New values for the same time stamps (in :meth:`arrays`' order), all at the
         first sample's level (rotor speeds, which this is for, have one)."""

@@ -68,7 +68,12 @@ def _build_parser() -> argparse.ArgumentParser:
         help="turn a flight log (.tlog, PX4 .ulg, ArduPilot .bin) into a Rerun recording "
         "(as gcs-replay)",
     )
-    replay.add_argument("tlog", metavar="LOG", help="the flight log (.tlog, .ulg or .bin)")
+    replay.add_argument(
+        "logs",
+        metavar="LOG",
+        nargs="+",
+        help="the flight log (.tlog, .ulg or .bin); several: overlaid, aligned at arming",
+    )
     replay.add_argument(
         "-o", "--output", metavar="RRD", help="write the recording here (default: open the viewer)"
     )
@@ -220,7 +225,7 @@ def _main(argv: Sequence[str] | None = None) -> int:
         from gcs_tools.replay import main as replay_main
 
         options = (["-o", args.output] if args.output else []) + (["--web"] if args.web else [])
-        return replay_main([args.tlog, *options], prog="quadsitl replay")
+        return replay_main([*args.logs, *options], prog="quadsitl replay")
     if args.command == "sim" and args.flight_stack:
         from quadsitl.bridges.ardupilot_udp import run_ardupilot
         from quadsitl.bridges.px4_tcp import run_px4

@@ -156,3 +156,39 @@ def test_a_file_cut_inside_the_ulog_header_is_a_clear_error(tmp_path, capsys):
     assert main([str(cut), "-o", str(tmp_path / "cut.rrd")]) == 2
     err = capsys.readouterr().err
     assert "not a ULog file" in err and "Traceback" not in err
+
+
+def first_time(rrd: Path, entity: str, above: float = 0.5) -> int:
+    """The first time stamp (µs) at which ``entity``'s value exceeds ``above``."""
+    import rerun.chunk as rrc
+
+    times = []
+    for chunk in rrc.RrdReader(rrd).store().stream():
+        if chunk.entity_path != entity or chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        values = [v[0] for v in batch.column("Scalars:scalars").to_pylist()]
+        stamps = batch.column("time").cast("int64").to_pylist()
+        times += [t for t, v in zip(stamps, values, strict=True) if v is not None and v > above]
+    return min(times)
+
+
+def test_several_logs_overlay_their_flights_aligned_at_arming(tmp_path, capsys):
+    """``quadsitl replay A B``: each flight named by its log, on one time axis where
+    both arm at once (the telemetry's clock is the wall's, 5x slower than PX4's)."""
+    out = tmp_path / "both.rrd"
+    assert main([str(PX4_ULOG), str(PX4_TLOG), "-o", str(out)]) == 0
+    rows = rows_per_entity(out)
+    for name in (PX4_ULOG.name, PX4_TLOG.name):
+        assert rows.get(f"/plots/altitude/{name}/altitude", 0) > 50, name
+        assert f"/world/vehicles/{name}/trajectory" in rows
+    armed = [
+        first_time(out, f"/plots/state/{name}/armed", 0.0)
+        for name in (PX4_ULOG.name, PX4_TLOG.name)
+    ]
+    assert armed[0] == armed[1]
+    empty = tmp_path / "empty.tlog"
+    empty.write_bytes(b"no log here\n" * 10)
+    assert main([str(PX4_ULOG), str(empty), "-o", str(tmp_path / "x.rrd")]) == 1
+    err = capsys.readouterr().err
+    assert f"no MAVLink messages found in {empty}" in err and "Traceback" not in err

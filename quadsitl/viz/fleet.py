@@ -75,10 +75,11 @@ class Member:
     system_id: int  # its MAVLink system id
     row: int  # its place in the fleet, from 1 (its row in the state panel)
     offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m, ENU: its local origin in the scene
+    label: str = ""  # its name where not its system id: the log it comes from (comparisons)
 
     @property
     def name(self) -> str:
-        return f"sys{self.system_id}"
+        return self.label or f"sys{self.system_id}"
 
     @property
     def color(self) -> list[int]:
@@ -113,7 +114,7 @@ class Member:
         (2: the mode is on) moves to this vehicle's row and armed (0/1) just under it,
         NaN where off."""
         if entity == "events":
-            return f"[system {self.system_id}] {value}"
+            return f"[{self.label or f'system {self.system_id}'}] {value}"
         if entity.startswith(f"plots/{STATE_PANEL}/"):
             if not (math.isfinite(value) and value > 0.5):
                 return math.nan
@@ -176,12 +177,14 @@ def fleet_blueprint(
     timeline: str = TIMELINE,
     whole_range: bool = True,
     modes: Sequence[str] | None = None,
+    subject: str = "",
 ) -> rrb.Blueprint:
     """The fleet's layout: the 3-D view framing the fleet (not following a vehicle),
     the map and event log, the state panel with a row per vehicle, and the panels of
     FLEET_PANELS whose panel is in ``panels`` (those with data). ``modes``: the flight
     modes of a finished flight, named with their colours in the state panel's title
-    instead of a legend over the bands."""
+    instead of a legend over the bands; ``subject``: what the 3-D view's title calls the
+    vehicles (default: labelled by system id)."""
     shown = set(panels)
     if "rotors" in shown:
         shown.discard("servo_pwm")
@@ -220,7 +223,7 @@ def fleet_blueprint(
         frame=frame,
         map_view=map_view,
         timeline=timeline,
-        subject=f"{len(members)} vehicles, labelled by system id in their plot colour",
+        subject=subject or f"{len(members)} vehicles, labelled by system id in their plot colour",
         state_share=min(3.0, 1.0 + 0.15 * len(members)),  # room for a row each
         zoom=FLEET_ZOOM,
     )

@@ -167,11 +167,15 @@ def series_style(entity: str) -> Any | None:
     name = entity.rsplit("/", 1)[-1]
     # A state holds until it changes: drawn as steps (a line between two reports would
     # slope, and where the plot averages the old and new value at a change, by seconds).
-    step = {"interpolation_mode": "StepAfter", "aggregation_policy": "Max"}
-    if entity.startswith(f"plots/{STATE_PANEL}/mode/"):
-        return rr.SeriesLines(colors=[mode_color(name)], widths=[10.0], names=[name], **step)
-    if entity == f"plots/{STATE_PANEL}/armed":
-        return rr.SeriesLines(colors=[palette.RED], widths=[2.0], names=["armed"], **step)
+    if entity.startswith(f"plots/{STATE_PANEL}/"):
+        mode = entity.startswith(f"plots/{STATE_PANEL}/mode/")
+        return rr.SeriesLines(
+            colors=[mode_color(name) if mode else palette.RED],
+            widths=[10.0 if mode else 2.0],
+            names=[name if mode else "armed"],
+            interpolation_mode="StepAfter",
+            aggregation_policy="Max",
+        )
     if not entity.startswith("plots/"):
         return None
     width = 1.5 if trace_role(name) else 2.0  # the estimate stands out
