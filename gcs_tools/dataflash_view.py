@@ -16,7 +16,8 @@ controllers' setpoints at their own rate and, in SITL, the simulator's state (``
 | GPS | GPS fix type and satellites |
 | BAT | battery voltage and remaining |
 | RCOU | servo outputs (PWM, as a .tlog's SERVO_OUTPUT_RAW) |
-| IMU, BARO (instance 0) | accelerometer, gyroscope, barometer |
+| IMU, BARO (instance 0) | accelerometer (and its spectrum), gyroscope, barometer |
+| VIBE | vibration (x, y, z), with ArduPilot's thresholds |
 | MSG, ERR, PARM (changes) | events |
 
 Time: the log counts µs from ArduPilot's boot (``TimeUS``); the replay's clock is UTC
@@ -125,6 +126,7 @@ def dataflash_system(log: DataFlash, path: str | Path) -> System:
     _pose(system, messages)
     _state(system, messages)
     _equipment(system, messages)
+    _vibration(system, messages)
     _events(system, messages)
     return system
 
@@ -274,6 +276,25 @@ def _equipment(system: System, messages: _Messages) -> None:
             stamps,
             messages.log.column(name, rows, "Press") / 100,
         )
+
+
+# ArduPilot's vibration levels (VIBE, m/s²): "below 30 normally acceptable, above 60
+# nearly always problems" (ArduPilot's wiki, Measuring Vibration).
+VIBE_LEVELS = (30.0, 60.0)
+
+
+def _vibration(system: System, messages: _Messages) -> None:
+    """VIBE's levels against ArduPilot's thresholds, and the accelerometer's spectrum
+    (IMU, at the rate it was logged)."""
+    name, stamps, rows = messages("VIBE", need=("VibeX", "VibeY", "VibeZ"))
+    if rows is not None:
+        levels = {axis.lower(): messages.log.column(name, rows, f"Vibe{axis}") for axis in "XYZ"}
+        span = S.armed_span(system)
+        S.vibration(system, stamps, levels, VIBE_LEVELS, span, "ArduPilot")
+    name, stamps, rows = messages("IMU", need=IMU_COLUMNS)
+    if rows is not None:
+        accel = messages.columns(name, rows, "AccX", "AccY", "AccZ")
+        S.spectra(system, stamps, accel, "accelerometer")
 
 
 def _events(system: System, messages: _Messages) -> None:

@@ -155,3 +155,82 @@ def events(
     """Log messages as events, each at its MAV_SEVERITY-style level (0..7)."""
     levels = [SEVERITY[min(max(int(s), 0), 7)] for s in severities]
     system.columns.extend("events", "text", np.asarray(stamps, np.int64), list(texts), levels)
+
+
+SPECTRUM_WINDOW_S = 1.0  # s of samples per spectrum: what the time cursor selects
+
+
+def spectra(system: System, stamps: np.ndarray, values: np.ndarray, sensor: str) -> None:
+    """Amplitude spectral density of a sensor's three axes ((N, 3), at its logged rate)
+    over consecutive windows of SPECTRUM_WINDOW_S, each at its window's end: the view
+    shows the window the time cursor is in. Hann window, mean removed; units: the
+    sensor's per √Hz. Nothing for a log below 20 samples/s (no vibration to see)."""
+    if len(stamps) < 64:
+        return
+    rate = 1e6 / float(np.median(np.diff(stamps)))
+    size = int(rate * SPECTRUM_WINDOW_S)
+    if rate < 20.0 or size < 16 or len(stamps) < size:
+        return
+    count = len(stamps) // size
+    window = np.hanning(size)
+    scale = np.sqrt(2.0 / (rate * np.sum(window**2)))
+    frequencies = np.fft.rfftfreq(size, 1.0 / rate)[1:]  # without DC
+    ends = stamps[size - 1 :: size][:count]
+    for k, axis in enumerate("xyz"):
+        blocks = values[: count * size, k].reshape(count, size).astype(np.float64)
+        blocks = (blocks - blocks.mean(axis=1, keepdims=True)) * window
+        density = np.abs(np.fft.rfft(blocks, axis=1))[:, 1:] * scale
+        bars = np.stack([np.broadcast_to(frequencies, density.shape), density], axis=1)
+        system.columns.extend(f"spectrum/{sensor}/{axis}", "spectrum", ends, bars)
+
+
+def vibration(
+    system: System,
+    stamps: np.ndarray,
+    levels: dict[str, np.ndarray],
+    thresholds: tuple[float, float],
+    armed_us: tuple[int, int] | None,
+    source: str,
+) -> None:
+    """Vibration levels (``levels``: series name -> m/s²) in the vibration panel with
+    the stack's own thresholds as lines (``warning``, ``bad``), and a one-line verdict
+    (the 95th percentile while armed, else over the log) among the system's notes and
+    events."""
+    for name, values in levels.items():
+        scalar(system, f"plots/vibration/{name}", stamps, values)
+    span = stamps[[0, -1]] if len(stamps) else stamps
+    for name, level in zip(("warning", "bad"), thresholds, strict=True):
+        scalar(system, f"plots/vibration/{name}", span, np.full(len(span), level))
+    flying = np.ones(len(stamps), dtype=bool)
+    if armed_us is not None:
+        flying = (stamps >= armed_us[0]) & (stamps <= armed_us[1])
+    worst = max(
+        (float(np.nanpercentile(v[flying], 95)) for v in levels.values() if flying.any()),
+        default=float("nan"),
+    )
+    if not np.isfinite(worst):
+        return
+    warning, bad = thresholds
+    verdict, severity = ("good", 6) if worst < warning else ("high", 4)
+    if worst >= bad:
+        verdict, severity = "too high", 3
+    over = " while armed" if armed_us else ""
+    note = (
+        f"vibration {verdict}: {worst:.2f} m/s² (95th percentile{over}; {source}: good "
+        f"below {warning:g}, too high above {bad:g})"
+    )
+    system.notes.append(note)
+    events(system, [int(stamps[-1])], [note], [severity])
+
+
+def armed_span(system: System) -> tuple[int, int] | None:
+    """(first, last) µs the flight was armed, from its flight-state band."""
+    armed = system.columns.series.get(("plots/state/armed", "scalar"))
+    if armed is None:
+        return None
+    times, values = armed.arrays()
+    on = np.flatnonzero(values > 0.5)
+    if len(on) == 0:
+        return None
+    last = on[-1] + 1 if on[-1] + 1 < len(times) else on[-1]
+    return int(times[on[0]]), int(times[last])

@@ -21,7 +21,7 @@ import stat
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from gcs_tools.dataflash_reader import MAGIC as DATAFLASH_MAGIC
@@ -50,6 +50,7 @@ class ReplayResult:
     entities: dict[str, int]  # entity path -> rows logged
     seconds: float
     warnings: list[str]
+    notes: list[str] = field(default_factory=list)  # verdicts: vibration
 
 
 def convert(
@@ -111,7 +112,8 @@ def compare(
         warnings.append(f"the log is damaged ({stats.describe()}); converted what was readable")
     if not any(system.track for system in vehicles.values()):
         warnings.append("no position messages: the 3-D view has no motion")
-    return ReplayResult(stats, entities, time.perf_counter() - started, warnings)
+    notes = [note for system in vehicles.values() for note in system.notes]
+    return ReplayResult(stats, entities, time.perf_counter() - started, warnings, notes)
 
 
 class EmptyLogError(ValueError):
@@ -284,6 +286,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "gcs-replay") -> int:
         return 1
     for warning in result.warnings:
         print(f"{prog}: warning: {warning}", file=sys.stderr)
+    for note in result.notes:
+        print(note)
     rate = result.stats.messages / max(result.seconds, 1e-9)
     print(
         f"{result.stats.messages} messages in {result.seconds:.2f} s ({rate:,.0f} messages/s)"

@@ -26,6 +26,7 @@ from quadsitl.viz.scene import (
     series_style,
     shown_panels,
 )
+from quadsitl.viz.series_colors import series_color
 from quadsitl.viz.viewer import open_recording
 
 
@@ -71,6 +72,10 @@ class Columns:
         for key in rotors:
             self.series[key].replace_values(self.series[key].arrays()[1].astype(float) / hover)
 
+    def spectra(self) -> list[str]:
+        """The sensors whose spectra were gathered (``spectrum/<sensor>/<axis>``)."""
+        return sorted({e.split("/")[1] for e, kind in self.series if kind == "spectrum"})
+
     def modes(self) -> list[str]:
         """The flight modes the log went through, in the order of their first sample."""
         prefix = f"plots/{STATE_PANEL}/mode/"
@@ -113,6 +118,8 @@ class Columns:
         """Every series as one column; a fleet's ``member`` under its system id."""
         rows: dict[str, int] = {}
         for (entity, kind), series in self.series.items():
+            if member is not None and kind == "spectrum":
+                continue  # a fleet's layout has no spectra
             times, values = series.arrays()
             levels = series.levels() if kind == "text" else []
             path, style = entity, series_style(entity) if kind == "scalar" else None
@@ -125,6 +132,10 @@ class Columns:
                     values = np.asarray([member.value(entity, value) for value in values])
             if style is not None:
                 rec.log(path, style, static=True)
+            if kind == "spectrum":
+                send_spectra(rec, path, times, values)
+                rows[path] = rows.get(path, 0) + len(times)
+                continue
             index = rr.TimeColumn(TIMELINE, timestamp=times.astype("datetime64[us]"))
             rec.send_columns(path, indexes=[index], columns=column(kind, values, levels))
             rows[path] = rows.get(path, 0) + len(times)
@@ -139,6 +150,7 @@ class System:
         self.columns = Columns()
         self.track: list[np.ndarray] = []  # m, ENU, in its own local frame
         self.truth_track: list[np.ndarray] = []  # the same, the simulator's (where logged)
+        self.notes: list[str] = []  # verdicts for the user (vibration)
 
     def add(self, stamp_us: int, message: Any) -> None:
         for sample in self.view.samples(message):
@@ -182,6 +194,18 @@ def vehicles_of(systems: dict[int, System]) -> dict[int, System]:
     return posed or {k: systems[k] for k in sorted(systems) if systems[k].columns.series}
 
 
+def send_spectra(rec: rr.RecordingStream, path: str, times: np.ndarray, values: Any) -> None:
+    """Spectra (``spectrum/<sensor>/<axis>``: rows of frequencies and densities), each
+    a bar chart at its time, in its axis' colour as in the sensor's panel: one log call
+    a window (a column of bar charts would hold one tensor, not one a row)."""
+    _, sensor, axis = path.split("/", 2)
+    color = list(series_color(f"plots/{sensor}/{axis}"))
+    for stamp, (frequencies, densities) in zip(times.tolist(), values, strict=True):
+        rec.set_time(TIMELINE, timestamp=np.datetime64(int(stamp), "us"))
+        rec.log(path, rr.BarChart(densities, abscissa=frequencies, color=color))
+    rec.reset_time()
+
+
 def column(kind: str, values: Any, levels: list[str]) -> Any:
     if kind == "scalar":
         return rr.Scalars.columns(scalars=np.asarray(values, dtype=np.float64))
@@ -216,6 +240,7 @@ def send_one(
         map_view=("map/track", "geo") in system.columns.series,
         fits=system.columns.fits(shown_panels(panels - {STATE_PANEL})),
         modes=system.columns.modes(),
+        spectra=system.columns.spectra(),
     )
     rec = open_recording(
         "quadsitl_replay",

@@ -16,7 +16,8 @@ publishes from the HIL_STATE_QUATERNION quadsitl sends it).
 | sensor_gps (or vehicle_gps_position) | GPS fix type and satellites |
 | battery_status | battery voltage and remaining |
 | actuator_motors (or actuator_outputs) | rotors |
-| sensor_combined, vehicle_air_data | accelerometer, gyroscope, barometer |
+| sensor_combined, vehicle_air_data | accelerometer (and its spectrum), gyroscope, barometer |
+| vehicle_imu_status | vibration (accel_vibration_metric), with Flight Review's bands |
 | mission_result | mission item |
 | logged messages, parameter changes, dropouts | events |
 
@@ -82,6 +83,7 @@ def ulog_system(log: ULog, path: str | Path) -> System:
     _pose(system, rows)
     _state(system, *rows("vehicle_status"))
     _equipment(system, rows)
+    _vibration(system, rows)
     S.events(
         system,
         [stamp + offset for stamp, _, _ in log.messages],
@@ -201,6 +203,23 @@ def _equipment(system: System, rows: _Topics) -> None:
     stamps, table = rows("mission_result")
     if table is not None:
         S.scalar(system, "plots/mission_item/seq", stamps, table["seq_current"])
+
+
+# PX4 Flight Review's bands for vehicle_imu_status.accel_vibration_metric (m/s²).
+ACCEL_VIBRATION = (4.905, 9.81)
+
+
+def _vibration(system: System, rows: _Topics) -> None:
+    """The accelerometer's vibration metric against Flight Review's bands, and its
+    spectrum (from sensor_combined, at the rate it was logged)."""
+    stamps, table = rows("vehicle_imu_status")
+    if table is not None and "accel_vibration_metric" in (table.dtype.names or ()):
+        metric = {"accel": table["accel_vibration_metric"].astype(np.float64)}
+        span = S.armed_span(system)
+        S.vibration(system, stamps, metric, ACCEL_VIBRATION, span, "PX4 Flight Review")
+    stamps, table = rows("sensor_combined")
+    if table is not None:
+        S.spectra(system, stamps, table["accelerometer_m_s2"], "accelerometer")
 
 
 def _columns(table: np.ndarray, *names: str) -> np.ndarray:

@@ -16,7 +16,7 @@ import pytest
 
 from gcs_tools.replay import convert, main
 from gcs_tools.ulog_reader import read_ulog
-from tests.test_rerun import check_attitude, check_panels, rows_per_entity, scalars
+from tests.test_rerun import check_attitude, check_panels, rows_per_entity, scalars, views
 
 DATA = Path(__file__).resolve().parent / "data"
 PX4_ULOG, PX4_TLOG = DATA / "px4_mission.ulg", DATA / "px4_mission.tlog"
@@ -93,6 +93,24 @@ def test_a_px4_ulog_replays_estimate_setpoint_and_truth(tmp_path):
     assert abs(altitude.max() - truth.max()) < 0.3
     # Absent, not zero: the log has no wind estimate and no servo outputs.
     assert not any(e.startswith(("/plots/wind", "/plots/servo_pwm")) for e in rows)
+
+
+def test_a_ulog_replay_judges_vibration_against_flight_reviews_levels(tmp_path):
+    """The accelerometer's vibration metric with PX4 Flight Review's levels as lines, a
+    one-line verdict, and the accelerometer's spectrum a second at a time."""
+    out = tmp_path / "px4.rrd"
+    result = convert(PX4_ULOG, out)
+    (note,) = result.notes
+    assert note.startswith("vibration good: ") and "good below 4.905, too high above 9.81" in note
+    assert np.all(scalars(out, "/plots/vibration/warning") == 4.905)
+    assert np.all(scalars(out, "/plots/vibration/bad") == 9.81)
+    metric = scalars(out, "/plots/vibration/accel")
+    assert len(metric) > 100 and 0 < np.nanmax(metric) < 4.905  # quadsitl's IMU: quiet
+    rows = rows_per_entity(out)
+    windows = [rows.get(f"/spectrum/accelerometer/{axis}", 0) for axis in "xyz"]
+    assert windows[0] == windows[1] == windows[2] >= 30  # one a second of the logged flight
+    shown = views(out)
+    assert ("BarChart", "spectrum/accelerometer") in shown.values()
 
 
 def test_a_ulog_and_a_tlog_of_one_flight_show_the_same_views(tmp_path):

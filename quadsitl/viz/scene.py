@@ -142,6 +142,7 @@ PANELS = {
     "accelerometer": "accelerometer (m/s², body FRD)",
     "gyroscope": "gyroscope (deg/s, body FRD)",
     "barometer": "barometer (hPa)",
+    "vibration": "vibration (m/s²; lines: warning, too high)",
 }
 WIND_COLOR = [70, 150, 230]  # the wind arrow in the 3-D view
 WIND_ARROW_SCALE = 0.25  # m of arrow per m/s of wind
@@ -220,6 +221,7 @@ def blueprint(
     fits: Mapping[str, PanelFit] | None = None,
     modes: Sequence[str] | None = None,
     zoom: float = 1.0,
+    spectra: Sequence[str] = (),
 ) -> rrb.Blueprint:
     """The layout sent with every recording of one vehicle: see :func:`arrange`, with one
     time-series panel per name in ``panels`` (see PANELS; pass only those with data;
@@ -227,11 +229,19 @@ def blueprint(
     ``fits``: panel name -> its y range and legend corner, where the data is known
     (:mod:`quadsitl.viz.plot_fit`); ``modes``: the flight modes of a finished flight,
     named with their colours in the band's title (its plot is too short for a legend);
-    ``zoom``: see :func:`arrange`."""
+    ``zoom``: see :func:`arrange`; ``spectra``: the sensors (``accelerometer`` ...)
+    whose spectra the recording holds, each a bar chart after the plots."""
     axis = time_axis(whole_range)
-    plots = [
+    plots: list[Any] = [
         time_series(f"plots/{name}", PANELS[name], axis, (fits or {}).get(name))
         for name in shown_panels(panels)
+    ]
+    plots += [
+        rrb.BarChartView(
+            origin=f"spectrum/{sensor}",
+            name=f"{sensor} spectrum (per √Hz, 1 s to the cursor)",
+        )
+        for sensor in spectra
     ]
     state_view = None
     if state and modes:

@@ -42,7 +42,10 @@ SERIES_NAMES: dict[str, tuple[str, ...]] = {
     "accelerometer": ("x", "y", "z"),
     "gyroscope": ("x", "y", "z"),
     "barometer": ("pressure",),
+    "vibration": ("x", "y", "z", "accel", "gyro"),
 }
+# The vibration panel's threshold lines: the stack's own warning and too-high levels.
+THRESHOLD_COLORS: dict[str, palette.RGB] = {"warning": palette.OLIVE, "bad": palette.RED}
 
 # The flight modes' bands, each mode its own colour (none red: armed is red); PX4's and
 # quadsitl's names, and ArduPilot's where they differ. A mode not named here takes one
@@ -70,6 +73,8 @@ MODE_COLORS: dict[str, palette.RGB] = {
 def series_color(entity: str) -> palette.RGB:
     """The colour of the time series at ``entity`` (``plots/<panel>/<name>``)."""
     _, panel, name = [*entity.split("/", 2), "", ""][:3]
+    if panel == "vibration" and name in THRESHOLD_COLORS:
+        return THRESHOLD_COLORS[name]
     role = trace_role(name)
     base = name.removesuffix(role).removesuffix("_") if role else name
     names = SERIES_NAMES.get(panel, ())
