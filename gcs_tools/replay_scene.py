@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from gcs_tools.mode_strips import send_mode_strips
 from gcs_tools.series_buffer import Series
 from quadsitl.viz import palette
 from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
@@ -233,12 +234,13 @@ def send_one(
     mission = system.mission_points()
     frame = framing(np.concatenate([np.asarray(system.track).reshape(-1, 3), mission]))
     panels = system.columns.panels()
+    fits = system.columns.fits(shown_panels(panels - {STATE_PANEL}))
     layout = blueprint(
         panels - {STATE_PANEL},
         state=STATE_PANEL in panels,
         frame=frame,
         map_view=("map/track", "geo") in system.columns.series,
-        fits=system.columns.fits(shown_panels(panels - {STATE_PANEL})),
+        fits=fits,
         modes=system.columns.modes(),
         spectra=system.columns.spectra(),
     )
@@ -251,6 +253,7 @@ def send_one(
         web=web,
     )
     entities = system.columns.send(rec)
+    entities.update(send_mode_strips(rec, system.columns.series, fits))
     log_statics(rec, system)
     return rec, entities
 
