@@ -23,6 +23,7 @@ from quadsitl.viz.flight_view import SEVERITY, state_samples
 from quadsitl.viz.scene import pose_from_ned
 
 AXES = ("roll", "pitch", "yaw")
+FARTHEST_M = 1e6  # a local position beyond is not one (a damaged log's garbage)
 
 
 def suffixed(name: str, role: str) -> str:
@@ -47,7 +48,7 @@ def position(
     """Position (N, 3) and velocity (N, 3), NED m and m/s, into the altitude, climb-rate
     and horizontal-velocity panels. The estimate (``role`` "") also poses the vehicle
     and draws its track; the truth draws the true track."""
-    keep = np.isfinite(ned).all(axis=1)
+    keep = np.isfinite(ned).all(axis=1) & (np.abs(ned) < FARTHEST_M).all(axis=1)
     stamps, enu = stamps[keep], frames.ned_to_enu(ned[keep])
     scalar(system, f"plots/altitude/{suffixed('altitude', role)}", stamps, enu[:, 2])
     if velocity_ned is not None:

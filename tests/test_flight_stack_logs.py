@@ -9,11 +9,13 @@ pyulog, PX4's own reader, on every field.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from gcs_tools.dataflash_reader import read_dataflash
 from gcs_tools.replay import convert, main
 from gcs_tools.ulog_reader import read_ulog
 from tests.test_rerun import check_attitude, check_panels, rows_per_entity, scalars, views
@@ -210,3 +212,152 @@ def test_several_logs_overlay_their_flights_aligned_at_arming(tmp_path, capsys):
     assert main([str(PX4_ULOG), str(empty), "-o", str(tmp_path / "x.rrd")]) == 1
     err = capsys.readouterr().err
     assert f"no MAVLink messages found in {empty}" in err and "Traceback" not in err
+
+
+def test_a_replayed_ulog_in_the_web_viewer_in_a_real_browser():
+    """``quadsitl replay FLIGHT.ulg --web`` on loopback, its URL loaded in headless
+    Chromium: the page draws the flight (the mission's and landing's mode bands, in
+    their colours) and the 3-D view's vehicle."""
+    import os
+    import select
+    import subprocess
+    from io import BytesIO
+
+    from PIL import Image
+
+    from quadsitl.viz import palette
+    from tests.chromium import HeadlessChromium, chromium_executable
+    from tests.conftest import cli
+    from tests.test_rerun import ROTOR_RED, colour_pixels, free_tcp_port
+
+    browser = chromium_executable()
+    if browser is None:
+        pytest.skip("Chromium is not installed (Debian: apt-get install chromium)")
+    env = dict(os.environ, QUADSITL_WEB_PORT=str(free_tcp_port()))
+    env["QUADSITL_GRPC_PORT"] = str(free_tcp_port())
+    replay = subprocess.Popen(
+        cli(f"replay {PX4_ULOG} --web"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
+    page = None
+    try:
+        ready, _, _ = select.select([replay.stdout], [], [], 60)
+        assert ready, "quadsitl replay --web printed no URL within 60 s"
+        line = replay.stdout.readline()
+        assert line.startswith("Rerun web viewer: open http://127.0.0.1:"), line
+        page = HeadlessChromium(browser, line.split("open ", 1)[1].strip(), size=(1280, 720))
+        deadline = time.monotonic() + 180  # the viewer's wasm, rendered in software
+        while True:
+            image = np.asarray(Image.open(BytesIO(page.screenshot())).convert("RGB"))
+            bands = [
+                colour_pixels(image, palette.BROWN, 12),
+                colour_pixels(image, palette.CYAN, 12),
+            ]
+            vehicle = colour_pixels(image[:, : image.shape[1] // 3], ROTOR_RED)
+            if min(bands) >= 50 and vehicle >= 4:
+                break  # the mission and landing bands, and the vehicle in 3-D
+            assert time.monotonic() < deadline, (
+                f"the page never drew the flight: {bands}, {vehicle}"
+            )
+            time.sleep(3)
+    finally:
+        if page is not None:
+            page.close()
+        replay.terminate()
+        replay.wait(timeout=20)
+
+
+ARDUPILOT_BIN, ARDUPILOT_TLOG = DATA / "ardupilot_mission.bin", DATA / "ardupilot_mission.tlog"
+
+
+def test_the_dataflash_reader_agrees_with_pymavlink_on_every_message():
+    from pymavlink import DFReader
+
+    ours = read_dataflash(ARDUPILOT_BIN)
+    assert not ours.stats.damaged and not ours.warnings
+    theirs = DFReader.DFReader_binary(str(ARDUPILOT_BIN), zero_time_base=True)
+    seen: dict[str, int] = {}
+    while (message := theirs.recv_msg()) is not None:
+        name = message.get_type()
+        if name == "FMT":
+            continue
+        row = seen.get(name, 0)
+        seen[name] = row + 1
+        if row % 97:  # every 97th row of each message, every field
+            continue
+        table = ours.tables[name]
+        for column in ours.formats[name].columns:
+            expected = getattr(message, column)
+            if isinstance(expected, str):
+                assert table[column][row].decode("utf-8", "replace").rstrip("\x00") == expected
+            elif not isinstance(expected, (bytes, list, tuple)):
+                got = ours.column(name, table[row : row + 1], column)[0]
+                np.testing.assert_allclose(got, expected, rtol=1e-6, atol=1e-9, err_msg=column)
+    assert {name: len(ours.tables[name]) for name in seen} == seen
+    assert len(seen) > 40
+
+
+def test_a_dataflash_log_replays_estimate_setpoint_and_truth(tmp_path):
+    out = tmp_path / "copter.rrd"
+    result = convert(ARDUPILOT_BIN, out)
+    assert not result.warnings, result.warnings
+    check_panels(out, {"plots/altitude", "plots/attitude", "plots/rates", "plots/servo_pwm"})
+    rows = rows_per_entity(out)
+    for entity in ("altitude/altitude", "altitude/altitude_truth", "altitude/setpoint",
+                   "attitude/roll", "attitude/roll_setpoint", "attitude/roll_truth",
+                   "rates/yaw", "rates/yaw_setpoint", "velocity/east_truth"):  # fmt: skip
+        assert rows.get(f"/plots/{entity}", 0) > 100, entity
+    check_attitude(out)
+    estimate, truth = (scalars(out, f"/plots/altitude/{n}") for n in ("altitude", "altitude_truth"))
+    assert 2.7 < estimate.max() < 3.8 and abs(estimate.max() - truth.max()) < 0.3
+    assert (
+        result.notes[0].startswith("vibration good: ")
+        and "ArduPilot: good below 30" in result.notes[0]
+    )
+    assert "/world/mission" in rows  # the mission ArduPilot logged (CMD)
+
+
+def test_a_dataflash_log_and_a_tlog_of_one_flight_show_the_same_flight():
+    from gcs_tools.replay import read_flights
+
+    systems = []
+    for log in (ARDUPILOT_BIN, ARDUPILOT_TLOG):
+        _, vehicles, _ = read_flights(log)
+        (system,) = vehicles.values()
+        systems.append(system)
+        track = np.asarray(system.track)
+        extent = track.max(axis=0) - track.min(axis=0)
+        assert 7.0 < extent[0] < 9.0 and 7.0 < extent[1] < 9.0 and 2.8 < extent[2] < 4.0, extent
+    dataflash, tlog = systems
+    # ArduPilot logs from arming: the modes it went through since, as the telemetry saw them.
+    assert dataflash.columns.modes() == ["GUIDED", "AUTO"]
+    assert tlog.columns.modes()[-2:] == ["GUIDED", "AUTO"]
+    common = {
+        "altitude",
+        "climb_rate",
+        "velocity",
+        "attitude",
+        "rates",
+        "servo_pwm",
+        "gps",
+        "state",
+    }
+    assert common <= dataflash.columns.panels() & tlog.columns.panels()
+
+
+def test_a_damaged_dataflash_log_shows_what_is_readable(tmp_path):
+    whole = read_dataflash(ARDUPILOT_BIN)
+    data = bytearray(ARDUPILOT_BIN.read_bytes())
+    middle = len(data) // 2
+    data[middle : middle + 700] = bytes(range(100, 240)) * 5  # garbage in the middle
+    damaged = tmp_path / "damaged.bin"
+    damaged.write_bytes(bytes(data[:-20]))  # and cut inside a message
+    log = read_dataflash(damaged)
+    assert log.stats.damaged and log.stats.truncated and log.stats.skipped_bytes >= 700
+    assert 0.9 * whole.stats.messages < log.stats.messages < whole.stats.messages
+    result = convert(damaged, tmp_path / "damaged.rrd")
+    assert [w for w in result.warnings if "damaged" in w]
+    assert rows_per_entity(tmp_path / "damaged.rrd")["/plots/altitude/altitude"] > 100

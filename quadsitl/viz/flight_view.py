@@ -174,6 +174,8 @@ class FlightView:
         return out
 
     def _global_position_int(self, msg: Any) -> list[Sample]:
+        if msg.lat == 0 and msg.lon == 0:
+            return []  # no position yet (ArduPilot's before its GPS and EKF have one)
         if self.home is None:
             self.home = Home(msg.lat * 1e-7, msg.lon * 1e-7, (msg.alt - msg.relative_alt) * 1e-3)
         geo = Sample("map/track", "geo", (msg.lat * 1e-7, msg.lon * 1e-7))
