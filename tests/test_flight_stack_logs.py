@@ -214,6 +214,7 @@ def test_several_logs_overlay_their_flights_aligned_at_arming(tmp_path, capsys):
     assert f"no MAVLink messages found in {empty}" in err and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_a_replayed_ulog_in_the_web_viewer_in_a_real_browser():
     """``quadsitl replay FLIGHT.ulg --web`` on loopback, its URL loaded in headless
     Chromium: the page draws the flight (the mission's and landing's mode bands, in
