@@ -87,7 +87,10 @@ def dataflash_hours(source: Path, target: Path, hours: float) -> None:
     }
     lengths = np.array([by_type[k].length if k in by_type else 89 for k in records[:, 1]])
     timed = np.array([k in by_type and by_type[k].columns[0] == "TimeUS" for k in records[:, 1]])
-    stamps = [rows["TimeUS"] for rows in log.tables.values() if "TimeUS" in rows.dtype.names]
+    tables = [log.rows(name) for name in log.names]
+    stamps = [
+        rows["TimeUS"] for rows in tables if rows is not None and "TimeUS" in rows.dtype.names
+    ]
     span = int(max(s.max() for s in stamps) - min(s.min() for s in stamps)) + 1000
     copies = max(int(hours * 3600e6 / span) - 1, 0)
     keep = records[:, 1] != 128  # the formats once

@@ -64,18 +64,37 @@ class Format:
 
 @dataclass
 class DataFlash:
-    """A DataFlash log's content: ``tables``: message name -> rows (structured, raw
-    units; :meth:`column` scales them)."""
+    """A DataFlash log's content: :meth:`table`, a message's rows (structured, raw
+    units; :meth:`column` scales them), read from the file's bytes when first asked
+    for (a replay uses a fifth of a copter log's message types)."""
 
     formats: dict[str, Format]
-    tables: dict[str, np.ndarray]
     stats: ReadStats
     warnings: list[str] = field(default_factory=list)
+    data: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint8), repr=False)
+    located: dict[str, np.ndarray] = field(default_factory=dict, repr=False)  # payloads
+    read: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+
+    @property
+    def names(self) -> list[str]:
+        """The message types the log holds rows of."""
+        return sorted(self.located)
+
+    def rows(self, name: str) -> np.ndarray | None:
+        """Every row of message ``name`` (None if the log has none)."""
+        if name not in self.read:
+            offsets = self.located.get(name)
+            if offsets is None:
+                return None
+            fmt = self.formats[name]
+            payload = fmt.length - HEADER_BYTES
+            self.read[name] = gather(self.data, offsets, payload, payload).view(fmt.dtype).ravel()
+        return self.read[name]
 
     def table(self, name: str, instance: int | None = 0) -> np.ndarray | None:
         """The rows of message ``name`` (those of ``instance`` where it has an
         instance column; None: all), or None if the log has none."""
-        rows = self.tables.get(name)
+        rows = self.rows(name)
         if rows is None or len(rows) == 0:
             return None
         column = next((c for c in INSTANCE_COLUMNS if c in (rows.dtype.names or ())), None)
@@ -89,6 +108,15 @@ class DataFlash:
         values = rows[column].astype(np.float64)
         return values * scale if scale is not None else values
 
+    def end_us(self) -> int:
+        """The latest TimeUS of the log (µs since boot; 0 without one)."""
+        ends = [
+            int(rows["TimeUS"].max())
+            for rows in map(self.rows, self.names)
+            if rows is not None and len(rows) and "TimeUS" in (rows.dtype.names or ())
+        ]
+        return max(ends, default=0)
+
 
 def read_dataflash(path: str | Path) -> DataFlash:
     """The DataFlash log at ``path``; ValueError if it does not start as one."""
@@ -96,17 +124,15 @@ def read_dataflash(path: str | Path) -> DataFlash:
     if bytes(data[: len(MAGIC)]) != MAGIC:
         raise ValueError(f"{path} is not an ArduPilot DataFlash log (no FMT message first)")
     records, skipped, truncated = scan_dataflash(data)
-    log = DataFlash({}, {}, ReadStats(skipped_bytes=skipped, truncated=truncated))
+    log = DataFlash({}, ReadStats(skipped_bytes=skipped, truncated=truncated), data=data)
     by_type = _formats(data, records[records[:, 1] == DATAFLASH_FMT, 0], log)
     kinds = records[:, 1]
-    for kind in np.unique(kinds):
-        fmt = by_type.get(int(kind))
-        if fmt is None or int(kind) == DATAFLASH_FMT:
-            continue
-        offsets = records[kinds == kind, 0] + HEADER_BYTES
-        payload = fmt.length - HEADER_BYTES
-        rows = gather(data, offsets, payload, payload)
-        log.tables[fmt.name] = rows.view(fmt.dtype).ravel()
+    order = np.argsort(kinds, kind="stable")
+    types, starts = np.unique(kinds[order], return_index=True)
+    for kind, rows in zip(types.tolist(), np.split(order, starts[1:]), strict=True):
+        fmt = by_type.get(kind)
+        if fmt is not None and kind != DATAFLASH_FMT:
+            log.located[fmt.name] = records[rows, 0] + HEADER_BYTES
     log.stats.messages = len(records)
     return log
 

@@ -110,12 +110,7 @@ def utc_offset(log: DataFlash, path: str | Path) -> int:
             row = gps[valid][0]
             seconds = GPS_EPOCH_S + int(row["GWk"]) * WEEK_S - GPS_LEAP_S
             return seconds * 1_000_000 + int(row["GMS"]) * 1000 - int(row["TimeUS"])
-    ends = [
-        int(rows["TimeUS"].max())
-        for rows in log.tables.values()
-        if "TimeUS" in (rows.dtype.names or ())
-    ]
-    return int(os.stat(path).st_mtime * 1e6) - max(ends, default=0)
+    return int(os.stat(path).st_mtime * 1e6) - log.end_us()
 
 
 def dataflash_system(log: DataFlash, path: str | Path) -> System:

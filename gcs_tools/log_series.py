@@ -158,29 +158,37 @@ def events(
     system.columns.extend("events", "text", np.asarray(stamps, np.int64), list(texts), levels)
 
 
-SPECTRUM_WINDOW_S = 1.0  # s of samples per spectrum: what the time cursor selects
+SPECTRUM_SEGMENT_S = 1.0  # s of samples per FFT: the frequency resolution (1 Hz)
+MOST_SPECTRA = 120  # per axis: a longer log averages more segments into each spectrum
 
 
 def spectra(system: System, stamps: np.ndarray, values: np.ndarray, sensor: str) -> None:
-    """Amplitude spectral density of a sensor's three axes ((N, 3), at its logged rate)
-    over consecutive windows of SPECTRUM_WINDOW_S, each at its window's end: the view
-    shows the window the time cursor is in. Hann window, mean removed; units: the
-    sensor's per √Hz. Nothing for a log below 20 samples/s (no vibration to see)."""
+    """Amplitude spectral density of a sensor's three axes ((N, 3), at its logged rate),
+    each spectrum at the end of the span it covers: the view shows the span the time
+    cursor is in. Welch's method: Hann-windowed segments of SPECTRUM_SEGMENT_S, mean
+    removed, their power averaged over as many consecutive segments as keep a log to
+    MOST_SPECTRA spectra per axis (1 s each for a flight under two minutes; a bar chart
+    is one log call, Rerun sends no columns of them). Units: the sensor's per √Hz.
+    Nothing for a log below 20 samples/s (no vibration to see)."""
     if len(stamps) < 64:
         return
     rate = 1e6 / float(np.median(np.diff(stamps)))
-    size = int(rate * SPECTRUM_WINDOW_S)
+    size = int(rate * SPECTRUM_SEGMENT_S)
     if rate < 20.0 or size < 16 or len(stamps) < size:
         return
-    count = len(stamps) // size
+    segments = len(stamps) // size
+    per_spectrum = -(-segments // MOST_SPECTRA)
+    count = segments // per_spectrum
+    used = count * per_spectrum * size
     window = np.hanning(size)
-    scale = np.sqrt(2.0 / (rate * np.sum(window**2)))
+    scale = 2.0 / (rate * np.sum(window**2))
     frequencies = np.fft.rfftfreq(size, 1.0 / rate)[1:]  # without DC
-    ends = stamps[size - 1 :: size][:count]
+    ends = stamps[per_spectrum * size - 1 : used : per_spectrum * size][:count]
     for k, axis in enumerate("xyz"):
-        blocks = values[: count * size, k].reshape(count, size).astype(np.float64)
+        blocks = values[:used, k].reshape(count * per_spectrum, size).astype(np.float64)
         blocks = (blocks - blocks.mean(axis=1, keepdims=True)) * window
-        density = np.abs(np.fft.rfft(blocks, axis=1))[:, 1:] * scale
+        power = np.abs(np.fft.rfft(blocks, axis=1))[:, 1:] ** 2 * scale
+        density = np.sqrt(power.reshape(count, per_spectrum, -1).mean(axis=1))
         bars = np.stack([np.broadcast_to(frequencies, density.shape), density], axis=1)
         system.columns.extend(f"spectrum/{sensor}/{axis}", "spectrum", ends, bars)
 
