@@ -1,4 +1,6 @@
-"""The flight mode under every time plot of a replay: a strip along each plot's bottom
+"""The flight's modes and events on the time axes of a replay.
+
+The flight mode under every time plot: a strip along each plot's bottom
 edge in the mode's band colour, so that a glance at any plot says which mode the
 vehicle was in (PX4 Flight Review colours the plots' backgrounds; Rerun's plots have no
 background bands, so the strip is the state band's own series drawn again, thick, at
@@ -7,6 +9,11 @@ the foot of each plot's fitted y range).
 Entities ``plots/<panel>/mode/<MODE>``, each drawn as steps, all named ``mode`` (one
 legend entry, not one per mode: the state band's title names the modes' colours).
 Only where a plot's y range is known (a replay, :mod:`quadsitl.viz.plot_fit`).
+
+The events (arming, mode changes, the autopilot's messages, parameter changes, the
+vibration verdict) as marks on the state band's time axis, between the armed line and
+the mode band (``plots/state/events``): a diamond per event, red for errors, orange
+for warnings; the event log lists them at the time cursor.
 """
 
 from __future__ import annotations
@@ -17,6 +24,7 @@ import numpy as np
 import rerun as rr
 
 from gcs_tools.series_buffer import Series
+from quadsitl.viz import palette
 from quadsitl.viz.plot_fit import PanelFit
 from quadsitl.viz.scene import STATE_PANEL, TIMELINE
 from quadsitl.viz.series_colors import mode_color
@@ -57,3 +65,29 @@ def send_mode_strips(
             rec.send_columns(path, indexes=[index], columns=rr.Scalars.columns(scalars=strip))
             rows[path] = len(times)
     return rows
+
+
+EVENT_HEIGHT = 1.5  # on the state band's axis: between armed (0/1) and the modes (2)
+EVENT_COLORS = {"CRITICAL": palette.RED, "ERROR": palette.RED, "WARN": palette.ORANGE}
+EVENT_COLOR = (220, 220, 220)
+
+
+def send_event_marks(rec: rr.RecordingStream, series: Mapping[tuple[str, str], Series]) -> int:
+    """A mark per event on the state band; how many."""
+    events = series.get(("events", "text"))
+    if events is None:
+        return 0
+    times, _ = events.arrays()
+    colors = [list(EVENT_COLORS.get(level, EVENT_COLOR)) for level in events.levels()]
+    path = f"plots/{STATE_PANEL}/events"
+    rec.log(
+        path, rr.SeriesPoints(markers="Diamond", marker_sizes=[4.0], names=["events"]), static=True
+    )
+    index = rr.TimeColumn(TIMELINE, timestamp=times.astype("datetime64[us]"))
+    heights = np.full(len(times), EVENT_HEIGHT)
+    rec.send_columns(
+        path,
+        indexes=[index],
+        columns=[*rr.Scalars.columns(scalars=heights), *rr.SeriesPoints.columns(colors=colors)],
+    )
+    return len(times)

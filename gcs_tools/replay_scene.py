@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from gcs_tools.mode_strips import send_mode_strips
+from gcs_tools.mode_strips import send_event_marks, send_mode_strips
 from gcs_tools.series_buffer import Series
 from quadsitl.viz import palette
 from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
@@ -272,6 +272,7 @@ def send_one(
     )
     entities = system.columns.send(rec)
     entities.update(send_mode_strips(rec, system.columns.series, fits))
+    entities[f"plots/{STATE_PANEL}/events"] = send_event_marks(rec, system.columns.series)
     log_statics(rec, system)
     return rec, entities
 

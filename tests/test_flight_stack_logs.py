@@ -363,3 +363,17 @@ def test_a_damaged_dataflash_log_shows_what_is_readable(tmp_path):
     result = convert(damaged, tmp_path / "damaged.rrd")
     assert [w for w in result.warnings if "damaged" in w]
     assert rows_per_entity(tmp_path / "damaged.rrd")["/plots/altitude/altitude"] > 100
+
+
+def test_modes_under_every_plot_and_events_on_the_time_axis(tmp_path):
+    """A replay's fitted plots each carry the mode strip (the mode bands' times), and
+    the state band a mark per event."""
+    out = tmp_path / "copter.rrd"
+    convert(ARDUPILOT_BIN, out)
+    rows = rows_per_entity(out)
+    for panel in ("altitude", "attitude", "servo_pwm", "vibration"):
+        strips = {e.rsplit("/", 1)[-1] for e in rows if e.startswith(f"/plots/{panel}/mode/")}
+        assert strips == {"GUIDED", "AUTO"}, (panel, strips)
+        assert rows[f"/plots/{panel}/mode/AUTO"] == rows["/plots/state/mode/AUTO"]
+    temporal = rows_per_entity(out, static=False)
+    assert temporal["/plots/state/events"] == temporal["/events"] >= 5

@@ -248,7 +248,7 @@ def blueprint(
         bands = ", ".join(f"{m} {palette.NAMES[mode_color(m)]}" for m in modes)
         state_view = time_series(
             f"plots/{STATE_PANEL}",
-            f"mode (band: {bands}) and armed (red: 0/1)",
+            f"mode (band: {bands}), armed (red: 0/1), events (marks)",
             axis,
             None,
             axis_y=rrb.ScalarAxis(range=STATE_RANGE),
