@@ -89,6 +89,15 @@ def _add_train_parser(commands: argparse._SubParsersAction) -> None:
         "(default: the preset's)",
     )
     train.add_argument("--num-envs", type=_count(1), help="parallel envs (default: the preset's)")
+    train.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        metavar="KEY=VALUE",
+        help="other training options, e.g. entropy_coef=0.01 steps_per_env=128 "
+        "anneal_lr=true learning_rate=3e-4 (policies/config.py: TrainConfig; "
+        "docs/training.md)",
+    )
     train.add_argument("--runs", default="runs", help="folder of run folders (default: runs)")
     train.add_argument(
         "--init",

@@ -111,7 +111,7 @@ def _resume_command(args: argparse.Namespace) -> str:
 
 
 def _train(args: argparse.Namespace) -> int:
-    from policies.config import make_config
+    from policies.config import make_config, parse_settings
     from policies.train import train
 
     config = make_config(
@@ -129,6 +129,7 @@ def _train(args: argparse.Namespace) -> int:
         total_steps=args.steps,
         num_envs=args.num_envs,
         init_from=args.init,
+        **parse_settings(args.set),
     )
     run_dir = Path(args.runs) / config.run_name
     mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"

@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -349,6 +350,47 @@ def check_task(task: str) -> None:
 
 
 MAX_SIMULATORS = 16  # simulator processes a run through the wire may start
+
+
+# Options with a command-line option of their own, not given through ``--set``.
+OWN_OPTIONS = ("task", "algo", "preset", "seed", "backend", "total_steps", "num_envs",
+               "init_from", "ray", "vehicles_per_sim", "action_level", "px4_build",
+               "first_instance", "sensor_noise", "task_options")  # fmt: skip
+
+
+def parse_settings(items: Sequence[str]) -> dict[str, Any]:
+    """``quadsitl train --set KEY=VALUE ...``: the training options without a
+    command-line option of their own (``entropy_coef=0.01``, ``steps_per_env=128``,
+    ``anneal_lr=true`` ...), typed as TrainConfig's fields; a ValueError names a bad one.
+    Their ranges are checked with the rest of the configuration (:func:`make_config`)."""
+    fields = {f.name: f for f in dataclasses.fields(TrainConfig)}
+    defaults: dict[str, Any] = {
+        name: f.default for name, f in fields.items() if f.default is not dataclasses.MISSING
+    }
+    settable = sorted(set(defaults) - set(OWN_OPTIONS))
+    settings: dict[str, Any] = {}
+    for item in items:
+        key, sep, text = (part.strip() for part in item.partition("="))
+        if key in OWN_OPTIONS:
+            raise ValueError(f"--set {item!r}: {key} has an option of its own")
+        if key not in settable:
+            raise ValueError(f"--set {item!r}: unknown option; known: {', '.join(settable)}")
+        if not sep or not text:
+            raise ValueError(f"--set {item!r}: give KEY=VALUE")
+        if key in settings:
+            raise ValueError(f"--set {item!r}: {key} given twice")
+        kind = type(defaults[key])
+        try:
+            if kind is bool:
+                if text.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(text)
+                settings[key] = text.lower() in ("true", "1")
+            else:
+                settings[key] = kind(text)
+        except ValueError:
+            article = "an" if kind.__name__[0] in "aeiou" else "a"
+            raise ValueError(f"--set {item!r}: not {article} {kind.__name__}") from None
+    return settings
 
 
 def make_config(

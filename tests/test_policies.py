@@ -241,6 +241,29 @@ def test_train_and_eval_commands(tmp_path):
     assert bad.returncode == 2 and "unknown algorithm" in bad.stderr
 
 
+def test_train_sets_other_options_and_names_a_bad_one(tmp_path):
+    """``--set KEY=VALUE`` reaches the run's configuration; a wrong key, value or an
+    option with its own flag is a one-line error before anything runs."""
+    run = _train("--task hover --algo ppo --quiet --set entropy_coef=0.02 steps_per_env=64 "
+                 "anneal_lr=true", tmp_path)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    config = json.loads((tmp_path / "hover-ppo-fast-seed0" / "config.json").read_text())
+    assert (config["entropy_coef"], config["steps_per_env"], config["anneal_lr"]) == (
+        0.02,
+        64,
+        True,
+    )
+    for words, said in (
+        (["--set", "entropy_coefficient=0.1"], "unknown option"),
+        (["--set", "steps_per_env=many"], "not an int"),
+        (["--set", "seed=3"], "has an option of its own"),
+        (["--set", "entropy_coef=2000"], "entropy_coef"),
+    ):
+        bad = refused_here("train", "--task", "hover", "--algo", "ppo", "--preset", "fast", *words)
+        assert bad.returncode == 2 and said in bad.stderr, (words, bad.stderr)
+        assert "Traceback" not in bad.stderr
+
+
 def test_seed_band_by_hand():
     from policies.plots import seed_band
 
