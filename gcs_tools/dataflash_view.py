@@ -34,7 +34,7 @@ import numpy as np
 
 from gcs_tools import log_series as S
 from gcs_tools.dataflash_reader import DataFlash
-from gcs_tools.replay_scene import System
+from gcs_tools.replay_scene import System, armed_span
 from quadsitl import frames
 from quadsitl.geo import Home
 
@@ -284,7 +284,7 @@ def _vibration(system: System, messages: _Messages) -> None:
     name, stamps, rows = messages("VIBE", need=("VibeX", "VibeY", "VibeZ"))
     if rows is not None:
         levels = {axis.lower(): messages.log.column(name, rows, f"Vibe{axis}") for axis in "XYZ"}
-        span = S.armed_span(system)
+        span = armed_span(system)
         S.vibration(system, stamps, levels, VIBE_LEVELS, span, "ArduPilot")
     name, stamps, rows = messages("IMU", need=IMU_COLUMNS)
     if rows is not None:

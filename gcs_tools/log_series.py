@@ -230,16 +230,3 @@ def vibration(
     )
     system.notes.append(note)
     events(system, [int(stamps[-1])], [note], [severity])
-
-
-def armed_span(system: System) -> tuple[int, int] | None:
-    """(first, last) µs the flight was armed, from its flight-state band."""
-    armed = system.columns.series.get(("plots/state/armed", "scalar"))
-    if armed is None:
-        return None
-    times, values = armed.arrays()
-    on = np.flatnonzero(values > 0.5)
-    if len(on) == 0:
-        return None
-    last = on[-1] + 1 if on[-1] + 1 < len(times) else on[-1]
-    return int(times[on[0]]), int(times[last])

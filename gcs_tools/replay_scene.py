@@ -330,14 +330,24 @@ def send_fleet(
     return rec, entities
 
 
+def armed_span(system: System) -> tuple[int, int] | None:
+    """(first, last) µs the flight was armed, from its flight-state band (None: never)."""
+    armed = system.columns.series.get(("plots/state/armed", "scalar"))
+    if armed is None:
+        return None
+    times, values = armed.arrays()
+    on = np.flatnonzero(values > 0.5)
+    if len(on) == 0:
+        return None
+    last = on[-1] + 1 if on[-1] + 1 < len(times) else on[-1]
+    return int(times[on[0]]), int(times[last])
+
+
 def take_off_us(system: System) -> int | None:
     """When the flight armed (µs), else its first sample's time; None without data."""
-    armed = system.columns.series.get(("plots/state/armed", "scalar"))
-    if armed is not None:
-        times, values = armed.arrays()
-        on = np.flatnonzero(values > 0.5)
-        if len(on):
-            return int(times[on[0]])
+    span = armed_span(system)
+    if span is not None:
+        return span[0]
     starts = [int(series.arrays()[0].min()) for series in system.columns.series.values()]
     return min(starts) if starts else None
 

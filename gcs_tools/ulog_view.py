@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from gcs_tools import log_series as S
-from gcs_tools.replay_scene import System
+from gcs_tools.replay_scene import System, armed_span
 from gcs_tools.ulog_reader import ULog
 from quadsitl.geo import Home
 
@@ -215,7 +215,7 @@ def _vibration(system: System, rows: _Topics) -> None:
     stamps, table = rows("vehicle_imu_status")
     if table is not None and "accel_vibration_metric" in (table.dtype.names or ()):
         metric = {"accel": table["accel_vibration_metric"].astype(np.float64)}
-        span = S.armed_span(system)
+        span = armed_span(system)
         S.vibration(system, stamps, metric, ACCEL_VIBRATION, span, "PX4 Flight Review")
     stamps, table = rows("sensor_combined")
     if table is not None:

@@ -358,6 +358,27 @@ OWN_OPTIONS = ("task", "algo", "preset", "seed", "backend", "total_steps", "num_
                "first_instance", "sensor_noise", "task_options")  # fmt: skip
 
 
+def typed_option(key: str, text: str) -> Any:
+    """``text`` as the type of TrainConfig's field ``key`` (a bool: true, false, 1, 0);
+    ValueError ``not a(n) TYPE`` if it is not one. ``quadsitl train --set`` and the
+    sweep's grids read their values with it."""
+    field = next((f for f in dataclasses.fields(TrainConfig) if f.name == key), None)
+    default: Any = field.default if field is not None else ""
+    if field is not None and default is dataclasses.MISSING:
+        factory: Any = field.default_factory
+        default = factory() if factory is not dataclasses.MISSING else ""
+    kind = int if key == "seed" else type(default) if default is not None else str
+    try:
+        if kind is bool:
+            if text.lower() not in ("true", "false", "1", "0"):
+                raise ValueError(text)
+            return text.lower() in ("true", "1")
+        return kind(text)
+    except ValueError:
+        article = "an" if kind.__name__[0] in "aeiou" else "a"
+        raise ValueError(f"not {article} {kind.__name__}") from None
+
+
 def parse_settings(items: Sequence[str]) -> dict[str, Any]:
     """``quadsitl train --set KEY=VALUE ...``: the training options without a
     command-line option of their own (``entropy_coef=0.01``, ``steps_per_env=128``,
@@ -379,17 +400,10 @@ def parse_settings(items: Sequence[str]) -> dict[str, Any]:
             raise ValueError(f"--set {item!r}: give KEY=VALUE")
         if key in settings:
             raise ValueError(f"--set {item!r}: {key} given twice")
-        kind = type(defaults[key])
         try:
-            if kind is bool:
-                if text.lower() not in ("true", "false", "1", "0"):
-                    raise ValueError(text)
-                settings[key] = text.lower() in ("true", "1")
-            else:
-                settings[key] = kind(text)
-        except ValueError:
-            article = "an" if kind.__name__[0] in "aeiou" else "a"
-            raise ValueError(f"--set {item!r}: not {article} {kind.__name__}") from None
+            settings[key] = typed_option(key, text)
+        except ValueError as error:
+            raise ValueError(f"--set {item!r}: {error}") from None
     return settings
 
 

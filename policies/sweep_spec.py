@@ -11,7 +11,7 @@ import re
 from pathlib import Path
 from typing import Any
 
-from policies.config import TrainConfig, make_config
+from policies.config import TrainConfig, make_config, typed_option
 from policies.config import run_name as base_run_name
 from policies.train import holds_run
 from quadsitl.envs.ray_simulators import check_ray_address
@@ -39,18 +39,10 @@ def _fields() -> dict[str, Any]:
 
 def _typed(key: str, text: str) -> Any:
     """``text`` as the type of option ``key``."""
-    field = _fields().get(key)
-    kind = type(field.default) if field is not None else str
-    if key == "seed":
-        kind = int
     try:
-        if kind is bool:
-            if text.lower() not in ("true", "false", "1", "0"):
-                raise ValueError(text)
-            return text.lower() in ("true", "1")
-        return kind(text)
-    except ValueError:
-        raise SweepError(f"{key}={text!r}: not a {kind.__name__}") from None
+        return typed_option(key, text)
+    except ValueError as error:
+        raise SweepError(f"{key}={text!r}: {error}") from None
 
 
 def _key(key: str) -> str:
