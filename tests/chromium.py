@@ -9,12 +9,39 @@ import json
 import os
 import select
 import shutil
+import socket
 import subprocess
 from pathlib import Path
 from typing import Any
 
 REPLY_TIMEOUT = 60.0  # s: a stuck browser fails the test instead of hanging it
 CANDIDATES = ("/usr/lib/chromium/chromium", "chromium", "chromium-browser", "google-chrome")
+
+
+def web_viewer_process(words: list[str]) -> subprocess.Popen[str]:
+    """A quadsitl command serving the web viewer (``--rerun-web``, ``--web``) on free
+    loopback ports, its output captured (the first line says where to open it)."""
+    env = dict(os.environ, QUADSITL_WEB_PORT=str(free_tcp_port()))
+    env["QUADSITL_GRPC_PORT"] = str(free_tcp_port())
+    return subprocess.Popen(
+        words, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env
+    )
+
+
+def printed_url(process: subprocess.Popen[str], what: str, seconds: float = 60) -> str:
+    """The URL the web viewer's command printed first (``what`` names the command)."""
+    assert process.stdout is not None
+    ready, _, _ = select.select([process.stdout], [], [], seconds)
+    assert ready, f"{what} printed no URL within {seconds:g} s"
+    line = process.stdout.readline()  # the first line: where to open it
+    assert line.startswith("Rerun web viewer: open http://127.0.0.1:"), line
+    return line.split("open ", 1)[1].strip()
+
+
+def free_tcp_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
 
 
 def chromium_executable() -> str | None:

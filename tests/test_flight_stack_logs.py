@@ -219,37 +219,28 @@ def test_a_replayed_ulog_in_the_web_viewer_in_a_real_browser():
     """``quadsitl replay FLIGHT.ulg --web`` on loopback, its URL loaded in headless
     Chromium: the page draws the flight (the mission's and landing's mode bands, in
     their colours) and the 3-D view's vehicle."""
-    import os
-    import select
-    import subprocess
     from io import BytesIO
 
     from PIL import Image
 
     from quadsitl.viz import palette
-    from tests.chromium import HeadlessChromium, chromium_executable
+    from tests.chromium import (
+        HeadlessChromium,
+        chromium_executable,
+        printed_url,
+        web_viewer_process,
+    )
     from tests.conftest import cli
-    from tests.test_rerun import ROTOR_RED, colour_pixels, free_tcp_port
+    from tests.test_rerun import ROTOR_RED, colour_pixels
 
     browser = chromium_executable()
     if browser is None:
         pytest.skip("Chromium is not installed (Debian: apt-get install chromium)")
-    env = dict(os.environ, QUADSITL_WEB_PORT=str(free_tcp_port()))
-    env["QUADSITL_GRPC_PORT"] = str(free_tcp_port())
-    replay = subprocess.Popen(
-        cli(f"replay {PX4_ULOG} --web"),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env=env,
-    )
+    replay = web_viewer_process(cli(f"replay {PX4_ULOG} --web"))
     page = None
     try:
-        ready, _, _ = select.select([replay.stdout], [], [], 60)
-        assert ready, "quadsitl replay --web printed no URL within 60 s"
-        line = replay.stdout.readline()
-        assert line.startswith("Rerun web viewer: open http://127.0.0.1:"), line
-        page = HeadlessChromium(browser, line.split("open ", 1)[1].strip(), size=(1280, 720))
+        url = printed_url(replay, "quadsitl replay --web")
+        page = HeadlessChromium(browser, url, size=(1280, 720))
         deadline = time.monotonic() + 180  # the viewer's wasm, rendered in software
         while True:
             image = np.asarray(Image.open(BytesIO(page.screenshot())).convert("RGB"))

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 import os
-import select
 import socket
 import subprocess
 import sys
@@ -23,6 +22,7 @@ from gcs_tools.tlog_reader import ReadStats, read_tlog
 from quadsitl.simulator.tlog import TlogWriter
 from quadsitl.viz.scene import WIND_ARROW_SCALE
 from quadsitl.wire.addresses import free_udp_port
+from tests.chromium import free_tcp_port
 from tests.conftest import cli, run_cli, start_sim, wait_until_listening
 
 
@@ -291,12 +291,6 @@ def _run_sim(
     )
 
 
-def free_tcp_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
-
-
 def colour_pixels(image: np.ndarray, colour: tuple[int, int, int], tolerance: int = 40) -> int:
     """How many pixels are within ``tolerance`` of ``colour`` in every channel."""
     return int(np.all(np.abs(image.astype(int) - colour) <= tolerance, axis=-1).sum())
@@ -369,29 +363,24 @@ def test_web_viewer_in_a_real_browser(tmp_path):
 
     from PIL import Image
 
-    from tests.chromium import HeadlessChromium, chromium_executable
+    from tests.chromium import (
+        HeadlessChromium,
+        chromium_executable,
+        printed_url,
+        web_viewer_process,
+    )
 
     browser = chromium_executable()
     if browser is None:
         pytest.skip("Chromium is not installed (Debian: apt-get install chromium)")
     port = free_udp_port()
-    env = dict(os.environ, QUADSITL_WEB_PORT=str(free_tcp_port()))
-    env["QUADSITL_GRPC_PORT"] = str(free_tcp_port())
-    sim = subprocess.Popen(
-        cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --logs none --rerun-web --quiet"),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env=env,
+    sim = web_viewer_process(
+        cli(f"sim --gcs udpin:127.0.0.1:{port} --api none --logs none --rerun-web --quiet")
     )
     wait_until_listening(sim, port)
     page = client = None
     try:
-        ready, _, _ = select.select([sim.stdout], [], [], 60)
-        assert ready, "quadsitl sim --rerun-web printed no URL within 60 s"
-        line = sim.stdout.readline()  # the first line: where to open it
-        assert line.startswith("Rerun web viewer: open http://127.0.0.1:"), line
-        url = line.split("open ", 1)[1].strip()
+        url = printed_url(sim, "quadsitl sim --rerun-web")
         client = VehicleClient(f"udpout:127.0.0.1:{port}")  # flying while the page loads
         client.connect(timeout=30)
         client.arm()
