@@ -370,7 +370,7 @@ def log_statics(rec: rr.RecordingStream, system: System, member: Member | None =
     def path(entity: str) -> str:
         return entity if member is None else member.path(entity)
 
-    color = [[90, 90, 200]] if member is None else [member.color]
+    color = [list(palette.TRACK)] if member is None else [member.color]
     width = None if member is None else rr.Radius.ui_points(2.0)  # a fleet's trails stand out
     view = system.view
     geo = system.columns.series.get(("map/track", "geo"))

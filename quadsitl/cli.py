@@ -231,8 +231,17 @@ def _main(argv: Sequence[str] | None = None) -> int:
         from quadsitl.bridges.px4_tcp import run_px4
 
         run = run_px4 if args.flight_stack == "px4" else run_ardupilot
+        make_view = None
+        if args.rerun or args.rerun_save or args.rerun_web:
+            from quadsitl.viz.flight_stack_view import FlightStackView
+
+            def make_view(fleet: Any, stack: str) -> Any:
+                return FlightStackView(
+                    fleet, stack, args.rerun_save, notice=_say("sim"), web=args.rerun_web
+                )
+
         try:
-            return run(flight_stack_config(args))
+            return run(flight_stack_config(args), make_view=make_view)
         except (ValueError, OSError) as error:
             parser.exit(2, f"quadsitl sim: error: {error}\n")
     if args.command == "sim":

@@ -360,8 +360,9 @@ def client(sim: RunningSim) -> Iterator[VehicleClient]:
 
 
 # PX4 instances for the flight-stack envs' tests: their ports (TCP 4560 + i, UDP
-# 14540 + i and 14580 + i) must be free. Instances 37..76 keep the two UDP ranges apart
-# (i and i + 40 would share one); each pytest-xdist worker takes ten of them, in turn.
+# 14540 + i, 14580 + i, the payload link's 14030 + i) must be free. Instances 37..76
+# keep the two UDP ranges apart (i and i + 40 would share one); each pytest-xdist
+# worker takes ten of them, in turn.
 _WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw") or 0) % 4
 _FIRST_PX4, _PX4_PER_WORKER = 37 + 10 * _WORKER, 10
 _next_px4 = [0]
@@ -374,7 +375,7 @@ def free_px4_instances(n: int = 1) -> int:
     def free(instance: int) -> bool:
         try:
             for kind, port in ((socket.SOCK_STREAM, 4560), (socket.SOCK_DGRAM, 14540),
-                               (socket.SOCK_DGRAM, 14580)):  # fmt: skip
+                               (socket.SOCK_DGRAM, 14580), (socket.SOCK_DGRAM, 14030)):  # fmt: skip
                 with socket.socket(socket.AF_INET, kind) as probe:
                     probe.bind(("127.0.0.1", port + instance))
         except OSError:

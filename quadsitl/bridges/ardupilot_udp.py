@@ -37,9 +37,11 @@ from quadsitl.bridges.ardupilot_json import (
 from quadsitl.bridges.serve import (
     WAIT,
     BridgeConfig,
+    MakeView,
     Say,
     bridge_fleet,
     check_ports,
+    live_watch,
     open_ports,
     say_on_stderr,
     say_weather,
@@ -222,8 +224,11 @@ def _readable(sock: socket.socket) -> bool:
     return True
 
 
-def run_ardupilot(config: ArduPilotConfig, say: Say | None = None) -> int:
-    """Serve ArduPilot instances until a signal or ``config.duration``; the exit status."""
+def run_ardupilot(
+    config: ArduPilotConfig, say: Say | None = None, make_view: MakeView | None = None
+) -> int:
+    """Serve ArduPilot instances until a signal or ``config.duration`` (``make_view``:
+    the live view's, for ``--rerun``); the exit status."""
     check_ports(config, PORT_STRIDE, "UDP")
     say = say or say_on_stderr
     physics = JsonPhysics(bridge_fleet(config, dt=1.0 / 1200), notice=say)
@@ -244,7 +249,20 @@ def run_ardupilot(config: ArduPilotConfig, say: Say | None = None) -> int:
             f"the longest-flying vehicle flew {simulated:.1f} s of physics"
         )
 
-    return serve_until_stopped(config, server, partial(_banner, config, physics, server), summary)
+    try:
+        watch = live_watch(
+            make_view,
+            physics.fleet,
+            "ardupilot",
+            config,
+            lambda: [peer.time_s for peer in physics.peers],
+            say,
+        )
+    except BaseException:
+        server.close()
+        raise
+    banner = partial(_banner, config, physics, server)
+    return serve_until_stopped(config, server, banner, summary, watch)
 
 
 def _banner(

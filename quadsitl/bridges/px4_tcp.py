@@ -28,9 +28,11 @@ from quadsitl.bridges.px4_hil import PORT, ROUND_US, HilPhysics
 from quadsitl.bridges.serve import (
     WAIT,
     BridgeConfig,
+    MakeView,
     Say,
     bridge_fleet,
     check_ports,
+    live_watch,
     open_ports,
     say_on_stderr,
     say_weather,
@@ -226,8 +228,9 @@ class Px4TcpServer:
             sock.close()
 
 
-def run_px4(config: Px4Config, say: Say | None = None) -> int:
-    """Serve PX4 instances until a signal or ``config.duration``; the exit status."""
+def run_px4(config: Px4Config, say: Say | None = None, make_view: MakeView | None = None) -> int:
+    """Serve PX4 instances until a signal or ``config.duration`` (``make_view``: the
+    live view's, for ``--rerun``); the exit status."""
     check_ports(config, 1, "TCP")
     say = say or say_on_stderr
     physics = HilPhysics(bridge_fleet(config), config.home, config.sensor_noise, notice=say)
@@ -246,7 +249,19 @@ def run_px4(config: Px4Config, say: Say | None = None) -> int:
             f"longest since its PX4 connected has flown {simulated:.1f} s of physics"
         )
 
-    return serve_until_stopped(config, server, partial(_banner, config, server), summary)
+    try:
+        watch = live_watch(
+            make_view,
+            physics.fleet,
+            "px4",
+            config,
+            lambda: [peer.time_us * 1e-6 for peer in physics.peers],
+            say,
+        )
+    except BaseException:
+        server.close()
+        raise
+    return serve_until_stopped(config, server, partial(_banner, config, server), summary, watch)
 
 
 def _banner(config: Px4Config, server: Px4TcpServer, out: Say) -> None:

@@ -2,6 +2,11 @@
 their ports opened with a clear error, their vehicles' physics, and the loop that
 serves them until a signal or ``--duration`` and says what was flown.
 
+With ``--rerun`` a :class:`LiveWatch` shows the flight after the turns: each
+autopilot's own telemetry (:mod:`.autopilot_telemetry`) beside the physics' truth, in
+the view the command line composes (``quadsitl.viz.flight_stack_view``; none of Rerun is
+imported here).
+
 A bridge (:mod:`.ardupilot_udp`, :mod:`.px4_tcp`) adds only its server: the sockets'
 framing (UDP datagrams of servo frames, TCP streams of MAVLink), who each instance
 belongs to and how a turn of its instances is taken (:class:`Server`).
@@ -16,12 +21,13 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 from quadsitl.physics.fleet import Fleet
 from quadsitl.physics.wind import Wind
 
 WAIT = 0.2  # wall s, longest sleep in one turn (signals, --duration)
+WATCH_PERIOD = 1.0 / 60.0  # wall s between the live view's looks at the flight
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 Say = Callable[[str], None]
 
@@ -50,6 +56,64 @@ class Server(Protocol):
     def close(self) -> None:
         """Close every socket; say what was counted and not said."""
         ...
+
+
+class View(Protocol):
+    """Something that shows the flight (``quadsitl.viz.flight_stack_view``)."""
+
+    def show(self, wall_now: float, times_s: list[float], messages: list[tuple[int, Any]]) -> None:
+        """Each vehicle's physics time now and the autopilots' messages that arrived."""
+        ...
+
+    def close(self) -> None: ...
+
+
+MakeView = Callable[[Fleet, str], View]  # (the vehicles' physics, "px4" | "ardupilot")
+
+
+class LiveWatch:
+    """The view, shown what the autopilots said and where the vehicles are, at most once
+    every WATCH_PERIOD of wall time (called after every turn of the server)."""
+
+    def __init__(self, view: View, telemetry: Any, times_s: Callable[[], list[float]]) -> None:
+        self.view, self.telemetry, self.times_s = view, telemetry, times_s
+        self.next_look = 0.0
+
+    def __call__(self, wall_now: float) -> None:
+        if wall_now >= self.next_look:
+            self.next_look = wall_now + WATCH_PERIOD
+            self.view.show(wall_now, self.times_s(), self.telemetry.poll(wall_now))
+
+    def close(self) -> None:
+        self.telemetry.close()
+        self.view.close()
+
+
+def live_watch(
+    make_view: MakeView | None,
+    fleet: Fleet,
+    stack: str,
+    config: BridgeConfig,
+    times_s: Callable[[], list[float]],
+    say: Say,
+) -> LiveWatch | None:
+    """The live view of ``quadsitl sim --flight-stack … --rerun`` (None without one):
+    its autopilot telemetry opened (OSError naming a port in use) and said where."""
+    if make_view is None:
+        return None
+    from quadsitl.bridges.autopilot_telemetry import AutopilotTelemetry, instance_numbers
+
+    telemetry = AutopilotTelemetry(
+        stack, instance_numbers(stack, config.port, config.vehicles), notice=say
+    )
+    try:
+        view = make_view(fleet, stack)
+    except BaseException:
+        telemetry.close()
+        raise
+    if not config.quiet:
+        say(f"live view: the physics' truth beside {telemetry.describe()}")
+    return LiveWatch(view, telemetry, times_s)
 
 
 def say_on_stderr(text: str) -> None:
@@ -116,9 +180,11 @@ def serve_until_stopped(
     server: Server,
     banner: Callable[[Say], None],
     summary: Callable[[float], str],
+    watch: LiveWatch | None = None,
 ) -> int:
-    """Say ``banner`` (unless quiet), serve until SIGINT, SIGTERM or ``config.duration``,
-    print ``summary(wall seconds served)``, close; the exit status."""
+    """Say ``banner`` (unless quiet), serve until SIGINT, SIGTERM or ``config.duration``
+    (``watch`` shown the flight after each turn), print ``summary(wall seconds
+    served)``, close; the exit status."""
     stopping: list[int] = []
     previous = [signal.signal(s, lambda n, _: stopping.append(n)) for s in SIGNALS]
     try:
@@ -128,9 +194,13 @@ def serve_until_stopped(
         end = None if config.duration is None else started + config.duration
         while not stopping and (end is None or time.monotonic() < end):
             server.serve(WAIT if end is None else max(0.0, min(WAIT, end - time.monotonic())))
+            if watch is not None:
+                watch(time.monotonic())
         print(summary(time.monotonic() - started), flush=True)
     finally:
         for s, handler in zip(SIGNALS, previous, strict=True):
             signal.signal(s, handler)
         server.close()
+        if watch is not None:
+            watch.close()
     return 0

@@ -111,7 +111,6 @@ def flight_stack_config(args: argparse.Namespace) -> Any:
         "--hil": args.hil,
         "--link": args.link,
         "--param": args.param,
-        "--rerun": args.rerun or args.rerun_save or args.rerun_web,
         "--signing-key": args.signing_key or args.signing_passphrase,
         "--home": args.home and not px4,  # ArduCopter's own (--home); PX4's comes from GPS
         "--speed": args.speed != 1.0,  # lockstep: the autopilot sets the pace

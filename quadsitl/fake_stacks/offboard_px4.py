@@ -9,7 +9,9 @@ What it does as PX4 does (its "Offboard Mode" docs, ``px4-rc.mavlink``):
 * It is MAVLink system i + 1 (PX4's MAV_SYS_ID), and ignores messages for another.
 * It listens for MAVLink on UDP 14580 + i and sends to 14540 + i (PX4's onboard link),
   every round (4 ms): LOCAL_POSITION_NED and ATTITUDE_QUATERNION stamped with its clock,
-  HEARTBEAT once a simulated second, COMMAND_ACK for each command.
+  HEARTBEAT once a simulated second, COMMAND_ACK for each command. Its telemetry (not
+  the acknowledgements) goes to 14030 + i too, where PX4's onboard payload link sends
+  (what ``quadsitl sim --flight-stack px4 --rerun`` reads).
 * Commands: arm and disarm (MAV_CMD_COMPONENT_ARM_DISARM), and the mode
   (MAV_CMD_DO_SET_MODE with PX4's custom main mode: OFFBOARD, or POSCTL to hold).
   OFFBOARD is refused unless a setpoint came within the last OFFBOARD_LOSS_S.
@@ -31,6 +33,7 @@ import socket
 import numpy as np
 
 from quadsitl import frames
+from quadsitl.bridges.autopilot_telemetry import PX4_PAYLOAD_PORT
 from quadsitl.bridges.fake_px4 import FakePx4, HilState, kinematics
 from quadsitl.bridges.px4_hil import LINK_PORT, PEER_PORT, PORT, ROUND_US
 from quadsitl.flight_software.controller import CascadedController, Setpoint
@@ -67,6 +70,7 @@ class FakeOffboardPx4:
         self.link.bind(("127.0.0.1", LINK_PORT + instance))
         self.link.setblocking(False)
         self.peer = ("127.0.0.1", PEER_PORT + instance)
+        self.payload_peer = ("127.0.0.1", PX4_PAYLOAD_PORT + instance)
         self.mav = mav.MAVLink(None, srcSystem=instance + 1, srcComponent=1)  # PX4's MAV_SYS_ID
         self.mav.robust_parsing = True
         self.armed = False
@@ -206,17 +210,22 @@ class FakeOffboardPx4:
                 mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_PX4, base,
                 custom_mode(self.main_mode), mav.MAV_STATE_ACTIVE,
             )  # fmt: skip
-            self._send(heartbeat)
+            self._send(heartbeat, payload=True)
         north_east_down = frames.enu_to_ned(s[L.POS])
         velocity = frames.enu_to_ned(s[L.VEL])
-        self._send(self.mav.local_position_ned_encode(ms, *north_east_down, *velocity))
+        position = self.mav.local_position_ned_encode(ms, *north_east_down, *velocity)
+        self._send(position, payload=True)
         q = frames.quat_enu_flu_to_ned_frd(s[L.QUAT])
         rates = frames.flu_to_frd(s[L.RATES])
-        self._send(self.mav.attitude_quaternion_encode(ms, *q, *rates, [0.0] * 4))
+        attitude = self.mav.attitude_quaternion_encode(ms, *q, *rates, [0.0] * 4)
+        self._send(attitude, payload=True)
 
-    def _send(self, msg: object) -> None:
-        with contextlib.suppress(OSError):  # nobody listens yet: PX4 sends on regardless
-            self.link.sendto(msg.pack(self.mav), self.peer)  # type: ignore[attr-defined]
+    def _send(self, msg: object, payload: bool = False) -> None:
+        """To the onboard link (``payload``: and the payload link)."""
+        data = msg.pack(self.mav)  # type: ignore[attr-defined]
+        for peer in (self.peer, self.payload_peer) if payload else (self.peer,):
+            with contextlib.suppress(OSError):  # nobody listens yet: PX4 sends on regardless
+                self.link.sendto(data, peer)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -9,9 +9,9 @@ the globe. Entities of vehicle N (its ``name`` is ``sysN``):
   ``vehicle`` (posed: the quadrotor model and a marker labelled ``sysN`` in the
   vehicle's colour), ``trajectory`` (its colour), ``home``, ``mission``, ``setpoint``;
 * ``plots/<panel>/sysN/<series>`` — its time series, in its colour, named
-  ``sysN <series>`` (setpoints a lighter shade); ``plots/state/sysN/...`` — its mode
-  band on row k of the state panel (k: its place in the fleet, from 1), a red line
-  under it while armed;
+  ``sysN <series>`` (setpoints a lighter shade, the truth a darker);
+  ``plots/state/sysN/...`` — its mode band on row k of the state panel (k: its place in
+  the fleet, from 1), a red line under it while armed;
 * ``map/sysN/{track,path}`` — its GPS track; ``events`` — its events, ``[system N] ...``.
 
 One vehicle alone keeps the single-vehicle paths of :mod:`quadsitl.viz.scene`.
@@ -54,11 +54,11 @@ ARMED_BELOW = 0.3  # rows: the armed line's place under the vehicle's mode band
 # plots have no legend (four vehicles' entries overflow a panel): the labels in the
 # 3-D view are drawn in the vehicles' colours, and hovering a line names it.
 FLEET_PANELS: tuple[tuple[str, tuple[str, ...], str], ...] = (
-    ("altitude", ("altitude", "setpoint"), "altitude (m)"),
-    ("climb_rate", ("climb", "setpoint"), "climb rate (m/s)"),
-    ("attitude", ("roll", "roll_setpoint"), "roll (deg)"),
-    ("attitude", ("pitch", "pitch_setpoint"), "pitch (deg)"),
-    ("attitude", ("yaw", "yaw_setpoint"), "yaw (deg, unwrapped)"),
+    ("altitude", ("altitude", "setpoint", "altitude_truth"), "altitude (m)"),
+    ("climb_rate", ("climb", "setpoint", "climb_truth"), "climb rate (m/s)"),
+    ("attitude", ("roll", "roll_setpoint", "roll_truth"), "roll (deg)"),
+    ("attitude", ("pitch", "pitch_setpoint", "pitch_truth"), "pitch (deg)"),
+    ("attitude", ("yaw", "yaw_setpoint", "yaw_truth"), "yaw (deg, unwrapped)"),
     ("rotors", (), "rotor speeds (x hover)"),
     ("servo_pwm", (), "servo output (PWM, us)"),
     ("battery_voltage", (), "battery (V)"),
@@ -131,9 +131,12 @@ class Member:
         if entity.startswith(f"plots/{STATE_PANEL}/"):
             return series_style(entity)
         series = entity.split("/", 2)[-1].replace("/", " ")
+        name = f"{self.name} {series}"
         if series.endswith("setpoint"):
-            name = f"{self.name} {series}"
             return rr.SeriesLines(colors=[self.light_color], widths=[1.0], names=[name])
+        if series.endswith("truth"):
+            r, g, b = self.color
+            return rr.SeriesLines(colors=[palette.darker((r, g, b))], widths=[1.0], names=[name])
         return rr.SeriesLines(colors=[self.color], widths=[1.5], names=[f"{self.name} {series}"])
 
     def setup(

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from quadsitl.viz import palette
 from quadsitl.viz.fleet import Member
 from quadsitl.viz.flight_view import FlightView, Sample
 from quadsitl.viz.scene import TIMELINE, WIND_COLOR, series_style
@@ -35,31 +36,38 @@ class LiveLogger:
         self.pose = {"translation": np.zeros(3), "rotation": np.array([0.0, 0.0, 0.0, 1.0])}
         self._drawn = 0.0
 
+    @property
+    def track_color(self) -> list[int]:
+        """Its trajectory's colour (a fleet's vehicle: its own)."""
+        return list(palette.TRACK) if self.member is None else self.member.color
+
+    @property
+    def truth_color(self) -> list[int]:
+        """Its true trajectory's colour: the trajectory's, darker."""
+        r, g, b = self.track_color
+        return list(palette.darker((r, g, b)))
+
     def message(self, msg: Any, own: bool = False, now: float | None = None) -> None:
         now = time.time() if now is None else now
-        samples = self.view.samples(msg, own)
-        if samples:
-            self.rec.set_time(TIMELINE, timestamp=now)
-            for sample in samples:
-                self._log(sample)
+        self.log_samples(self.view.samples(msg, own), now)
         if self.view.mission_changed:
             self.view.mission_changed = False
             points = np.array([self.view.mission[k] for k in sorted(self.view.mission)])
             mission_color = [230, 180, 0] if self.member is None else self.member.light_color
             self.rec.log(
-                self._path("world/mission"),
+                self.path("world/mission"),
                 rr.Points3D(points, radii=0.08, colors=[mission_color]),
             )
         if self.track and now - self._drawn > TRACK_REDRAW:
             self._drawn = now
-            trail_color = None if self.member is None else [self.member.color]
+            trail_color = [self.track_color]
             self.rec.log(
-                self._path("world/trajectory"),
+                self.path("world/trajectory"),
                 rr.LineStrips3D([np.asarray(self.track)], colors=trail_color),
             )
             if len(self.geo_track) > 1:
                 self.rec.log(
-                    self._path("map/path"),
+                    self.path("map/path"),
                     rr.GeoLineStrings(lat_lon=[self.geo_track], colors=trail_color),
                 )
 
@@ -67,7 +75,15 @@ class LiveLogger:
         self.rec.set_time(TIMELINE, timestamp=time.time())
         self.rec.log("events", rr.TextLog(text, level=level))
 
-    def _path(self, entity: str) -> str:
+    def log_samples(self, samples: list[Sample], now: float) -> None:
+        """``samples`` (single-vehicle entities), stamped ``now`` (s since the epoch)."""
+        if samples:
+            self.rec.set_time(TIMELINE, timestamp=now)
+            for sample in samples:
+                self._log(sample)
+
+    def path(self, entity: str) -> str:
+        """Where a single-vehicle entity of this vehicle is logged."""
         return entity if self.member is None else self.member.path(entity)
 
     def _style(self, entity: str) -> None:
@@ -75,7 +91,7 @@ class LiveLogger:
         self.styled.add(entity)
         style = series_style(entity) if self.member is None else self.member.style(entity)
         if style is not None:
-            self.rec.log(self._path(entity), style, static=True)
+            self.rec.log(self.path(entity), style, static=True)
 
     def _log(self, sample: Sample) -> None:
         if sample.kind == "scalar" and sample.entity not in self.styled:

@@ -36,6 +36,8 @@ NAMES: dict[RGB, str] = {
     CYAN: "cyan",
 }  # what a title calls a colour where a legend has no room
 
+TRACK: RGB = (90, 90, 200)  # one vehicle's trajectory in 3-D (a fleet's: each its colour)
+
 # The series of one plot, in order: first blue, then orange ... (no red, no grey).
 SERIES: tuple[RGB, ...] = (BLUE, ORANGE, GREEN, PURPLE, CYAN, PINK, OLIVE, BROWN)
 
