@@ -54,6 +54,7 @@ bench: venv
 	$(BIN)/python benchmarks/sb3_vs_ppo.py
 	$(BIN)/python benchmarks/replay.py
 	$(BIN)/python benchmarks/flight_logs.py
+	$(BIN)/python benchmarks/live_fleet.py
 	$(BIN)/python benchmarks/export.py
 	$(BIN)/python benchmarks/robustness.py
 	$(BIN)/python benchmarks/reference_pid.py

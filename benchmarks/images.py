@@ -8,7 +8,9 @@ in still air and in wind with moderate turbulence, replayed), a replay of a
 foreign-style (PX4-like) log, of the real PX4's and ArduPilot's own logs of
 tests/data/, ``quadsitl eval --rerun`` of each shipped policy, a
 4-vehicle fleet (``quadsitl sim --vehicles 4``, each vehicle flying its own mission,
-its log replayed) — and rendered by the Rerun viewer itself, headless
+its log replayed), the live view of 64 vehicles (``sim --vehicles 64 --rerun-save``)
+and, with ``QUADSITL_PX4_BUILD`` set, of a real PX4 (``sim --flight-stack px4
+--rerun-save``) — and rendered by the Rerun viewer itself, headless
 (:mod:`benchmarks.headless_viewer`), a fresh viewer per picture. The flights are
 flown in real time (``--speed 1``), as a user's are: a log's clock is the wall's, and
 a flight four times faster would last ten seconds of it, too short for a time axis to
@@ -20,6 +22,8 @@ into docs/images/ with ``--docs``.
 from __future__ import annotations
 
 import argparse
+import asyncio
+import os
 import shutil
 import subprocess
 import sys
@@ -122,6 +126,90 @@ def fleet_recording(folder: Path) -> Path:
     return out
 
 
+CROWD_SIZE = 64  # vehicles of the live crowd's picture
+CROWD_FOCUS = 10  # the one drawn in full
+
+
+def live_fleet_recording(folder: Path) -> Path:
+    """``quadsitl sim --vehicles 64 --rerun-save``: every vehicle takes off to one of
+    eight heights, hops a few metres, and every other one lands; the live view draws
+    vehicle 10 in full, the crowd dimmed."""
+    out = folder / "live_fleet.rrd"
+    port = free_udp_port()
+    sim = start_simulator(
+        *("--vehicles", str(CROWD_SIZE), "--spacing", "4", "--speed", str(SPEED)),
+        *("--gcs", f"udpin:127.0.0.1:{port}", "--api", "none", "--logs", "none", "--quiet"),
+        *("--rerun-save", str(out), "--rerun-focus", str(CROWD_FOCUS)),
+    )
+    clients = [VehicleClient(f"udpout:127.0.0.1:{port}", target=1 + i) for i in range(CROWD_SIZE)]
+
+    def pump_for(seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            for client in clients:
+                client.drain()
+            time.sleep(0.05)
+
+    try:
+        for client in clients:
+            connect_while_starting(client, sim)
+        heights = [2.0 + (i % 8) * 0.8 for i in range(CROWD_SIZE)]
+        for client, up in zip(clients, heights, strict=True):
+            client.drain()
+            client.arm()
+            client.takeoff(up)
+        pump_for(12.0)
+        for i, (client, up) in enumerate(zip(clients, heights, strict=True)):
+            client.drain()
+            client.goto(3.0 * (i % 3 - 1), 3.0 * (i // 3 % 3 - 1), up)
+        pump_for(12.0)
+        for client in clients[::2]:
+            client.drain()
+            client.land()
+        pump_for(10.0)
+    finally:
+        for client in clients:
+            client.close()
+        stop_simulator(sim)
+    return out
+
+
+def live_px4_recording(folder: Path, build: Path) -> Path:
+    """``quadsitl sim --flight-stack px4 --rerun-save``: a real PX4 (its SITL build at
+    ``build``) takes off, flies a 6 m square mission and lands; the view draws its
+    estimate beside the truth."""
+    from quadsitl.bridges.px4_airframe import parameter_folder
+    from quadsitl.bridges.px4_hil import PEER_PORT, PORT
+    from tests.test_px4_real import _fly, free_instance
+
+    out = folder / "live_px4.rrd"
+    instance = free_instance()
+    command = [sys.executable, "-m", "quadsitl.cli", "sim", "--flight-stack", "px4"]
+    command += ["--flight-stack-port", str(PORT + instance), "--rerun-save", str(out)]
+    sim = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.DEVNULL)
+    work = folder / "px4"
+    work.mkdir()
+    path = f"{parameter_folder('iris')}:{os.environ['PATH']}"
+    px4 = subprocess.Popen(
+        [str(build / "bin" / "px4"), "-d", "-i", str(instance), str(build / "etc")],
+        cwd=work,
+        env={**os.environ, "PATH": path, "PX4_SIM_MODEL": "none_iris"},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        import tests.test_px4_real as flight
+
+        flight.SQUARE, flight.ALTITUDE = 6.0, 3.0
+        asyncio.run(asyncio.wait_for(_fly(PEER_PORT + instance), 400))
+    finally:
+        px4.terminate()
+        px4.wait(30)
+        sim.terminate()
+        sim.wait(60)
+    return out
+
+
 def eval_recording(folder: Path, task: str) -> Path:
     """``quadsitl eval policies/checkpoints/TASK.pt --episodes 3 --rerun TASK.rrd``."""
     out = folder / f"eval_{task}.rrd"
@@ -151,6 +239,12 @@ def recordings(folder: Path) -> dict[str, Callable[[], Path]]:
         "rerun_fleet": lambda: fleet_recording(folder),
         "rerun_replay_ulog": lambda: flight_stack_log_recording(folder, PX4_ULOG),
     }
+    made["rerun_live_fleet"] = lambda: live_fleet_recording(folder)
+    build = os.environ.get("QUADSITL_PX4_BUILD")
+    if build:  # a real PX4 flies it; without one the picture is left as it is
+        made["rerun_live_px4"] = lambda: live_px4_recording(folder, Path(build))
+    else:
+        print("images.py: rerun_live_px4 skipped (set QUADSITL_PX4_BUILD to a PX4 SITL build)")
     if ARDUPILOT_LOG.exists():
         made["rerun_replay_dataflash"] = lambda: flight_stack_log_recording(folder, ARDUPILOT_LOG)
     for task in POLICIES:

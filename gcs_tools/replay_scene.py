@@ -13,7 +13,7 @@ import rerun as rr
 from gcs_tools.mode_strips import send_event_marks, send_mode_strips
 from gcs_tools.series_buffer import Series
 from quadsitl.viz import palette
-from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
+from quadsitl.viz.fleet import Member, fleet_blueprint, fleet_of, origin_offset
 from quadsitl.viz.flight_view import FlightView, Sample
 from quadsitl.viz.plot_fit import PanelFit, fit
 from quadsitl.viz.plot_layout import plot_sizes
@@ -289,19 +289,20 @@ def send_fleet(
     (key -> name: flights compared, one per log), each is named by its label and all
     share one origin, overlaid."""
     reference = next(iter(vehicles.values())).view
-    members, points, panels = [], [], set()
-    for row, (system_id, system) in enumerate(vehicles.items(), start=1):
+    offsets, points, panels = [], [], set()
+    for system in vehicles.values():
         view = system.view
         offset = (0.0, 0.0, 0.0)
         if labels is None and reference.home is not None and view.home is not None:
             offset = origin_offset(
                 reference.home, reference.home_local_enu, view.home, view.home_local_enu
             )
-        label = (labels or {}).get(system_id, "")
-        members.append(Member(system_id, row, offset, label))
+        offsets.append(offset)
         local = [np.asarray(system.track).reshape(-1, 3), system.mission_points()]
         points.append(np.concatenate(local) + offset)
         panels |= system.columns.panels()
+    names = [(labels or {}).get(system_id, "") for system_id in vehicles]
+    members = fleet_of(list(vehicles), offsets, names)
     frame = framing(np.concatenate(points))
     modes = [mode for system in vehicles.values() for mode in system.columns.modes()]
     subject = f"{len(members)} flights overlaid, labelled by log" if labels else ""

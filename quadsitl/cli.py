@@ -147,7 +147,13 @@ def _sim_collaborators(args: argparse.Namespace) -> tuple[Any, Any]:
         from quadsitl.viz.sim_view import SimView
 
         def make_view(vehicles: Any) -> Any:
-            return SimView(vehicles, args.rerun_save, notice=_say("sim"), web=args.rerun_web)
+            return SimView(
+                vehicles,
+                args.rerun_save,
+                notice=_say("sim"),
+                web=args.rerun_web,
+                focus=args.rerun_focus,
+            )
 
     return make_autopilot, make_view
 
@@ -226,6 +232,11 @@ def _main(argv: Sequence[str] | None = None) -> int:
 
         options = (["-o", args.output] if args.output else []) + (["--web"] if args.web else [])
         return replay_main([*args.logs, *options], prog="quadsitl replay")
+    viewed = args.command == "sim" and (args.rerun or args.rerun_save or args.rerun_web)
+    if args.command == "sim" and args.rerun_focus is not None and not viewed:
+        parser.exit(
+            2, "quadsitl sim: error: --rerun-focus needs --rerun, --rerun-save or --rerun-web\n"
+        )
     if args.command == "sim" and args.flight_stack:
         from quadsitl.bridges.ardupilot_udp import run_ardupilot
         from quadsitl.bridges.px4_tcp import run_px4
@@ -237,7 +248,12 @@ def _main(argv: Sequence[str] | None = None) -> int:
 
             def make_view(fleet: Any, stack: str) -> Any:
                 return FlightStackView(
-                    fleet, stack, args.rerun_save, notice=_say("sim"), web=args.rerun_web
+                    fleet,
+                    stack,
+                    args.rerun_save,
+                    notice=_say("sim"),
+                    web=args.rerun_web,
+                    focus=args.rerun_focus,
                 )
 
         try:

@@ -239,3 +239,49 @@ def event_texts(rrd: Path) -> list[str]:
         if chunk.entity_path == "/events" and not chunk.is_static:
             texts += [t[0] for t in chunk.to_record_batch().column("TextLog:text").to_pylist()]
     return texts
+
+
+def test_a_crowd_is_dimmed_but_for_the_vehicle_in_focus():
+    from quadsitl.viz import palette
+    from quadsitl.viz.fleet import CROWD, VEHICLE_COLORS, fleet_of
+
+    few = fleet_of([1, 2, 3], [(0.0, 0.0, 0.0)] * 3)
+    assert not any(m.dim or m.focus for m in few)  # a few vehicles: each in its colour
+    assert few[1].color == VEHICLE_COLORS[1]
+    ids = list(range(1, 65))
+    crowd = fleet_of(ids, [(float(i), 0.0, 0.0) for i in ids], focus=10)
+    assert len(crowd) > CROWD
+    assert [m.system_id for m in crowd if not m.dim] == [10]
+    focus = crowd[9]
+    assert focus.focus and focus.color == VEHICLE_COLORS[9 % len(VEHICLE_COLORS)]
+    assert focus.line_width == 2.5
+    other = crowd[0]
+    r, g, b = VEHICLE_COLORS[0]
+    assert other.color == list(palette.dim((r, g, b))) and other.line_width == 1.0
+    assert all(m.band_px < 10.0 for m in crowd)  # 64 mode bands share the state panel
+    with pytest.raises(ValueError, match="no vehicle with system id 99"):
+        fleet_of(ids, [(0.0, 0.0, 0.0)] * 64, focus=99)
+
+
+def test_the_vehicle_in_focus_is_logged_at_the_full_rate(tmp_path):
+    """64 vehicles in turn at FLEET_SNAPSHOTS a second would show each at about 1 Hz: the
+    one in focus is logged on its own at RATE besides."""
+    from quadsitl.simulator.runner import SimConfig, Simulator
+    from quadsitl.viz import sim_view
+
+    sim = Simulator(SimConfig(vehicles=12, gcs_url="udpin:127.0.0.1:0", api_url=None, log_dir=None))
+    vehicles = {1 + i: v for i, v in enumerate(sim.group.vehicles)}
+    out = tmp_path / "crowd.rrd"
+    view = sim_view.SimView(vehicles, save=str(out), focus=5)
+    try:
+        for k in range(2000):  # two wall seconds of a 1 kHz loop with time to spare
+            view.tick(1000.0 + k * 1e-3, spare=1.0)
+    finally:
+        view.close()
+        sim.close()
+    rows = rows_per_entity(out, static=False)
+    focus = rows["/plots/altitude/sys5/altitude"]
+    others = [rows.get(f"/plots/altitude/sys{s}/altitude", 0) for s in vehicles if s != 5]
+    assert focus >= 2 * sim_view.RATE * 0.9  # 30 Hz for two seconds
+    assert max(others) <= focus / 3 and min(others) >= 1  # each of the rest in turn
+    assert any(name.startswith("12 vehicles, sys5 in focus") for name in views(out))

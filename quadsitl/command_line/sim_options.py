@@ -262,4 +262,11 @@ def _add_viewer_options(sim: argparse.ArgumentParser) -> None:
         help="serve the Rerun web viewer and the vehicle's stream on this host (loopback; "
         "QUADSITL_WEB_BIND, QUADSITL_WEB_PORT=9090, QUADSITL_GRPC_PORT=9876) and print its URL",
     )
+    sim.add_argument(
+        "--rerun-focus",
+        type=int,
+        metavar="SYSID",
+        help="the vehicle of a fleet of more than 8 drawn in full colour (and logged at "
+        "30 Hz) while the others are dimmed (default: the first)",
+    )
     sim.add_argument("--quiet", action="store_true", help="do not print vehicle events")

@@ -45,6 +45,14 @@ VEHICLE_COLORS = [list(color) for color in palette.SERIES]  # no red: armed, fro
 
 FLEET_ZOOM = 1.25  # the camera this much closer than for one flight: a fleet is compact
 ARMED_BELOW = 0.3  # rows: the armed line's place under the vehicle's mode band
+# A fleet of more than CROWD vehicles is a crowd: every vehicle but the one in focus is
+# drawn dimmed and unlabelled (model, trails, lines), so that one stands out of 64;
+# clicking any other in the viewer selects it and names it. A crowd's mode bands are
+# thinner (STATE_ROWS_PX of the state panel shared among its rows).
+CROWD = 8
+STATE_ROWS_PX = 240.0
+BAND_PX = 10.0  # a mode band's width, a few vehicles
+HOME_GREEN = (0, 160, 0)
 
 # The fleet's time-series panels: (panel, series shown, title). Each shows the named
 # series (all of the panel's where none are named) of every vehicle, coloured by
@@ -76,6 +84,9 @@ class Member:
     row: int  # its place in the fleet, from 1 (its row in the state panel)
     offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m, ENU: its local origin in the scene
     label: str = ""  # its name where not its system id: the log it comes from (comparisons)
+    dim: bool = False  # one of a crowd, not the one in focus: drawn in the background
+    focus: bool = False  # the one of a crowd drawn in full colour, thicker, labelled
+    band_px: float = BAND_PX  # its mode band's width
 
     @property
     def name(self) -> str:
@@ -83,7 +94,12 @@ class Member:
 
     @property
     def color(self) -> list[int]:
-        return VEHICLE_COLORS[(self.row - 1) % len(VEHICLE_COLORS)]
+        r, g, b = VEHICLE_COLORS[(self.row - 1) % len(VEHICLE_COLORS)]
+        return list(palette.dim((r, g, b))) if self.dim else [r, g, b]
+
+    @property
+    def line_width(self) -> float:
+        return 2.5 if self.focus else 1.0 if self.dim else 1.5
 
     @property
     def light_color(self) -> list[int]:
@@ -129,15 +145,25 @@ class Member:
         """How a time series of this vehicle is drawn (``entity``: the single-vehicle
         path): the state band as for one vehicle, the rest in the vehicle's colour."""
         if entity.startswith(f"plots/{STATE_PANEL}/"):
-            return series_style(entity)
+            style = series_style(entity)
+            if self.band_px != BAND_PX and entity.startswith(f"plots/{STATE_PANEL}/mode/"):
+                style = rr.SeriesLines(
+                    colors=[mode_color(entity.rsplit("/", 1)[-1])],
+                    widths=[self.band_px],
+                    names=[entity.rsplit("/", 1)[-1]],
+                    interpolation_mode="StepAfter",
+                    aggregation_policy="Max",
+                )
+            return style
         series = entity.split("/", 2)[-1].replace("/", " ")
         name = f"{self.name} {series}"
+        thin = min(1.0, self.line_width)
         if series.endswith("setpoint"):
-            return rr.SeriesLines(colors=[self.light_color], widths=[1.0], names=[name])
+            return rr.SeriesLines(colors=[self.light_color], widths=[thin], names=[name])
         if series.endswith("truth"):
             r, g, b = self.color
-            return rr.SeriesLines(colors=[palette.darker((r, g, b))], widths=[1.0], names=[name])
-        return rr.SeriesLines(colors=[self.color], widths=[1.5], names=[f"{self.name} {series}"])
+            return rr.SeriesLines(colors=[palette.darker((r, g, b))], widths=[thin], names=[name])
+        return rr.SeriesLines(colors=[self.color], widths=[self.line_width], names=[name])
 
     def setup(
         self, rec: rr.RecordingStream, scale: float = 1.0, home: Any | None = (0, 0, 0)
@@ -146,15 +172,48 @@ class Member:
         in its own local frame; None: the caller logs it)."""
         rec.log(f"world/vehicles/{self.name}", rr.Transform3D(translation=self.offset), static=True)
         log_vehicle_model(
-            rec, f"world/vehicles/{self.name}/vehicle", scale, label=self.name, color=self.color
+            rec,
+            f"world/vehicles/{self.name}/vehicle",
+            scale,
+            label=None if self.dim else self.name,
+            color=self.color,
         )
         if home is None:
             return
+        green = palette.dim(HOME_GREEN) if self.dim else HOME_GREEN
         rec.log(
             f"world/vehicles/{self.name}/home",
-            rr.Points3D([home], radii=rr.Radius.ui_points(5.0), colors=[[0, 160, 0]]),
+            rr.Points3D([home], radii=rr.Radius.ui_points(5.0), colors=[green]),
             static=True,
         )
+
+
+def fleet_of(
+    system_ids: Sequence[int],
+    offsets: Sequence[tuple[float, float, float]],
+    labels: Sequence[str] | None = None,
+    focus: int | None = None,
+) -> list[Member]:
+    """The members of a fleet, in rows from 1; a crowd (more than CROWD) dimmed but for
+    the vehicle ``focus`` (a system id; None: the first), its bands thinner. ValueError
+    for a focus not in the fleet."""
+    if focus is not None and focus not in system_ids:
+        raise ValueError(f"no vehicle with system id {focus} in the fleet {list(system_ids)}")
+    crowd = len(system_ids) > CROWD
+    focused = system_ids[0] if focus is None else focus
+    band = min(BAND_PX, max(2.0, STATE_ROWS_PX / len(system_ids))) if crowd else BAND_PX
+    return [
+        Member(
+            system_id,
+            row,
+            offset,
+            labels[row - 1] if labels else "",
+            dim=crowd and system_id != focused,
+            focus=crowd and system_id == focused,
+            band_px=band,
+        )
+        for row, (system_id, offset) in enumerate(zip(system_ids, offsets, strict=True), start=1)
+    ]
 
 
 def origin_offset(
@@ -226,7 +285,15 @@ def fleet_blueprint(
         frame=frame,
         map_view=map_view,
         timeline=timeline,
-        subject=subject or f"{len(members)} vehicles, labelled by system id in their plot colour",
+        subject=subject or _subject(members),
         state_share=min(3.0, 1.0 + 0.15 * len(members)),  # room for a row each
         zoom=FLEET_ZOOM,
     )
+
+
+def _subject(members: Sequence[Member]) -> str:
+    """What the 3-D view's title calls the fleet's vehicles."""
+    focus = next((m for m in members if m.focus), None)
+    if focus is None:
+        return f"{len(members)} vehicles, labelled by system id in their plot colour"
+    return f"{len(members)} vehicles, {focus.name} in focus (click another to select it)"

@@ -30,7 +30,7 @@ import rerun as rr
 
 from quadsitl import frames
 from quadsitl.physics.fleet import Fleet
-from quadsitl.viz.fleet import Member, fleet_blueprint
+from quadsitl.viz.fleet import fleet_blueprint, fleet_of
 from quadsitl.viz.flight_view import Sample
 from quadsitl.viz.live import MAX_TRACK, TRACK_REDRAW, LiveLogger
 from quadsitl.viz.scene import blueprint, framing
@@ -128,7 +128,7 @@ class FlightStackView:
     """The fleet's vehicles (their ``fleet``, at rest at their starts now) in Rerun:
     spawns a viewer, saves to ``save`` (an .rrd path) or (``web``) serves the web viewer;
     ``notice`` takes the message saying where the recording goes when no viewer can be
-    shown."""
+    shown; ``focus``: the vehicle (1 … n) a crowd shows in full."""
 
     def __init__(
         self,
@@ -137,15 +137,12 @@ class FlightStackView:
         save: str | None = None,
         notice: Callable[[str], None] | None = None,
         web: bool = False,
+        focus: int | None = None,
     ) -> None:
         self.fleet = fleet
         self.start_position = fleet.position.copy()  # each vehicle's estimator starts here
         n = fleet.n
-        members = (
-            [Member(i + 1, i + 1, offset) for i, offset in enumerate(grid_offsets(n))]
-            if n > 1
-            else []
-        )
+        members = fleet_of(list(range(1, n + 1)), grid_offsets(n), focus=focus) if n > 1 else []
         if members:
             grid = np.array([m.offset for m in members])
             frame = framing(np.concatenate([grid, grid + np.array([0.0, 0.0, 5.0])]))

@@ -61,6 +61,13 @@ def darker(color: RGB, amount: float = 0.45) -> RGB:
     return (r, g, b)
 
 
+def dim(color: RGB, amount: float = 0.6) -> RGB:
+    """``color`` moved ``amount`` of the way to the viewer's dark grey: one of a crowd,
+    kept in the background of the one looked at."""
+    r, g, b = (round(c + (48 - c) * amount) for c in color)
+    return (r, g, b)
+
+
 def hex_color(color: RGB) -> str:
     """``#rrggbb``, as matplotlib takes a colour."""
     return "#{:02x}{:02x}{:02x}".format(*color)

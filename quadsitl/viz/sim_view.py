@@ -10,9 +10,11 @@ each vehicle under its system id (:mod:`quadsitl.viz.fleet`), the camera framing
 fleet's start grid and the air above it. The vehicles are logged in turn, one per tick
 (a tick then costs what one vehicle's does, never a burst for the whole fleet), at most
 FLEET_SNAPSHOTS ticks a second: 30 Hz each for 2 vehicles, 15 Hz each for 4, less for
-more (recording more stole the real-time loop's time on a 2-core machine). A vehicle's
-messages are logged one per pass of the simulator's loop, in the time a physics step
-leaves.
+more (recording more stole the real-time loop's time on a 2-core machine). A crowd (more
+than :data:`~quadsitl.viz.fleet.CROWD` vehicles) is drawn dimmed but for the vehicle in
+focus (``sim --rerun-focus SYSID``, default the first), which is logged on its own at
+RATE besides. A vehicle's messages are logged one per pass of the simulator's loop, in
+the time a physics step leaves (at most PENDING_LIMIT wait: the oldest are dropped).
 """
 
 from __future__ import annotations
@@ -29,13 +31,14 @@ from quadsitl.simulator import telemetry_pose as pose
 from quadsitl.simulator import telemetry_sensors as sensors
 from quadsitl.simulator import telemetry_status as status
 from quadsitl.simulator.snapshot import Snapshot
-from quadsitl.viz.fleet import Member, fleet_blueprint, origin_offset
+from quadsitl.viz.fleet import Member, fleet_blueprint, fleet_of, origin_offset
 from quadsitl.viz.live import LiveLogger
 from quadsitl.viz.scene import LIVE_PANELS, SENSOR_PANELS, blueprint, framing
 from quadsitl.viz.viewer import open_recording
 
 RATE = 30.0  # Hz of wall time, per vehicle
 FLEET_SNAPSHOTS = 60.0  # Hz of wall time: vehicles logged a second, the fleet together
+PENDING_LIMIT = 64  # messages waiting to be logged
 MESSAGE_TIME = 0.5e-3  # wall s a message's logging may take (a few rr.log calls)
 FRAMED_HEIGHT = 5.0  # m above the start grid that the fleet's camera frames
 BUILDERS = (
@@ -62,11 +65,12 @@ class SimView:
         save: str | None = None,
         notice: Callable[[str], None] | None = None,
         web: bool = False,
+        focus: int | None = None,
     ) -> None:
         if not vehicles:
             raise ValueError("SimView needs at least one vehicle")
         self.vehicles = dict(vehicles)
-        members = fleet_members(self.vehicles) if len(self.vehicles) > 1 else []
+        members = fleet_members(self.vehicles, focus) if len(self.vehicles) > 1 else []
         windy = any(v.fleet.windy for v in self.vehicles.values())
         panels = (*PANELS, "wind") if windy else PANELS
         if members:
@@ -94,11 +98,16 @@ class SimView:
             )
             for i, vehicle in enumerate(self.vehicles.values())
         ]
-        self.turns = list(zip(self.vehicles.values(), self.loggers, strict=True))
+        turns = list(zip(self.vehicles.values(), self.loggers, strict=True))
+        focused = [i for i, m in enumerate(members) if m.focus]
+        # A crowd's vehicle in focus is logged on its own, at RATE; the rest take turns.
+        self.focus = turns.pop(focused[0]) if focused else None
+        self.next_focus = 0.0
+        self.turns = turns
         self.period = 1.0 / min(RATE * len(self.turns), FLEET_SNAPSHOTS)  # s of wall time
         self.turn = 0
         self.next_due = 0.0
-        self.next_heartbeat = [0.0] * len(self.turns)  # wall s, per vehicle
+        self.next_heartbeat = [0.0] * len(self.vehicles)  # wall s, per vehicle
         self.pending: list[tuple[LiveLogger, Any, float]] = []  # (logger, message, stamp)
 
     def tick(self, wall_now: float, spare: float = math.inf) -> None:
@@ -109,17 +118,23 @@ class SimView:
         A snapshot logged at once (a dozen series) made the next physics steps late."""
         if wall_now >= self.next_due:
             self.next_due = wall_now + self.period
-            self.pending = self._snapshot(wall_now)
+            index, self.turn = self.turn, (self.turn + 1) % len(self.turns)
+            self.pending = self._snapshot(wall_now, *self.turns[index]) + self.pending
+        if self.focus is not None and wall_now >= self.next_focus:
+            self.next_focus = wall_now + 1.0 / RATE
+            self.pending = self._snapshot(wall_now, *self.focus) + self.pending
+        del self.pending[PENDING_LIMIT:]  # the oldest (logged from the end)
         urgent = wall_now >= self.next_due - self.period / 2
         if self.pending and (spare >= MESSAGE_TIME or urgent):
             logger, message, stamp = self.pending.pop()
             logger.message(message, own=True, now=stamp)
 
-    def _snapshot(self, wall_now: float) -> list[tuple[LiveLogger, Any, float]]:
-        """The next vehicle's messages (its heartbeat once a second), to be logged in
-        order (popped from the end), stamped with the time they were taken."""
-        index, self.turn = self.turn, (self.turn + 1) % len(self.turns)
-        vehicle, logger = self.turns[index]
+    def _snapshot(
+        self, wall_now: float, vehicle: Vehicle, logger: LiveLogger
+    ) -> list[tuple[LiveLogger, Any, float]]:
+        """A vehicle's messages (its heartbeat once a second), to be logged in order
+        (popped from the end), stamped with the time they were taken."""
+        index = self.loggers.index(logger)
         stamp = time.time()
         snapshot = Snapshot(vehicle)
         messages = [build(snapshot) for build in BUILDERS]
@@ -138,10 +153,9 @@ class SimView:
         self.rec.disconnect()
 
 
-def fleet_members(vehicles: Mapping[int, Vehicle]) -> list[Member]:
-    """The fleet in the scene: each vehicle at its local origin's offset from the first's."""
+def fleet_members(vehicles: Mapping[int, Vehicle], focus: int | None = None) -> list[Member]:
+    """The fleet in the scene: each vehicle at its local origin's offset from the first's
+    (``focus``: the system id a crowd shows in full; ValueError if none has it)."""
     first = next(iter(vehicles.values())).origin
-    return [
-        Member(system_id, row, origin_offset(first, (0, 0, 0), vehicle.origin, (0, 0, 0)))
-        for row, (system_id, vehicle) in enumerate(vehicles.items(), start=1)
-    ]
+    offsets = [origin_offset(first, (0, 0, 0), v.origin, (0, 0, 0)) for v in vehicles.values()]
+    return fleet_of(list(vehicles), offsets, focus=focus)
