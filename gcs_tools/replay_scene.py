@@ -173,6 +173,9 @@ class System:
 
     def add(self, stamp_us: int, message: Any) -> None:
         for sample in self.view.samples(message):
+            if sample.kind == "truth":  # a point of the true track, drawn whole
+                self.truth_track.append(sample.value)
+                continue
             self.columns.add(stamp_us, sample)
             if sample.kind == "translation":
                 self.track.append(sample.value)

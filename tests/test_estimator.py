@@ -151,3 +151,43 @@ def test_odometry_over_udp_carries_the_estimate_and_its_covariance():
         assert np.all(pose[diagonal] > 0) and np.all(motion[diagonal] > 0)
         assert pose[0] < 25.0 and pose[15] < 0.1  # m², rad²: a plausible estimate at rest
         assert math.hypot(m.x, m.y) < 5.0 and abs(m.z) < 1.0  # on the ground near home
+
+
+def test_the_truth_comes_beside_the_estimate_and_replays_darker(tmp_path):
+    """With the estimator on, SIM_STATE carries the simulator's truth (25 Hz): the
+    replay of the flight's log draws it beside the estimate (``altitude_truth``, the
+    true track); with the truth flown, no SIM_STATE (it would repeat the telemetry)."""
+    from gcs_tools.replay import convert
+    from tests.test_flight_stack_view import timed_scalars
+    from tests.test_rerun import rows_per_entity
+
+    with sim_with_client(f"--logs {tmp_path} --speed 2 --estimator ekf") as (client, _):
+        client.drain()
+        client.arm()
+        client.takeoff(3.0)
+        truths = []
+        deadline = time.monotonic() + 120
+        while not (truths and -client.latest["LOCAL_POSITION_NED"].z > 2.5):
+            assert time.monotonic() < deadline, "timed out waiting for the climb"
+            msg = client.pump()
+            if msg is not None and msg.get_type() == "SIM_STATE":
+                truths.append(msg)
+    last = truths[-1]
+    assert abs(last.lat_int * 1e-7 - last.lat) < 1e-5  # (the float field: 7 digits)
+    assert math.isnan(last.xacc) and abs(last.vd) < 5.0
+    out = tmp_path / "flight.rrd"
+    convert(next(tmp_path.glob("*.tlog")), out)
+    rows = rows_per_entity(out)
+    assert rows["/plots/attitude/roll_truth"] > 10 and "/world/trajectory_truth" in rows
+    when, estimate = timed_scalars(out, "/plots/altitude/altitude")
+    truth_when, truth = timed_scalars(out, "/plots/altitude/altitude_truth")
+    assert truth.max() > 2.0  # it climbed, and the estimate followed within a metre
+    assert np.abs(np.interp(truth_when, when, estimate) - truth).max() < 1.0
+
+    with sim_with_client("--logs none --speed 2") as (client, _):
+        kinds = []
+        while kinds.count("LOCAL_POSITION_NED") < 60:  # over a second of 50 Hz telemetry
+            msg = client.pump()
+            if msg is not None:
+                kinds.append(msg.get_type())
+        assert "SIM_STATE" not in kinds

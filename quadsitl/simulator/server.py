@@ -249,7 +249,14 @@ class MavlinkServer:
             if snapshot is None:
                 snapshot = self.snapshot()
             for message_id in due:
+                if message_id == T.TRUTH_ONLY_BESIDE_ESTIMATE and not self.estimating:
+                    continue  # the truth beside the truth would say nothing new
                 self.send(T.BUILDERS[message_id](snapshot), link)
+
+    @property
+    def estimating(self) -> bool:
+        """Whether the flight software flies on its estimate (EKF2_EN 1)."""
+        return bool(self.vehicle.estimator.enabled)
 
     def snapshot(self) -> Snapshot:
         return Snapshot(

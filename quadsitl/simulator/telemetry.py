@@ -45,6 +45,7 @@ BUILDERS: dict[int, Callable[[Snapshot], Any]] = {
     mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: status.build_autopilot_version,
     mav.MAVLINK_MSG_ID_CURRENT_MODE: status.build_current_mode,
     mav.MAVLINK_MSG_ID_WIND_COV: sensors.build_wind_cov,
+    mav.MAVLINK_MSG_ID_SIM_STATE: pose.build_sim_state,
     # On request only (SET_MESSAGE_INTERVAL, REQUEST_MESSAGE): not in DEFAULT_RATES.
     mav.MAVLINK_MSG_ID_ODOMETRY: pose.build_odometry,
     mav.MAVLINK_MSG_ID_HIGHRES_IMU: sensors.build_highres_imu,
@@ -70,7 +71,9 @@ DEFAULT_RATES: dict[int, float] = {
     mav.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,
     mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
     mav.MAVLINK_MSG_ID_WIND_COV: 1.0,
+    mav.MAVLINK_MSG_ID_SIM_STATE: 25.0,  # the truth: sent only beside an estimate (EKF2_EN 1)
 }
+TRUTH_ONLY_BESIDE_ESTIMATE = mav.MAVLINK_MSG_ID_SIM_STATE
 
 FASTEST_INTERVAL = 1.0 / max(DEFAULT_RATES.values())  # s, of the fastest default stream
 

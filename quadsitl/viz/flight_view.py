@@ -7,7 +7,9 @@ ODOMETRY, HIL_STATE_QUATERNION, ATTITUDE), rotors from ACTUATOR_OUTPUT_STATUS or
 SERVO_OUTPUT_RAW, battery from BATTERY_STATUS or SYS_STATUS, setpoints from
 POSITION_TARGET_LOCAL_NED / SET_POSITION_TARGET_LOCAL_NED and ATTITUDE_TARGET, GPS from
 GPS_RAW_INT and GLOBAL_POSITION_INT (``map/track``), the wind from WIND_COV, the flight
-state from HEARTBEAT and MISSION_CURRENT; messages it does not know are ignored. Angles
+state from HEARTBEAT and MISSION_CURRENT, the simulator's truth beside an estimate from
+SIM_STATE (``altitude_truth``, ``roll_truth`` …, the true track); messages it does not
+know are ignored. Angles
 are in degrees, unwrapped (continuous through ±180°). Frames: see
 :mod:`quadsitl.viz.scene` (ENU on screen).
 """
@@ -38,7 +40,8 @@ SEVERITY = ["CRITICAL"] * 3 + ["ERROR", "WARN", "INFO", "INFO", "DEBUG"]  # MAV_
 @dataclass
 class Sample:
     """``kind``: translation (3,), rotation (xyzw), scalar, point (3,), arrow (origin and
-    vector, (6,)), geo (lat, lon in degrees) or text."""
+    vector, (6,)), geo (lat, lon in degrees), text, or truth (3,): where the vehicle
+    really was (ENU, m, the local frame), a point of its true track."""
 
     entity: str
     kind: str
@@ -71,6 +74,7 @@ class FlightView:
             M.MAVLINK_MSG_ID_HOME_POSITION: self._home_position,
             M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: self._attitude_quaternion,
             M.MAVLINK_MSG_ID_HIL_STATE_QUATERNION: self._hil_state_quaternion,
+            M.MAVLINK_MSG_ID_SIM_STATE: self._sim_state,
             M.MAVLINK_MSG_ID_ATTITUDE: self._attitude,
             M.MAVLINK_MSG_ID_ATTITUDE_TARGET: self._attitude_target,
             M.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: self._position_target_local_ned,
@@ -204,6 +208,27 @@ class FlightView:
             return []
         q = msg.attitude_quaternion
         return [Sample("world/vehicle", "rotation", pose_from_ned([0, 0, 0], q)[1])]
+
+    def _sim_state(self, msg: Any) -> list[Sample]:
+        """The simulator's truth: attitude and body rates, velocity and, once the home is
+        known (the local frame's place on the globe), the true position."""
+        out = [
+            self._angle(f"plots/attitude/{name}_truth", value)
+            for name, value in (("roll", msg.roll), ("pitch", msg.pitch), ("yaw", msg.yaw))
+        ]
+        for name, value in (("roll", msg.xgyro), ("pitch", msg.ygyro), ("yaw", msg.zgyro)):
+            out.append(Sample(f"plots/rates/{name}_truth", "scalar", math.degrees(value)))
+        velocity = frames.ned_to_enu([msg.vn, msg.ve, msg.vd])
+        out.append(Sample("plots/climb_rate/climb_truth", "scalar", float(velocity[2])))
+        out.append(Sample("plots/velocity/east_truth", "scalar", float(velocity[0])))
+        out.append(Sample("plots/velocity/north_truth", "scalar", float(velocity[1])))
+        lat, lon = (msg.lat_int * 1e-7, msg.lon_int * 1e-7) if msg.lat_int else (msg.lat, msg.lon)
+        if self.home is not None and math.isfinite(msg.alt):
+            east, north, up = self.home.to_local(lat, lon, msg.alt)
+            position = np.array([east, north, up]) + self.home_local_enu
+            out.append(Sample("plots/altitude/altitude_truth", "scalar", float(position[2])))
+            out.append(Sample("world/trajectory_truth", "truth", position))
+        return out
 
     def _attitude(self, msg: Any) -> list[Sample]:
         out = [

@@ -32,6 +32,7 @@ class LiveLogger:
         self.view = FlightView(hover_rotor=hover_rotor)
         self.styled: set[str] = set()
         self.track: list[np.ndarray] = []
+        self.truth_track: list[np.ndarray] = []  # where it really went (SIM_STATE)
         self.geo_track: list[tuple[float, float]] = []
         self.pose = {"translation": np.zeros(3), "rotation": np.array([0.0, 0.0, 0.0, 1.0])}
         self._drawn = 0.0
@@ -65,6 +66,11 @@ class LiveLogger:
                 self.path("world/trajectory"),
                 rr.LineStrips3D([np.asarray(self.track)], colors=trail_color),
             )
+            if len(self.truth_track) > 1:
+                self.rec.log(
+                    self.path("world/trajectory_truth"),
+                    rr.LineStrips3D([np.asarray(self.truth_track)], colors=[self.truth_color]),
+                )
             if len(self.geo_track) > 1:
                 self.rec.log(
                     self.path("map/path"),
@@ -117,6 +123,9 @@ class LiveLogger:
             if sample.kind == "translation":
                 self.track.append(translation)
                 del self.track[:-MAX_TRACK]
+        elif sample.kind == "truth":
+            self.truth_track.append(np.asarray(sample.value, dtype=np.float64))
+            del self.truth_track[:-MAX_TRACK]
         elif sample.kind == "point":
             self.rec.log(sample.entity, rr.Points3D([sample.value], radii=0.06))
         elif sample.kind == "arrow":

@@ -138,6 +138,8 @@ class SimView:
         stamp = time.time()
         snapshot = Snapshot(vehicle)
         messages = [build(snapshot) for build in BUILDERS]
+        if vehicle.estimator.enabled:  # the truth beside the estimate the telemetry shows
+            messages.append(pose.build_sim_state(snapshot))
         if vehicle.fleet.windy:
             messages.append(sensors.build_wind_cov(snapshot))
         if wall_now >= self.next_heartbeat[index]:
