@@ -6,7 +6,9 @@ quadsitl): the log's data messages repeated, each copy's time stamps moved on by
 flight's length, until an hour is logged. A sample is one logged message (a ULog data
 or text message, a DataFlash message): ``*_replay_samples_per_s`` is the log's messages
 over the seconds ``quadsitl replay LOG -o LOG.rrd`` takes (reading, the views, writing
-the recording). Also the read alone, and, where a Rerun viewer runs here (headless,
+the recording). Also the read alone; Rerun's write alone of as many time-series rows
+(synthetic series of the recording's lengths into a fresh file: the floor of a convert
+on this machine, before any log is read); and, where a Rerun viewer runs here (headless,
 a software renderer without a GPU), the seconds it takes to open the hour's recording
 and draw it.
 
@@ -126,8 +128,31 @@ def measure(label: str, log: Path, read: Callable[[Path], object], viewer: bool)
     verdict = "met" if rate >= 1e6 else "BELOW"
     print(f"{label}_replay_samples_per_s: {rate:,.0f} (convert {seconds:.2f} s; target "
           f"1,000,000: {verdict}); recording {rrd.stat().st_size / 1e6:.0f} MB")  # fmt: skip
+    floor = write_alone(result.entities, log.with_suffix(".floor.rrd"))
+    print(f"{label}: Rerun's write alone of its {floor[0]:,} time-series rows (same "
+          f"lengths, no reading): {floor[1]:.2f} s, the floor of a convert here")  # fmt: skip
     if viewer:
         open_in_viewer(label, rrd)
+
+
+def write_alone(entities: dict[str, int], rrd: Path) -> tuple[int, float]:
+    """(rows, seconds) to send and write series of the recording's lengths (every
+    entity of more than 1,000 rows: the time series) into a fresh recording: what
+    Rerun's encoder costs before any log is read."""
+    import rerun as rr
+
+    lengths = [n for n in entities.values() if n > 1000]
+    rec = rr.RecordingStream("floor")
+    rec.save(str(rrd))
+    start = time.perf_counter()
+    for k, n in enumerate(lengths):
+        times = (np.arange(n, dtype=np.int64) * 4000).astype("datetime64[us]")
+        values = np.sin(np.arange(n) * 0.01) + np.random.default_rng(k).normal(0, 0.1, n)
+        index = rr.TimeColumn("time", timestamp=times)
+        rec.send_columns(f"s/{k}", indexes=[index], columns=rr.Scalars.columns(scalars=values))
+    rec.flush()
+    rec.disconnect()
+    return sum(lengths), time.perf_counter() - start
 
 
 def open_in_viewer(label: str, rrd: Path) -> None:

@@ -31,6 +31,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import rerun as rr
 
 from gcs_tools import log_series as S
 from gcs_tools.dataflash_reader import DataFlash
@@ -113,14 +114,17 @@ def utc_offset(log: DataFlash, path: str | Path) -> int:
     return int(os.stat(path).st_mtime * 1e6) - log.end_us()
 
 
-def dataflash_system(log: DataFlash, path: str | Path) -> System:
-    """The flight the DataFlash log at ``path`` holds, as the replay draws one vehicle."""
-    system = System()
+def dataflash_system(
+    log: DataFlash, path: str | Path, rec: rr.RecordingStream | None = None
+) -> System:
+    """The flight the DataFlash log at ``path`` holds, as the replay draws one vehicle
+    (``rec``: the recording its finished series stream to as they are read)."""
+    system = System(rec)
     messages = _Messages(log, utc_offset(log, path))
     _home_and_mission(system, messages)
+    _equipment(system, messages)  # first: the IMU's columns stream while the rest is read
     _pose(system, messages)
     _state(system, messages)
-    _equipment(system, messages)
     _vibration(system, messages)
     _events(system, messages)
     return system

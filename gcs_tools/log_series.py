@@ -56,11 +56,13 @@ def position(
         scalar(system, f"plots/climb_rate/{suffixed('climb', role)}", stamps, velocity[:, 2])
         scalar(system, f"plots/velocity/{suffixed('east', role)}", stamps, velocity[:, 0])
         scalar(system, f"plots/velocity/{suffixed('north', role)}", stamps, velocity[:, 1])
+    if not len(enu):
+        return
     if role == "truth":
-        system.truth_track.extend(enu)
+        system.truth_track.append(enu)  # a block (see replay_scene.track_points)
     elif not role:
         system.columns.extend("world/vehicle", "translation", stamps, enu)
-        system.track.extend(enu)
+        system.track.append(enu)
 
 
 def position_setpoint(
@@ -121,6 +123,9 @@ def imu(system: System, stamps: np.ndarray, accel: np.ndarray, gyro_rad: np.ndar
     for k, axis in enumerate("xyz"):
         scalar(system, f"plots/accelerometer/{axis}", stamps, accel[:, k])
         scalar(system, f"plots/gyroscope/{axis}", stamps, np.degrees(gyro_rad[:, k]))
+    for axis in "xyz":  # the longest series of a log: into the recording at once
+        system.columns.finish(f"plots/accelerometer/{axis}")
+        system.columns.finish(f"plots/gyroscope/{axis}")
 
 
 def geo_track(system: System, stamps: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> None:

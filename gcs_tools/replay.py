@@ -24,6 +24,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import rerun as rr
+
 from gcs_tools.dataflash_reader import MAGIC as DATAFLASH_MAGIC
 from gcs_tools.dataflash_reader import read_dataflash
 from gcs_tools.dataflash_view import dataflash_system
@@ -39,7 +41,7 @@ from gcs_tools.tlog_reader import ReadStats, read_tlog
 from gcs_tools.ulog_reader import MAGIC as ULOG_MAGIC
 from gcs_tools.ulog_reader import read_ulog
 from gcs_tools.ulog_view import ulog_system
-from quadsitl.viz.viewer import check_output_path
+from quadsitl.viz.viewer import check_output_path, open_recording
 
 DUPLICATE_US = 10_000  # a message repeated within 10 ms on another link is the same one
 
@@ -82,8 +84,14 @@ def compare(
     stats, warnings = ReadStats(), []
     vehicles: dict[int, System] = {}
     labels: dict[int, str] = {}
+    # One flight stack's log: the recording opens first, and the log's longest series
+    # stream into it as they are read (Rerun encodes them meanwhile, on its own thread).
+    early = None
+    if len(logs) == 1 and log_format(logs[0]) != "tlog":
+        early = open_recording("quadsitl_replay", str(out) if out else None, spawn, web=web,
+                               vehicle=False, layout_later=True)  # fmt: skip
     for log in logs:
-        one_stats, flights, notes = read_flights(log, progress)
+        one_stats, flights, notes = read_flights(log, progress, early)
         if one_stats.messages == 0 and len(logs) > 1:
             raise EmptyLogError(log)
         _add_stats(stats, one_stats)
@@ -94,6 +102,8 @@ def compare(
             name = Path(log).name
             labels[key] = name if len(flights) == 1 else f"{name} sys{system_id}"
     if stats.messages == 0:
+        if early is not None:
+            early.disconnect()
         return ReplayResult(stats, {}, time.perf_counter() - started, [])
     for system in vehicles.values():
         system.columns.normalise_rotors()
@@ -103,7 +113,7 @@ def compare(
     elif len(vehicles) > 1:
         rec, entities = send_fleet(vehicles, out, spawn, web)
     else:
-        rec, entities = send_one(vehicles, out, spawn, web)
+        rec, entities = send_one(vehicles, out, spawn, web, early)
     rec.send_recording_name(" vs ".join(Path(log).name for log in logs))
     rec.flush()
     if out is not None:
@@ -124,14 +134,17 @@ class EmptyLogError(ValueError):
 
 
 def read_flights(
-    log: str | Path, progress: Callable[[float], None] | None = None
+    log: str | Path,
+    progress: Callable[[float], None] | None = None,
+    rec: rr.RecordingStream | None = None,
 ) -> tuple[ReadStats, dict[int, System], list[str]]:
-    """The vehicles of one log of any format, by system id."""
+    """The vehicles of one log of any format, by system id (``rec``: where a flight
+    stack's log streams its finished series, see :class:`~gcs_tools.replay_scene.Columns`)."""
     kind = log_format(log)
     if kind == "ulog":
-        return ulog_flights(log)
+        return ulog_flights(log, rec)
     if kind == "dataflash":
-        return dataflash_flights(log)
+        return dataflash_flights(log, rec)
     return tlog_flights(log, progress)
 
 
@@ -174,16 +187,20 @@ def tlog_flights(
     return stats, vehicles_of(systems), []
 
 
-def ulog_flights(path: str | Path) -> tuple[ReadStats, dict[int, System], list[str]]:
+def ulog_flights(
+    path: str | Path, rec: rr.RecordingStream | None = None
+) -> tuple[ReadStats, dict[int, System], list[str]]:
     """The vehicle of a PX4 ULog (one per log: system id 1)."""
     log = read_ulog(path)
-    return log.stats, {1: ulog_system(log, path)}, list(log.warnings)
+    return log.stats, {1: ulog_system(log, path, rec)}, list(log.warnings)
 
 
-def dataflash_flights(path: str | Path) -> tuple[ReadStats, dict[int, System], list[str]]:
+def dataflash_flights(
+    path: str | Path, rec: rr.RecordingStream | None = None
+) -> tuple[ReadStats, dict[int, System], list[str]]:
     """The vehicle of an ArduPilot DataFlash log (one per log: system id 1)."""
     log = read_dataflash(path)
-    return log.stats, {1: dataflash_system(log, path)}, list(log.warnings)
+    return log.stats, {1: dataflash_system(log, path, rec)}, list(log.warnings)
 
 
 def input_problem(path: str) -> str | None:

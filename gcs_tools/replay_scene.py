@@ -12,6 +12,7 @@ import rerun as rr
 
 from gcs_tools.mode_strips import send_event_marks, send_mode_strips
 from gcs_tools.series_buffer import Series
+from gcs_tools.tensor_column import bar_chart_columns
 from quadsitl.viz import palette
 from quadsitl.viz.fleet import Member, fleet_blueprint, fleet_of, origin_offset
 from quadsitl.viz.flight_view import FlightView, Sample
@@ -25,17 +26,32 @@ from quadsitl.viz.scene import (
     framing,
     model_scale,
     series_style,
+    setup,
     shown_panels,
 )
 from quadsitl.viz.series_colors import series_color
-from quadsitl.viz.viewer import open_recording
+from quadsitl.viz.viewer import open_recording, send_layout
 
 
 class Columns:
-    """Samples gathered per (entity, kind), sent as columns at the end."""
+    """Samples gathered per (entity, kind), sent as columns at the end; or, with a
+    recording to stream to (``rec``), a finished series sent at once (:meth:`finish`):
+    Rerun encodes it on its own thread while the rest of the log is read."""
 
-    def __init__(self) -> None:
+    def __init__(self, rec: rr.RecordingStream | None = None) -> None:
         self.series: dict[tuple[str, str], Series] = {}
+        self.rec = rec
+        self.sent: set[tuple[str, str]] = set()  # finished and sent: kept for the fits
+
+    def finish(self, entity: str, kind: str = "scalar") -> None:
+        """Series ``entity`` is complete: sent now if there is a recording to stream to
+        (one vehicle's, whose clock nothing moves later), else at the end."""
+        key = (entity, kind)
+        if self.rec is None or key in self.sent or key not in self.series:
+            return
+        self.sent.add(key)
+        times, values = self.series[key].arrays()
+        send_series(self.rec, entity, kind, times, values, [])
 
     def add(self, stamp_us: int, sample: Sample) -> None:
         key = (sample.entity, sample.kind)
@@ -54,6 +70,8 @@ class Columns:
         elif kind == "text":
             values = np.asarray(list(values), dtype=object)
         self.series.setdefault((entity, kind), Series()).extend(stamps, values, levels)
+        if (entity, kind) in self.sent and self.rec is not None:  # more after all: sent too
+            send_series(self.rec, entity, kind, stamps, values, [])
 
     def panels(self) -> set[str]:
         """The time-series panels (``plots/<panel>/...``) that have data."""
@@ -121,6 +139,9 @@ class Columns:
         for (entity, kind), series in self.series.items():
             if member is not None and kind == "spectrum":
                 continue  # a fleet's layout has no spectra
+            if (entity, kind) in self.sent:
+                rows[entity] = len(series)
+                continue
             times, values = series.arrays()
             levels = series.levels() if kind == "text" else []
             path, style = entity, series_style(entity) if kind == "scalar" else None
@@ -135,10 +156,8 @@ class Columns:
                 rec.log(path, style, static=True)
             if kind == "spectrum":
                 send_spectra(rec, path, times, values)
-                rows[path] = rows.get(path, 0) + len(times)
-                continue
-            index = rr.TimeColumn(TIMELINE, timestamp=times.astype("datetime64[us]"))
-            rec.send_columns(path, indexes=[index], columns=column(kind, values, levels))
+            else:
+                send_series(rec, path, kind, times, values, levels, style=False)
             rows[path] = rows.get(path, 0) + len(times)
         return rows
 
@@ -162,12 +181,15 @@ def thin(times: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 
 class System:
-    """What a log holds of one MAVLink system: its flight, as samples and track."""
+    """What a log holds of one MAVLink system: its flight, as samples and track
+    (``rec``: the recording its finished series stream to, see :class:`Columns`)."""
 
-    def __init__(self) -> None:
+    def __init__(self, rec: rr.RecordingStream | None = None) -> None:
         self.view = FlightView()
-        self.columns = Columns()
-        self.track: list[np.ndarray] = []  # m, ENU, in its own local frame
+        self.columns = Columns(rec)
+        # m, ENU, in its own local frame: points (3,) of a .tlog, blocks (n, 3) of a
+        # binary log's columns (see track_points)
+        self.track: list[np.ndarray] = []
         self.truth_track: list[np.ndarray] = []  # the same, the simulator's (where logged)
         self.notes: list[str] = []  # verdicts for the user (vibration)
 
@@ -210,6 +232,16 @@ def route(message: Any, systems: dict[int, System]) -> System:
     return system
 
 
+def track_points(track: list[np.ndarray]) -> np.ndarray:
+    """(n, 3) of a track held as points (3,) and blocks (k, 3), in order (one array of
+    a million rows in one step, not a million rows converted one by one)."""
+    if not track:
+        return np.zeros((0, 3))
+    if all(np.ndim(part) == 1 for part in track):
+        return np.asarray(track, dtype=np.float64).reshape(-1, 3)
+    return np.concatenate([np.asarray(part, np.float64).reshape(-1, 3) for part in track])
+
+
 def vehicles_of(systems: dict[int, System]) -> dict[int, System]:
     """System id -> the systems drawn: those with a pose, else those with any data."""
     posed = {k: systems[k] for k in sorted(systems) if systems[k].posed}
@@ -218,14 +250,35 @@ def vehicles_of(systems: dict[int, System]) -> dict[int, System]:
 
 def send_spectra(rec: rr.RecordingStream, path: str, times: np.ndarray, values: Any) -> None:
     """Spectra (``spectrum/<sensor>/<axis>``: rows of frequencies and densities), each
-    a bar chart at its time, in its axis' colour as in the sensor's panel: one log call
-    a window (a column of bar charts would hold one tensor, not one a row)."""
+    a bar chart at its time, in its axis' colour as in the sensor's panel: a column of
+    bar charts per length of spectrum (one, unless the sample rate changed)."""
     _, sensor, axis = path.split("/", 2)
     color = list(series_color(f"plots/{sensor}/{axis}"))
-    for stamp, (frequencies, densities) in zip(times.tolist(), values, strict=True):
-        rec.set_time(TIMELINE, timestamp=np.datetime64(int(stamp), "us"))
-        rec.log(path, rr.BarChart(densities, abscissa=frequencies, color=color))
-    rec.reset_time()
+    widths = np.array([len(densities) for _, densities in values])
+    for width in np.unique(widths):
+        pick = np.flatnonzero(widths == width)
+        frequencies = np.stack([np.asarray(values[i][0], np.float64) for i in pick])
+        densities = np.stack([np.asarray(values[i][1], np.float64) for i in pick])
+        index = rr.TimeColumn(TIMELINE, timestamp=times[pick].astype("datetime64[us]"))
+        columns = bar_chart_columns(densities, frequencies, color)
+        rec.send_columns(path, indexes=[index], columns=columns)
+
+
+def send_series(
+    rec: rr.RecordingStream,
+    path: str,
+    kind: str,
+    times: np.ndarray,
+    values: Any,
+    levels: list[str],
+    style: bool = True,
+) -> None:
+    """One series as one column (``style``: its single-vehicle style logged first)."""
+    look = series_style(path) if style and kind == "scalar" else None
+    if look is not None:
+        rec.log(path, look, static=True)
+    index = rr.TimeColumn(TIMELINE, timestamp=np.asarray(times).astype("datetime64[us]"))
+    rec.send_columns(path, indexes=[index], columns=column(kind, values, levels))
 
 
 def column(kind: str, values: Any, levels: list[str]) -> Any:
@@ -248,12 +301,18 @@ def column(kind: str, values: Any, levels: list[str]) -> Any:
 
 
 def send_one(
-    vehicles: dict[int, System], out: str | Path | None, spawn: bool, web: bool
+    vehicles: dict[int, System],
+    out: str | Path | None,
+    spawn: bool,
+    web: bool,
+    rec: rr.RecordingStream | None = None,
 ) -> tuple[rr.RecordingStream, dict[str, int]]:
-    """The recording of one vehicle (or none): the single-vehicle scene and layout."""
+    """The recording of one vehicle (or none): the single-vehicle scene and layout
+    (``rec``: the recording its series streamed to, opened without the vehicle model,
+    whose size and layout are known only now)."""
     system = next(iter(vehicles.values()), None) or System()
     mission = system.mission_points()
-    frame = framing(np.concatenate([np.asarray(system.track).reshape(-1, 3), mission]))
+    frame = framing(np.concatenate([track_points(system.track), mission]))
     panels = system.columns.panels()
     fits = system.columns.fits(shown_panels(panels - {STATE_PANEL}))
     layout = blueprint(
@@ -265,14 +324,18 @@ def send_one(
         modes=system.columns.modes(),
         spectra=system.columns.spectra(),
     )
-    rec = open_recording(
-        "quadsitl_replay",
-        str(out) if out else None,
-        spawn,
-        default_blueprint=layout,
-        scale=model_scale(frame[1]),
-        web=web,
-    )
+    if rec is None:
+        rec = open_recording(
+            "quadsitl_replay",
+            str(out) if out else None,
+            spawn,
+            default_blueprint=layout,
+            scale=model_scale(frame[1]),
+            web=web,
+        )
+    else:
+        setup(rec, scale=model_scale(frame[1]))
+        send_layout(rec, layout)
     entities = system.columns.send(rec)
     entities.update(send_mode_strips(rec, system.columns.series, fits))
     entities[f"plots/{STATE_PANEL}/events"] = send_event_marks(rec, system.columns.series)
@@ -301,7 +364,7 @@ def send_fleet(
                 reference.home, reference.home_local_enu, view.home, view.home_local_enu
             )
         offsets.append(offset)
-        local = [np.asarray(system.track).reshape(-1, 3), system.mission_points()]
+        local = [track_points(system.track), system.mission_points()]
         points.append(np.concatenate(local) + offset)
         panels |= system.columns.panels()
     names = [(labels or {}).get(system_id, "") for system_id in vehicles]
@@ -389,7 +452,7 @@ def log_statics(rec: rr.RecordingStream, system: System, member: Member | None =
     if system.track:
         rec.log(
             path("world/trajectory"),
-            rr.LineStrips3D([np.asarray(system.track)], colors=color, radii=width),
+            rr.LineStrips3D([track_points(system.track)], colors=color, radii=width),
             static=True,
         )
     if system.truth_track:  # where the vehicle really went: the estimate's colour, darker
@@ -397,7 +460,7 @@ def log_statics(rec: rr.RecordingStream, system: System, member: Member | None =
         truth = [palette.darker((r, g, b))]
         rec.log(
             path("world/trajectory_truth"),
-            rr.LineStrips3D([np.asarray(system.truth_track)], colors=truth, radii=width),
+            rr.LineStrips3D([track_points(system.truth_track)], colors=truth, radii=width),
             static=True,
         )
     rec.log(

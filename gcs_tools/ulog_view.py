@@ -31,6 +31,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import rerun as rr
 
 from gcs_tools import log_series as S
 from gcs_tools.replay_scene import System, armed_span
@@ -74,15 +75,16 @@ def utc_offset(log: ULog, path: str | Path) -> int:
     return int(os.stat(path).st_mtime * 1e6) - log.end_us
 
 
-def ulog_system(log: ULog, path: str | Path) -> System:
-    """The flight the ULog at ``path`` holds, as the replay draws one vehicle."""
-    system = System()
+def ulog_system(log: ULog, path: str | Path, rec: rr.RecordingStream | None = None) -> System:
+    """The flight the ULog at ``path`` holds, as the replay draws one vehicle
+    (``rec``: the recording its finished series stream to as they are read)."""
+    system = System(rec)
     offset = utc_offset(log, path)
     rows = _Topics(log, offset)
     _home(system, log.topic("home_position"))
+    _equipment(system, rows)  # first: the IMU's columns stream while the rest is read
     _pose(system, rows)
     _state(system, *rows("vehicle_status"))
-    _equipment(system, rows)
     _vibration(system, rows)
     S.events(
         system,

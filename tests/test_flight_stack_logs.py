@@ -17,6 +17,7 @@ import pytest
 
 from gcs_tools.dataflash_reader import read_dataflash
 from gcs_tools.replay import convert, main
+from gcs_tools.replay_scene import track_points
 from gcs_tools.ulog_reader import read_ulog
 from tests.test_rerun import check_attitude, check_panels, rows_per_entity, scalars, views
 
@@ -137,7 +138,7 @@ def test_a_ulog_and_a_tlog_of_one_flight_show_the_same_views(tmp_path):
         assert sorted(modes) == sorted(FLIGHT_MODES)
     ulog_system, tlog_system = (convert_system(log) for log in (PX4_ULOG, PX4_TLOG))
     for system in (ulog_system, tlog_system):
-        track = np.asarray(system.track)
+        track = track_points(system.track)
         extent = track.max(axis=0) - track.min(axis=0)
         assert 7.0 < extent[0] < 9.5 and 7.0 < extent[1] < 9.5, extent  # the 8 m square
         assert 2.5 < extent[2] < 3.6, extent
@@ -321,7 +322,7 @@ def test_a_dataflash_log_and_a_tlog_of_one_flight_show_the_same_flight():
         _, vehicles, _ = read_flights(log)
         (system,) = vehicles.values()
         systems.append(system)
-        track = np.asarray(system.track)
+        track = track_points(system.track)
         extent = track.max(axis=0) - track.min(axis=0)
         assert 7.0 < extent[0] < 9.0 and 7.0 < extent[1] < 9.0 and 2.8 < extent[2] < 4.0, extent
     dataflash, tlog = systems

@@ -90,6 +90,7 @@ def open_recording(
     web: bool = False,
     vehicle: bool = True,
     home: bool = True,
+    layout_later: bool = False,
 ) -> rr.RecordingStream:
     """A recording stream saved to ``save`` (an .rrd path), sent to a spawned viewer, or
     (``web``) served with the web viewer on this host (see :func:`serve_web`).
@@ -100,10 +101,14 @@ def open_recording(
     takes that message (a command line prints it as one plain line); without it, it is
     a RuntimeWarning (library use). ``scale``: how many times life size the vehicle is
     drawn (:func:`model_scale`); ``vehicle``: False for a fleet, which draws its own;
-    ``home``: False for a task's episodes (their origin is the task's, not a home).
+    ``home``: False for a task's episodes (their origin is the task's, not a home);
+    ``layout_later``: no layout now, the caller sends it once the data is known (one
+    recording, one layout: :func:`send_layout`).
     """
     rec = rr.RecordingStream(name)
-    layout = blueprint() if default_blueprint is None else default_blueprint
+    layout: rrb.Blueprint | None = blueprint() if default_blueprint is None else default_blueprint
+    if layout_later:
+        layout = None
     if web:
         serve_web(rec, layout)
     elif spawn and save is None:
@@ -123,14 +128,19 @@ def open_recording(
                 warnings.warn(message, RuntimeWarning, stacklevel=2)
     if save is not None:
         rec.save(check_output_path(save), default_blueprint=layout)
-    # Also the active layout: a viewer that showed another recording of the same kind
-    # (same application id) would otherwise keep that one's panels.
-    rec.send_blueprint(layout, make_active=True, make_default=True)
+    if layout is not None:
+        send_layout(rec, layout)
     setup(rec, scale, vehicle, home)
     return rec
 
 
-def serve_web(rec: rr.RecordingStream, layout: rrb.Blueprint) -> str:
+def send_layout(rec: rr.RecordingStream, layout: rrb.Blueprint) -> None:
+    """The active layout too: a viewer that showed another recording of the same kind
+    (same application id) would otherwise keep that one's panels."""
+    rec.send_blueprint(layout, make_active=True, make_default=True)
+
+
+def serve_web(rec: rr.RecordingStream, layout: rrb.Blueprint | None) -> str:
     """Serve ``rec`` and the web viewer on this host; prints and returns the page's URL.
 
     The Rerun viewer executable runs as a child process with ``--serve-web``, bound to
