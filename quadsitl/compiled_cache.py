@@ -33,6 +33,7 @@ COMPILED_SOURCES = (
     "flight_software/cascade.py",
     "frames.py",
     "registration.py",
+    "wire/frame_kernel.py",
 )
 STAMP = "compiled_sources.sha256"
 

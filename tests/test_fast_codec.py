@@ -86,3 +86,32 @@ def test_wire_state_of_a_batch_with_one_gear_height_per_row_matches_row_by_row()
             np.testing.assert_allclose(
                 getattr(batch, field)[k], getattr(single, field), rtol=0, atol=1e-12
             )
+
+
+def test_frames_built_at_once_are_pymavlinks_bytes_for_every_message() -> None:
+    """Three frames of each message of the dialect at once (quadsitl.wire.batch_frames:
+    one structured array of payloads, one compiled framing pass) against pymavlink."""
+    from quadsitl.wire import batch_frames as BF
+
+    rng = random.Random(5)
+    encoder = mav.MAVLink(None, srcSystem=42, srcComponent=1)
+    for cls in mav.mavlink_map.values():
+        messages = [_random_message(cls, rng) for _ in range(3)]
+        seqs = [rng.randint(0, 255) for _ in messages]
+        expected = []
+        for message, seq in zip(messages, seqs, strict=True):
+            encoder.seq = seq
+            expected.append(message.pack(encoder))
+        unpacked = [cls.unpacker.unpack(m.pack(encoder)[10:-2].ljust(cls.unpacker.size, b"\0"))
+                    for m in messages]  # fmt: skip
+        dtype = BF.wire_dtype(cls)
+        columns, at = [], 0
+        for name in dtype.names or ():
+            shape = dtype.fields[name][0].shape  # type: ignore[index]
+            width = int(np.prod(shape)) if shape else 1
+            rows = [u[at : at + width] if shape else u[at] for u in unpacked]
+            kind = dtype[name].base  # (values in range: a uint64 would round through float)
+            columns.append(np.array(rows, dtype=object if kind.kind == "S" else kind))
+            at += width
+        rows = BF.payloads(cls, columns, len(messages))
+        assert BF.frames(cls, rows, seqs, [42] * 3, 1) == expected, cls.msgname

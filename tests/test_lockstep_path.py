@@ -144,3 +144,65 @@ def test_answers_full_and_lean_carry_each_vehicles_state():
     assert decoded.time_usec == PERIOD_US
     np.testing.assert_allclose(decoded.position_ned, truth.position_ned, atol=1e-5)
     np.testing.assert_allclose(decoded.rotor_speeds, physics.state[:, L.ROTORS], rtol=1e-6)
+
+
+def test_a_fleets_answers_built_at_once_are_the_frame_by_frame_bytes():
+    """The lean answers of more than ROW_BY_ROW vehicles are built for all of them at once
+    (:func:`lean_answer_frames`): byte for byte the frames of :func:`answer_parts`
+    packed one by one, sequence numbers included, for vehicles in the air, on the ground
+    and with values no field holds (fitted, as the frame-by-frame path fits them)."""
+    from quadsitl.simulator.motor_slot import answer_parts, lean_answer_frames
+    from quadsitl.wire import fast_codec as FC
+
+    path = _path(12)
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        for row in range(12):
+            controls = np.clip(HOVER + rng.normal(0, 0.1, 4), 0, 1).tolist()
+            path.round_command(row, _time(path), controls)
+    state = path.batch.physics.state
+    state[3, L.POS] = (0.0, 0.0, AIRFRAME.gear_height)  # on the ground
+    state[3, L.VEL] = 0.0
+    path.batch.physics.contact[3] = L.ON_GROUND
+    state[5, L.POS] = (1e39, -1e39, 3.0)  # beyond float32: saturated
+    state[6, L.VEL] = (np.nan, np.inf, -np.inf)
+    path.slots[7].resets = 300  # a counter of one byte: wraps
+    slots = path.slots
+    seqs_a: dict[int, int] = {}
+    seqs_b: dict[int, int] = {}
+
+    def counter(seqs: dict[int, int]):  # type: ignore[no-untyped-def]
+        def next_seq(system_id: int) -> int:
+            seq = seqs.get(system_id, 250)  # (wrapping past 255 on the way)
+            seqs[system_id] = (seq + 1) & 0xFF
+            return seq
+
+        return next_seq
+
+    for _ in range(3):
+        at_once = lean_answer_frames(slots, counter(seqs_a))
+        next_seq = counter(seqs_b)
+        one_by_one = [
+            [FC.pack(cls, values, next_seq(s.system_id), s.system_id, s.component_id)
+             for cls, values in parts]
+            for s, parts in zip(slots, answer_parts(slots, full=False), strict=True)
+        ]  # fmt: skip
+        assert at_once == one_by_one
+    assert len(at_once[3]) == 4 and len(at_once[0]) == 2  # on the ground: CONTACT, TD_SPEED
+
+
+def test_a_fleets_commands_framed_at_once_are_the_frame_by_frame_bytes():
+    from quadsitl.lockstep_client.fleet_client import FleetClient
+    from quadsitl.wire.addresses import free_udp_port
+
+    with FleetClient("127.0.0.1", free_udp_port(), 12) as client:
+        controls = np.random.default_rng(3).random((12, 4))
+        controls[2] = (np.nan, np.inf, 1e39, -0.5)  # what the simulator then refuses
+        client.seq = 250  # (wrapping past 255 on the way)
+        at_once = client._actuator_frames(123_456, controls)
+        after = client.seq
+        client.seq = 250
+        one_by_one = [
+            client._actuator_frame(123_456, i, row) for i, row in enumerate(controls.tolist())
+        ]
+        assert at_once == one_by_one and client.seq == after

@@ -16,6 +16,7 @@ is set. Equations, parameters and sources: docs/physics.md, "Battery".
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 
@@ -40,9 +41,26 @@ OCV_CHARGE = (np.array(_TABLE_PERCENT) - 3.85) / (100.0 - 3.85)
 OCV_SHAPE = (np.array(_TABLE_CELL_V) - 3.091) / (4.173 - 3.091)
 
 
+_CHARGES, _SHAPES = tuple(OCV_CHARGE.tolist()), tuple(OCV_SHAPE.tolist())
+
+
 def ocv_shape(charge: ArrayLike) -> np.ndarray:
     """(OCV − empty) / (full − empty) of a cell with ``charge`` (0..1) left."""
     return np.interp(np.asarray(charge, dtype=np.float64), OCV_CHARGE, OCV_SHAPE)
+
+
+def ocv_shape_of(charge: float) -> float:
+    """:func:`ocv_shape` of one charge, as ``np.interp`` computes it (the same bits),
+    without numpy's cost for one value: a battery is drained once a control period."""
+    if not charge < _CHARGES[-1]:  # (NaN too, as np.interp's right end)
+        return _SHAPES[-1] if charge == charge else math.nan
+    if charge < _CHARGES[0]:
+        return _SHAPES[0]
+    j = bisect.bisect_right(_CHARGES, charge) - 1
+    if _CHARGES[j] == charge:
+        return _SHAPES[j]
+    slope = (_SHAPES[j + 1] - _SHAPES[j]) / (_CHARGES[j + 1] - _CHARGES[j])
+    return slope * (charge - _CHARGES[j]) + _SHAPES[j]
 
 
 def shaft_power(
@@ -87,7 +105,7 @@ class Battery:
     @property
     def open_circuit_voltage(self) -> float:
         """V at rest with the charge left: n · OCV(q)."""
-        shape = float(ocv_shape(self.remaining))
+        shape = ocv_shape_of(self.remaining)
         return self.cells * (self.cell_empty_v + (self.cell_full_v - self.cell_empty_v) * shape)
 
     @property

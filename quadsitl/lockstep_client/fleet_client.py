@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from quadsitl.lockstep_client.fleet_link import RESEND_AFTER, FleetLink, SimulatorError, resend_wait
 from quadsitl.physics import layout as L
+from quadsitl.wire import batch_frames as BF
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.answer import ANSWER_IDS, Answer, AnswerReader, decode_answer, field_slices
 from quadsitl.wire.dialect import mavlink as mav
@@ -42,7 +43,7 @@ from quadsitl.wire.lockstep import (
     STAGE_AIRFRAME,
     STAGE_MOTION,
 )
-from quadsitl.wire.state import WireState
+from quadsitl.wire.state import ROW_BY_ROW, WireState
 
 HEARTBEAT_WAIT = 2.5  # s: the shortest wait for every vehicle's heartbeat (1 Hz each)
 ODOMETRY = mav.MAVLINK_MSG_ID_ODOMETRY
@@ -155,10 +156,13 @@ class FleetClient(FleetLink):
     def send_step(self, controls: NDArray[np.float64]) -> None:
         """The first half of :meth:`step` (to drive several simulators at once)."""
         stamp = self.time_usec
-        self._round = [
-            [self._actuator_frame(stamp, i, row)]
-            for i, row in enumerate(np.asarray(controls, dtype=np.float64).tolist())
-        ]
+        controls = np.asarray(controls, dtype=np.float64)
+        if self.signing or self.n <= ROW_BY_ROW:
+            self._round = [
+                [self._actuator_frame(stamp, i, row)] for i, row in enumerate(controls.tolist())
+            ]
+        else:  # a fleet's commands framed at once: the bytes of _actuator_frame's
+            self._round = [[frame] for frame in self._actuator_frames(stamp, controls)]
         self._send([group[0] for group in self._round])
         self._sent_at = time.monotonic()
 
@@ -178,6 +182,19 @@ class FleetClient(FleetLink):
             )
         values = (stamp, *controls, 0, self.first + i, 1)
         return self._pack(SET_ACTUATOR_CONTROL_TARGET, values)
+
+    def _actuator_frames(self, stamp: int, controls: NDArray[np.float64]) -> list[bytes]:
+        """Every vehicle's unsigned command of a round (``controls`` (n, 4)), built at
+        once (:mod:`quadsitl.wire.batch_frames`)."""
+        n = len(controls)
+        padded = np.zeros((n, 8))
+        padded[:, : L.N_ROTORS] = controls
+        targets = np.arange(self.first, self.first + n)
+        rows = BF.payloads(SET_ACTUATOR_CONTROL_TARGET, [stamp, padded, 0, targets, 1], n)
+        seqs = (self.seq + 1 + np.arange(n)) & 0xFF
+        self.seq = int(seqs[-1])
+        sysids = [self.mav.srcSystem] * n
+        return BF.frames(SET_ACTUATOR_CONTROL_TARGET, rows, seqs, sysids, self.mav.srcComponent)
 
     def _pack(self, message_class: Any, values: tuple[Any, ...]) -> bytes:
         """An unsigned frame of ours, packed without pymavlink (the hot path)."""

@@ -34,9 +34,10 @@ import numpy as np
 from quadsitl.flight_software.stepping import Stepping
 from quadsitl.physics import layout as L
 from quadsitl.simulator.links import Link
-from quadsitl.simulator.motor_slot import MotorSlot, answer_parts
+from quadsitl.simulator.motor_slot import MotorSlot, answer_parts, lean_answer_frames
 from quadsitl.wire import fast_codec as FC
 from quadsitl.wire.lockstep import ARMED_FLAG, LOCKSTEP_FLAG, check_controls
+from quadsitl.wire.state import ROW_BY_ROW
 from quadsitl.wire.units import rotor_speed, to_time_usec
 
 LOCKSTEP_IDLE = 5.0  # wall s without lockstep commands before real time resumes
@@ -173,6 +174,8 @@ class MotorPath:
         for ``link``: its sequence numbers, its signing."""
         slots = [self.slots[row] for row in rows]
         signer = link.signing()
+        if signer is None and not full and len(slots) > ROW_BY_ROW and _one_component(slots):
+            return lean_answer_frames(slots, link.next_seq)  # a fleet's round, at once
         return [
             [
                 FC.pack(cls, values, link.next_seq(slot.system_id), slot.system_id,
@@ -181,3 +184,7 @@ class MotorPath:
             ]
             for slot, parts in zip(slots, answer_parts(slots, full, hil_state), strict=True)
         ]  # fmt: skip
+
+
+def _one_component(slots: Sequence[MotorSlot]) -> bool:
+    return len({slot.component_id for slot in slots}) == 1

@@ -39,8 +39,10 @@ from quadsitl.simulator.links import Link
 from quadsitl.simulator.realtime_loop import RealTimeLoop
 from quadsitl.simulator.server import MavlinkServer
 from quadsitl.simulator.tlog import TlogWriter
+from quadsitl.wire import batch_frames
 from quadsitl.wire.addresses import is_loopback, parse_url
 from quadsitl.wire.ids import MAX_SYSTEM_ID
+from quadsitl.wire.state import ROW_BY_ROW
 
 
 @dataclass
@@ -127,7 +129,8 @@ class SimConfig:
 def compile_for_sim(vehicles: int, airframe: str, wind: Wind | None = None) -> None:
     """Load (or compile) the physics and the controller before the clock starts: their
     first calls take milliseconds to seconds, which real time cannot absorb. The physics'
-    world build too: a motor failure injected in flight switches to it."""
+    world build too: a motor failure injected in flight switches to it; and a fleet's
+    answer framing."""
     group = VehicleGroup(vehicles, airframe)
     group.step()
     group.physics.set_motor_efficiency((1.0, 1.0, 1.0, 0.5))
@@ -136,6 +139,8 @@ def compile_for_sim(vehicles: int, airframe: str, wind: Wind | None = None) -> N
     group.step()
     vehicle = group.vehicles[0]
     vehicle.cascade.rotor_command(vehicle.state, Setpoint(position=np.zeros(3)), 0.004)
+    if vehicles > ROW_BY_ROW:  # a fleet's lockstep answers are framed by compiled code
+        batch_frames.warm_up()
 
 
 class View(Protocol):
