@@ -109,3 +109,18 @@ def test_battery_parameters_are_checked():
         with pytest.raises(ValueError) as error:
             v.set_param(name, bad)
         assert "\n" not in str(error.value)
+
+
+def test_one_cells_shape_is_numpys_interpolation_bit_for_bit():
+    """The scalar path a battery drains through each control period gives np.interp's
+    bits (ends, table points, between them, beyond them, NaN)."""
+    import math
+
+    from quadsitl.flight_software.battery import OCV_CHARGE, ocv_shape, ocv_shape_of
+
+    charges = np.concatenate(
+        [np.linspace(-0.5, 1.5, 20_001), OCV_CHARGE, np.random.default_rng(0).random(20_000)]
+    )
+    for charge in charges.tolist():
+        assert ocv_shape_of(charge) == float(ocv_shape(charge))
+    assert math.isnan(ocv_shape_of(math.nan)) and math.isnan(float(ocv_shape(math.nan)))
