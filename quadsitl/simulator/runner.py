@@ -42,7 +42,6 @@ from quadsitl.simulator.tlog import TlogWriter
 from quadsitl.wire import batch_frames
 from quadsitl.wire.addresses import is_loopback, parse_url
 from quadsitl.wire.ids import MAX_SYSTEM_ID
-from quadsitl.wire.state import ROW_BY_ROW
 
 
 @dataclass
@@ -139,8 +138,7 @@ def compile_for_sim(vehicles: int, airframe: str, wind: Wind | None = None) -> N
     group.step()
     vehicle = group.vehicles[0]
     vehicle.cascade.rotor_command(vehicle.state, Setpoint(position=np.zeros(3)), 0.004)
-    if vehicles > ROW_BY_ROW:  # a fleet's lockstep answers are framed by compiled code
-        batch_frames.warm_up()
+    batch_frames.warm_up()  # long datagrams are scanned, a fleet's answers framed, compiled
 
 
 class View(Protocol):

@@ -114,8 +114,10 @@ def frames(
 
 
 def warm_up() -> None:
-    """Load (or compile, once, about a second) the framing before a clock starts."""
+    """Load (or compile, once, about a second) the compiled framing and scanning
+    (:mod:`.frame_kernel`) before a clock starts."""
     frames(_WARM_UP, np.zeros((1, 18), np.uint8), [0], [1], 1)
+    list(FC.parse(bytes(FC.SCANNED)))
 
 
 _WARM_UP = FC.mav.MAVLink_named_value_int_message  # any message

@@ -17,10 +17,12 @@ import struct
 from collections.abc import Iterator
 from typing import Any
 
+import numpy as np
 from fastcrc import crc16
 
 from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.fit import pack_payload
+from quadsitl.wire.frame_kernel import scan
 
 MAGIC = 0xFD  # MAVLink 2
 HEADER = struct.Struct("<BBBBBBBHB")  # magic, len, incompat, compat, seq, sys, comp, id
@@ -111,7 +113,24 @@ def datagrams(units: list[bytes], limit: int = DATAGRAM_LIMIT) -> Iterator[bytes
 def parse(data: bytes) -> Iterator[Frame]:
     """The MAVLink 2 frames of a datagram whose CRC is right and whose message this
     pymavlink knows; anything else (MAVLink 1, bad CRC, garbage) is skipped. Signatures
-    are not checked here (the caller verifies or does not need to)."""
+    are not checked here (the caller verifies or does not need to). A datagram of
+    several frames is scanned by compiled code (:func:`~quadsitl.wire.frame_kernel.scan`,
+    the same frames as the loop below)."""
+    if len(data) >= SCANNED:
+        starts, sizes = scan(np.frombuffer(data, dtype=np.uint8), _EXTRAS)
+        for i, size in zip(starts.tolist(), sizes.tolist(), strict=True):
+            msgid, length = data[i + 7] | data[i + 8] << 8 | data[i + 9] << 16, data[i + 1]
+            full = mav.mavlink_map[msgid].unpacker.size
+            payload = data[i + HEADER_SIZE : i + HEADER_SIZE + length]
+            if length < full:
+                payload = payload + bytes(full - length)
+            yield Frame(msgid, data[i + 5], data[i + 6], payload[:full], data[i : i + size])
+    else:
+        yield from parse_loop(data)
+
+
+def parse_loop(data: bytes) -> Iterator[Frame]:
+    """:func:`parse`, byte by byte in Python (a short datagram: one or two frames)."""
     i, end = 0, len(data)
     while i + HEADER_SIZE + CRC_SIZE <= end:
         if data[i] != MAGIC:
@@ -136,6 +155,13 @@ def parse(data: bytes) -> Iterator[Frame]:
             payload = payload + bytes(full - length)
         yield Frame(msgid, data[i + 5], data[i + 6], payload[:full], data[i : i + size])
         i += size
+
+
+SCANNED = 512  # bytes of a datagram from which it is scanned by compiled code
+# Each message's CRC extra byte by message id (−1: not one pymavlink knows).
+_EXTRAS = np.full(max(mav.mavlink_map) + 1, -1, dtype=np.int16)
+for _msgid, _cls in mav.mavlink_map.items():
+    _EXTRAS[_msgid] = _cls.crc_extra
 
 
 def pack_message(

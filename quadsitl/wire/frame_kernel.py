@@ -57,3 +57,42 @@ def _x25(crc: int, byte: int) -> int:
     tmp = (byte ^ (crc & 0xFF)) & 0xFF
     tmp = (tmp ^ (tmp << 4)) & 0xFF
     return ((crc >> 8) ^ (tmp << 8) ^ (tmp << 3) ^ (tmp >> 4)) & 0xFFFF
+
+
+@numba.njit(cache=True)
+def scan(data: np.ndarray, extras: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the MAVLink 2 frames of ``data`` (a datagram's bytes) start and how long
+    each is (signature included), found as :func:`quadsitl.wire.fast_codec.parse` finds
+    them: a frame starts at a magic byte, its message is known (``extras[msgid]``, its
+    CRC extra byte, ≥ 0) and its checksum is right; else the next byte is looked at. A
+    frame cut short by the end of the datagram ends the scan."""
+    end = len(data)
+    starts = np.empty(end // 12 + 1, dtype=np.int64)
+    sizes = np.empty(end // 12 + 1, dtype=np.int64)
+    count = 0
+    i = 0
+    while i + 12 <= end:
+        if data[i] != 0xFD:
+            i += 1
+            continue
+        length = int(data[i + 1])
+        size = 12 + length + (13 if data[i + 2] & 1 else 0)
+        if i + size > end:
+            break
+        msgid = int(data[i + 7]) | int(data[i + 8]) << 8 | int(data[i + 9]) << 16
+        extra = extras[msgid] if msgid < len(extras) else -1
+        if extra < 0:
+            i += 1
+            continue
+        crc = 0xFFFF
+        for k in range(i + 1, i + 10 + length):
+            crc = _x25(crc, data[k])
+        crc = _x25(crc, extra)
+        if crc != int(data[i + 10 + length]) | int(data[i + 11 + length]) << 8:
+            i += 1
+            continue
+        starts[count] = i
+        sizes[count] = size
+        count += 1
+        i += size
+    return starts[:count], sizes[:count]
