@@ -173,9 +173,17 @@ def _report(client: VehicleClient, path: PlannedPath) -> FlightReport:
         path_rms=float(np.sqrt(np.mean(distances**2))),
         path_max=float(distances.max()),
         flight_time=float(times[-1] - times[0]) if times.size else 0.0,
-        landed=not client.armed and abs(enu[-1, 2]) < 0.05,
+        landed=not client.armed and (abs(enu[-1, 2]) < 0.05 or _says_on_ground(client)),
         touchdown_offset=float(math.hypot(enu[-1, 0], enu[-1, 1])),
     )
+
+
+def _says_on_ground(client: VehicleClient) -> bool:
+    """Whether the vehicle's last EXTENDED_SYS_STATE says it is on the ground: what its
+    own landing detector decided, where the reported height cannot say (flown on an
+    estimate, whose height on the ground is its barometer's, a few centimetres off)."""
+    state = client.latest.get("EXTENDED_SYS_STATE")
+    return state is not None and state.landed_state == mav.MAV_LANDED_STATE_ON_GROUND
 
 
 def _segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:

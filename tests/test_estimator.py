@@ -191,3 +191,13 @@ def test_the_truth_comes_beside_the_estimate_and_replays_darker(tmp_path):
             if msg is not None:
                 kinds.append(msg.get_type())
         assert "SIM_STATE" not in kinds
+
+
+def test_the_mission_demo_flown_on_the_estimate_reports_its_landing(tmp_path, capsys):
+    """The demo's report calls a landing by the vehicle's own landing detector too
+    (EXTENDED_SYS_STATE): flown on the EKF, the estimate's height on the ground is the
+    barometer's, a few centimetres off, and it said "landed: False" after a landing."""
+    from gcs_tools.demo import run_demo
+
+    assert run_demo(speed=8.0, logs=str(tmp_path), sim_args=("--estimator", "ekf")) == 0
+    assert "landed: True" in capsys.readouterr().out
