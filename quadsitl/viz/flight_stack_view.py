@@ -30,11 +30,9 @@ import rerun as rr
 
 from quadsitl import frames
 from quadsitl.physics.fleet import Fleet
-from quadsitl.viz.fleet import fleet_blueprint, fleet_of
+from quadsitl.viz.fleet import fleet_of
 from quadsitl.viz.flight_view import Sample
-from quadsitl.viz.live import MAX_TRACK, TRACK_REDRAW, LiveLogger
-from quadsitl.viz.scene import blueprint, framing
-from quadsitl.viz.viewer import open_recording
+from quadsitl.viz.live import MAX_TRACK, TRACK_REDRAW, open_live
 
 TRUTH_RATE = 60.0  # Hz of wall time, per vehicle
 MESSAGE_RATE = 60.0  # Hz of wall time, per vehicle and kind of message
@@ -143,34 +141,16 @@ class FlightStackView:
         self.start_position = fleet.position.copy()  # each vehicle's estimator starts here
         n = fleet.n
         members = fleet_of(list(range(1, n + 1)), grid_offsets(n), focus=focus) if n > 1 else []
-        if members:
-            grid = np.array([m.offset for m in members])
-            frame = framing(np.concatenate([grid, grid + np.array([0.0, 0.0, 5.0])]))
-            layout = fleet_blueprint(
-                members,
-                PANELS,
-                frame=frame,
-                whole_range=False,
-                subject=f"{n} {stack} vehicles (estimate; truth: the darker track)",
-            )
-        else:
-            layout = blueprint(PANELS, follow=True, whole_range=False)
-        self.rec = open_recording(
+        self.rec, self.loggers = open_live(
             f"quadsitl_{stack}",
+            members,
+            PANELS,
+            fleet.hover_rotor_speed,
             save,
-            spawn=save is None,
-            default_blueprint=layout,
-            notice=notice,
-            web=web,
-            vehicle=not members,
+            notice,
+            web,
+            subject=f"{n} {stack} vehicles (estimate; truth: the darker track)",
         )
-        for member in members:
-            member.setup(self.rec)
-        hover = fleet.hover_rotor_speed
-        self.loggers = [
-            LiveLogger(self.rec, float(hover[i]), members[i] if members else None) for i in range(n)
-        ]
-        self.members = members
         self.epoch = time.time()  # the timeline's simulated 0 s
         self.clocks = [MessageClock() for _ in range(n)]
         self.last_yaw: list[float | None] = [None] * n

@@ -15,9 +15,10 @@ import numpy as np
 import rerun as rr
 
 from quadsitl.viz import palette
-from quadsitl.viz.fleet import Member
+from quadsitl.viz.fleet import Member, fleet_blueprint
 from quadsitl.viz.flight_view import FlightView, Sample
-from quadsitl.viz.scene import TIMELINE, WIND_COLOR, series_style
+from quadsitl.viz.scene import TIMELINE, WIND_COLOR, blueprint, framing, series_style
+from quadsitl.viz.viewer import open_recording
 
 TRACK_REDRAW = 0.5  # s of wall time between trajectory redraws
 MAX_TRACK = 20_000  # points kept for the trajectory (about 7 min at 50 Hz)
@@ -135,3 +136,44 @@ class LiveLogger:
             )
         else:
             self.rec.log(sample.entity, rr.TextLog(str(sample.value), level=sample.level))
+
+
+FRAMED_HEIGHT = 5.0  # m above a fleet's start grid that its camera frames
+
+
+def open_live(
+    name: str,
+    members: list[Member],
+    panels: Any,
+    hover_rotors: Any,
+    save: str | None,
+    notice: Any,
+    web: bool,
+    subject: str = "",
+) -> tuple[rr.RecordingStream, list[LiveLogger]]:
+    """The recording of a live view (a viewer spawned, ``save``: an .rrd, ``web``: the
+    web viewer) and a :class:`LiveLogger` per vehicle (``hover_rotors``: each one's
+    hover rotor speed): one vehicle followed by the camera, or a fleet (``members``)
+    framed over its start grid, each vehicle set up under its system id."""
+    if members:
+        grid = np.array([m.offset for m in members])
+        frame = framing(np.concatenate([grid, grid + np.array([0.0, 0.0, FRAMED_HEIGHT])]))
+        layout = fleet_blueprint(members, panels, frame=frame, whole_range=False, subject=subject)
+    else:
+        layout = blueprint(panels, follow=True, whole_range=False)
+    rec = open_recording(
+        name,
+        save,
+        spawn=save is None,
+        default_blueprint=layout,
+        notice=notice,
+        web=web,
+        vehicle=not members,
+    )
+    for member in members:
+        member.setup(rec)
+    loggers = [
+        LiveLogger(rec, float(hover), members[i] if members else None)
+        for i, hover in enumerate(hover_rotors)
+    ]
+    return rec, loggers

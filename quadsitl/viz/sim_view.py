@@ -24,23 +24,19 @@ import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
-import numpy as np
-
 from quadsitl.flight_software.vehicle import Vehicle
 from quadsitl.simulator import telemetry_pose as pose
 from quadsitl.simulator import telemetry_sensors as sensors
 from quadsitl.simulator import telemetry_status as status
 from quadsitl.simulator.snapshot import Snapshot
-from quadsitl.viz.fleet import Member, fleet_blueprint, fleet_of, origin_offset
-from quadsitl.viz.live import LiveLogger
-from quadsitl.viz.scene import LIVE_PANELS, SENSOR_PANELS, blueprint, framing
-from quadsitl.viz.viewer import open_recording
+from quadsitl.viz.fleet import Member, fleet_of, origin_offset
+from quadsitl.viz.live import LiveLogger, open_live
+from quadsitl.viz.scene import LIVE_PANELS, SENSOR_PANELS
 
 RATE = 30.0  # Hz of wall time, per vehicle
 FLEET_SNAPSHOTS = 60.0  # Hz of wall time: vehicles logged a second, the fleet together
 PENDING_LIMIT = 64  # messages waiting to be logged
 MESSAGE_TIME = 0.5e-3  # wall s a message's logging may take (a few rr.log calls)
-FRAMED_HEIGHT = 5.0  # m above the start grid that the fleet's camera frames
 BUILDERS = (
     pose.build_attitude,
     pose.build_attitude_quaternion,
@@ -73,32 +69,11 @@ class SimView:
         members = fleet_members(self.vehicles, focus) if len(self.vehicles) > 1 else []
         windy = any(v.fleet.windy for v in self.vehicles.values())
         panels = (*PANELS, "wind") if windy else PANELS
-        if members:
-            grid = np.array([m.offset for m in members])
-            frame = framing(np.concatenate([grid, grid + np.array([0.0, 0.0, FRAMED_HEIGHT])]))
-            layout = fleet_blueprint(members, panels, frame=frame, whole_range=False)
-        else:
-            layout = blueprint(panels, follow=True, whole_range=False)
-        self.rec = open_recording(
-            "quadsitl_sim",
-            save,
-            spawn=save is None,
-            default_blueprint=layout,
-            notice=notice,
-            web=web,
-            vehicle=not members,
+        hovers = [vehicle.airframe.hover_rotor_speed for vehicle in self.vehicles.values()]
+        self.rec, self.loggers = open_live(
+            "quadsitl_sim", members, panels, hovers, save, notice, web
         )
-        for member in members:
-            member.setup(self.rec)
-        self.loggers = [
-            LiveLogger(
-                self.rec,
-                hover_rotor=vehicle.airframe.hover_rotor_speed,
-                member=members[i] if members else None,
-            )
-            for i, vehicle in enumerate(self.vehicles.values())
-        ]
-        turns = list(zip(self.vehicles.values(), self.loggers, strict=True))
+        turns = list(enumerate(zip(self.vehicles.values(), self.loggers, strict=True)))
         focused = [i for i, m in enumerate(members) if m.focus]
         # A crowd's vehicle in focus is logged on its own, at RATE; the rest take turns.
         self.focus = turns.pop(focused[0]) if focused else None
@@ -118,11 +93,13 @@ class SimView:
         A snapshot logged at once (a dozen series) made the next physics steps late."""
         if wall_now >= self.next_due:
             self.next_due = wall_now + self.period
-            index, self.turn = self.turn, (self.turn + 1) % len(self.turns)
-            self.pending = self._snapshot(wall_now, *self.turns[index]) + self.pending
+            turn, self.turn = self.turn, (self.turn + 1) % len(self.turns)
+            index, (vehicle, logger) = self.turns[turn]
+            self.pending = self._snapshot(wall_now, index, vehicle, logger) + self.pending
         if self.focus is not None and wall_now >= self.next_focus:
             self.next_focus = wall_now + 1.0 / RATE
-            self.pending = self._snapshot(wall_now, *self.focus) + self.pending
+            index, (vehicle, logger) = self.focus
+            self.pending = self._snapshot(wall_now, index, vehicle, logger) + self.pending
         del self.pending[PENDING_LIMIT:]  # the oldest (logged from the end)
         urgent = wall_now >= self.next_due - self.period / 2
         if self.pending and (spare >= MESSAGE_TIME or urgent):
@@ -130,11 +107,10 @@ class SimView:
             logger.message(message, own=True, now=stamp)
 
     def _snapshot(
-        self, wall_now: float, vehicle: Vehicle, logger: LiveLogger
+        self, wall_now: float, index: int, vehicle: Vehicle, logger: LiveLogger
     ) -> list[tuple[LiveLogger, Any, float]]:
-        """A vehicle's messages (its heartbeat once a second), to be logged in order
-        (popped from the end), stamped with the time they were taken."""
-        index = self.loggers.index(logger)
+        """Vehicle ``index``'s messages (its heartbeat once a second), to be logged in
+        order (popped from the end), stamped with the time they were taken."""
         stamp = time.time()
         snapshot = Snapshot(vehicle)
         messages = [build(snapshot) for build in BUILDERS]
