@@ -41,6 +41,27 @@ def figure(name: str, value: float, unit: str, note: str) -> None:
     print(f"{name}: {value:.0f}")
 
 
+def cpu_seconds(pid: int) -> float:
+    """CPU time (user + system) another process has spent so far, from ``/proc`` (Linux)."""
+    with open(f"/proc/{pid}/stat") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def cpu_per_frame(name: str, pid: int, run: Callable[[], int], target_us: float) -> float:
+    """Run ``run`` (it returns how many autopilot frames it made) and print the simulator
+    process ``pid``'s CPU time per frame in µs against ``target_us`` (lower is better).
+    Time a fleet: a simulator answering one autopilot flat out polls between frames
+    (its CPU is then all the time there is), one serving several waits in select()."""
+    before = cpu_seconds(pid)
+    frames = run()
+    us = (cpu_seconds(pid) - before) / frames * 1e6
+    verdict = "meets" if us <= target_us else "ABOVE"
+    print(f"{name}: {us:.1f} µs of simulator CPU per frame (target ≤ {target_us:g}, {verdict})")
+    print(f"{name}: {us:.1f}")
+    return us
+
+
 def start_stack_simulator(
     stack: str, airframe: str, vehicles: int, port: int
 ) -> subprocess.Popen[bytes]:

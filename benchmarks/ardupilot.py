@@ -8,7 +8,11 @@ Reports
   rules (target ≥ 12,000: ten times ArduCopter's real-time 1,200 Hz);
 * ``ardupilot_fleet8_realtime_factor``: simulated seconds per wall second of each of 8
   vehicles on one simulator process, the 8 fakes in one process sending their frames
-  together each round (target ≥ 2).
+  together each round (target ≥ 2);
+* ``ardupilot_fleet8_sim_cpu_us_per_frame``: the simulator process's CPU time (user +
+  system, from ``/proc``) per autopilot frame while it serves the 8: decode, physics,
+  sensors, encode and the socket calls (target ≤ 10 µs). One vehicle flat out would
+  say nothing: the simulator polls between its frames.
 
 Both processes share the machine's cores: the figures are of the pair.
 """
@@ -22,7 +26,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import best_rate, report, start_stack_simulator
+from _common import best_rate, cpu_per_frame, report, start_stack_simulator
 
 from quadsitl.bridges.fake_ardupilot import FakeArduPilot
 from quadsitl.physics import get_airframe
@@ -33,6 +37,7 @@ FRAME_RATE = 1200  # Hz
 FRAMES = 12_000  # per timed run: 10 s of ArduCopter's time
 FLEET = 8
 FLEET_ROUNDS = 6_000  # 5 s of each vehicle's time
+CPU_TARGET_US = 10  # the simulator's CPU per autopilot frame
 
 
 def start_simulator(vehicles: int) -> tuple[subprocess.Popen[bytes], int]:
@@ -84,7 +89,10 @@ def fleet_realtime_factor() -> float:
         run()
         start = time.perf_counter()
         rounds = run()
-        return rounds / FRAME_RATE / (time.perf_counter() - start)
+        factor = rounds / FRAME_RATE / (time.perf_counter() - start)
+        name = "ardupilot_fleet8_sim_cpu_us_per_frame"
+        cpu_per_frame(name, process.pid, lambda: run() * FLEET, CPU_TARGET_US)
+        return factor
     finally:
         for fake in fakes:
             fake.close()

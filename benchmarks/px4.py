@@ -9,7 +9,10 @@ Reports
   ≥ 2,500: ten times PX4's real-time 250 Hz);
 * ``px4_fleet8_realtime_factor``: simulated seconds per wall second of each of 8
   vehicles on one simulator process, the 8 fakes in one process sending their actuator
-  messages together each round (target ≥ 2).
+  messages together each round (target ≥ 2);
+* ``px4_fleet8_sim_cpu_us_per_frame``: the simulator process's CPU time (user + system,
+  from ``/proc``) per PX4 round while it serves the 8: decode, physics, sensors (IMU,
+  barometer, magnetometer, GPS), encode and the socket calls (target ≤ 10 µs).
 
 Both processes share the machine's cores: the figures are of the pair.
 """
@@ -24,7 +27,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import best_rate, report, start_stack_simulator
+from _common import best_rate, cpu_per_frame, report, start_stack_simulator
 
 from quadsitl.bridges.fake_px4 import FakePx4
 from quadsitl.bridges.px4_hil import ROUND_US
@@ -34,6 +37,7 @@ AIRFRAME = "iris"
 ROUNDS = 5_000  # per timed run: 20 s of PX4's time
 FLEET = 8
 FLEET_ROUNDS = 2_500  # 10 s of each vehicle's time
+CPU_TARGET_US = 10  # the simulator's CPU per autopilot frame (a 4 ms round)
 
 
 def free_tcp_ports(count: int) -> int:
@@ -103,6 +107,8 @@ def fleet_realtime_factors() -> list[float]:
         start = time.perf_counter()
         simulated_us = run()
         wall = time.perf_counter() - start
+        name = "px4_fleet8_sim_cpu_us_per_frame"
+        cpu_per_frame(name, process.pid, lambda: len(run()) * FLEET_ROUNDS, CPU_TARGET_US)
         return [us * 1e-6 / wall for us in simulated_us]
     finally:
         for fake in fakes:

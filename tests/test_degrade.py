@@ -130,3 +130,25 @@ def test_a_slowed_schedule_keeps_slow_streams_and_restores_the_rates_asked_for()
     assert slowed[mav.MAVLINK_MSG_ID_SYS_STATUS] == pytest.approx(10, abs=1)  # 1 Hz: kept
     assert slowed[mav.MAVLINK_MSG_ID_HOME_POSITION] == pytest.approx(5, abs=1)  # 0.5 Hz
     assert all(abs(restored[m] - full[m]) <= 2 for m in full), (restored, full)
+
+
+def test_a_fleet_tick_past_its_deadline_ticks_one_vehicle_and_owes_the_others():
+    """The vehicles' telemetry ticks stop when the next physics step is due (the physics
+    does not wait for telemetry), one vehicle still advancing per call; those left over
+    are owed and ticked in the next call, so that every vehicle keeps its turn."""
+    from quadsitl.simulator.runner import SimConfig, Simulator
+
+    sim = Simulator(SimConfig(vehicles=8, gcs_url="udpin:127.0.0.1:0", api_url=None, log_dir=None))
+    ticked: list[int] = []
+    for index, server in enumerate(sim.server.servers):
+        server.tick = lambda wall_now, lockstep=False, index=index: ticked.append(index)
+    try:
+        fleet = sim.server
+        fleet.tick(1000.0)  # the first call: one vehicle
+        ticked.clear()
+        fleet.tick(1001.0, deadline=0.0)  # every vehicle due (a whole period on), none in time
+        assert len(ticked) == 1
+        fleet.tick(1001.0, deadline=float("inf"))  # the owed ones now
+        assert sorted(ticked) == list(range(8))  # each once: the turn went round
+    finally:
+        sim.close()

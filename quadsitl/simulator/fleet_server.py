@@ -16,6 +16,7 @@ the motor link: :mod:`.ownership`) and sends the answers, in as few datagrams as
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -96,30 +97,35 @@ class FleetServer:
                 for server in self.servers:
                     server.greet()
 
-    def tick(self, wall_now: float) -> None:
+    def tick(self, wall_now: float, deadline: float = math.inf) -> None:
         """Every vehicle's events, heartbeat and telemetry, the vehicles in turn: each
         is ticked about every TICK_PERIOD of wall time (LOCKSTEP_TICK_PERIOD in
         lockstep, where telemetry is rate-limited on the wall clock anyway), at least
         one vehicle per call, so that a large fleet's work is spread evenly over the
-        physics steps. What the vehicles ticked in one call send goes out together, in
-        datagrams of at most TELEMETRY_DATAGRAM bytes per link (as PX4 packs them)."""
+        physics steps. No further vehicle is ticked once the monotonic clock reaches
+        ``deadline`` (the next physics step's): those left over are ticked first next
+        call, so that telemetry waits rather than the physics. What the vehicles ticked
+        in one call send goes out together, in datagrams of at most TELEMETRY_DATAGRAM
+        bytes per link (as PX4 packs them)."""
         n = len(self.servers)
         lockstep = self.motors.in_lockstep(wall_now)
         period = LOCKSTEP_TICK_PERIOD if lockstep else TICK_PERIOD
         last = wall_now if self._last_tick is None else self._last_tick
         elapsed = min(max(wall_now - last, 0.0), period)
         self._last_tick = wall_now
-        self._credit += n * elapsed / period
+        self._credit = min(float(n), self._credit + n * elapsed / period)
         count = min(n, max(1, int(self._credit)))
-        self._credit = max(0.0, self._credit - count)
         links = self.servers[0].links
         for link in links:
             link.hold(FC.TELEMETRY_DATAGRAM)
+        ticked = 0
         try:
-            for _ in range(count):
+            while ticked < count and (ticked == 0 or time.monotonic() < deadline):
                 self.servers[self._next_tick].tick(wall_now, lockstep)
                 self._next_tick = (self._next_tick + 1) % n
+                ticked += 1
         finally:
+            self._credit = max(0.0, self._credit - ticked)
             for link in links:
                 link.release()
 

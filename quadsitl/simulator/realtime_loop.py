@@ -130,8 +130,8 @@ class RealTimeLoop:
             else:
                 steps = self._real_time_steps(start, steps, wall_per_step)
                 self._govern(now)
-                self.server.tick(now)
                 next_step = start + (steps + 1) * wall_per_step
+                self.server.tick(now, deadline=next_step)
                 self.housekeeping(now, next_step - time.monotonic())
                 wait = next_step - time.monotonic()
             sockets = self._sockets()
