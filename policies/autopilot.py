@@ -188,6 +188,16 @@ class PolicyAutopilot:
         target = position.copy() if goal is None else np.asarray(goal, dtype=np.float64)
         if goal is None and self.target is not None:
             target = self.target  # hold where position control ended
+        action = self.action(state, target)
+        omega = commanded_rotor_speed(self.airframe.hover_rotor_speed, self.beta, action)
+        self.command = np.clip(omega, 0.0, self.airframe.max_rotor_speed)
+        return self.command
+
+    def action(self, state: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """The policy's action (its mean, as the envs step it) for the vehicle in
+        ``state`` (a state row, world ENU) flying to ``target`` (ENU, m) through the
+        carrot; one control period on."""
+        position = state[L.POS]
         if self.target is None or np.linalg.norm(target - self.target) > 0.01:
             self.target, self.origin = target.copy(), position.copy()
             self.frame, self.along, self.clock = position.copy(), -np.inf, 0.0
@@ -206,10 +216,7 @@ class PolicyAutopilot:
         F.hide_position(self.obs, self.observe_position)
         if self.observe_integral:
             self.integral.accumulate(self.obs)
-        action = self.net.mean_action(self.obs)[0].astype(np.float64)  # as the envs step it
-        omega = commanded_rotor_speed(self.airframe.hover_rotor_speed, self.beta, action)
-        self.command = np.clip(omega, 0.0, self.airframe.max_rotor_speed)
-        return self.command
+        return self.net.mean_action(self.obs)[0].astype(np.float64)
 
     def _step_carrot(self, position: np.ndarray) -> None:
         """Move the carrot on to ``carrot`` m ahead of the vehicle's place along the leg

@@ -214,6 +214,16 @@ def _main(argv: Sequence[str] | None = None) -> int:
             return run_policy_command(args)
         except (ValueError, OSError) as error:  # OSError: a file or folder that cannot be used
             parser.exit(2, f"quadsitl {args.command}: error: {error}\n")
+    if args.command == "companion":
+        from policies.companion.cli import run as run_companion
+        from policies.companion.flight import RefusalError
+
+        try:
+            return run_companion(args, _say("companion"))
+        except RefusalError as refusal:
+            parser.exit(2, f"quadsitl companion: refused: {refusal}\n")
+        except (ValueError, OSError) as error:
+            parser.exit(2, f"quadsitl companion: error: {error}\n")
     if args.command == "fly":
         from gcs_tools.fly import run_fly
 

@@ -41,10 +41,14 @@ def sha256(path: Path) -> str:
 
 
 def trained_options(config: TrainConfig) -> TaskOptions:
-    """The task options a policy was trained with, less its start noise (init_*)."""
-    return TaskOptions.from_kwargs(
-        **{k: v for k, v in config.task_options.items() if not k.startswith("init_")}
-    )
+    """The task options a policy was trained with, less its start noise (init_*); through
+    an autopilot (backend px4), its env step's timing (quadsitl/envs/offboard_env.py)."""
+    options = {k: v for k, v in config.task_options.items() if not k.startswith("init_")}
+    if config.backend == "px4":
+        from quadsitl.envs.offboard_env import AIRFRAME, flight_stack_timing
+
+        options = {"airframe": AIRFRAME, **flight_stack_timing(), **options}
+    return TaskOptions.from_kwargs(**options)
 
 
 def layout_text(task_name: str, options: TaskOptions | None = None) -> str:
@@ -85,7 +89,11 @@ def build_contract(config: TrainConfig, checkpoint: Path, act_size: int) -> dict
         },
         "conventions": _conventions(),
         "observation": _observation_section(task, config, options, obs_size),
-        "action": _action_section(airframe, options, act_size),
+        "action": (
+            _setpoint_section(config.action_level, airframe, act_size)
+            if config.backend == "px4"
+            else _action_section(airframe, options, act_size)
+        ),
         "motors": _motors_section(airframe),
         "control": {
             "rate_hz": 1.0 / options.control_period,
@@ -175,6 +183,46 @@ def _action_section(airframe: Airframe, options: TaskOptions, act_size: int) -> 
         "max_rotor_speed_rad_s": top,
         "action_bounds": [-hover / options.beta, (top - hover) / options.beta],
     }
+
+
+def _setpoint_section(level: str, airframe: Airframe, act_size: int) -> dict[str, Any]:
+    """The contract's ``action`` of a policy that flies an autopilot by its setpoints
+    (quadsitl/envs/setpoints.py: its scales are read from there)."""
+    from quadsitl.envs import setpoints as S
+
+    meanings = {
+        "velocity": (
+            f"a[0:3] east, north, up velocity × ({S.MAX_SPEED_XY:g}, {S.MAX_SPEED_XY:g}, "
+            f"{S.MAX_SPEED_Z:g}) m/s; a[3] yaw rate about up × {S.MAX_YAW_RATE:g} rad/s",
+            "SET_POSITION_TARGET_LOCAL_NED, MAV_FRAME_LOCAL_NED, velocity and yaw rate "
+            "(north = a[1], east = a[0], down = −a[2]; yaw rate about down = −a[3])",
+        ),
+        "attitude": (
+            f"a[0:2] roll, pitch × {S.MAX_TILT:g} rad, a[2] yaw × π rad (ENU: 0 faces "
+            "east), body FLU in world ENU; a[3] collective thrust",
+            "SET_ATTITUDE_TARGET, quaternion FRD→NED and thrust, body rates ignored",
+        ),
+        "rates": (
+            f"a[0:2] body roll, pitch rates × {S.MAX_RATE_RP:g} rad/s, a[2] yaw rate × "
+            f"{S.MAX_RATE_YAW:g} rad/s, body FLU; a[3] collective thrust",
+            "SET_ATTITUDE_TARGET, body rates FRD and thrust, the attitude ignored",
+        ),
+    }
+    meaning, message = meanings[level]
+    section: dict[str, Any] = {
+        "size": act_size,
+        "dtype": "float32",
+        "level": level,
+        "meaning": meaning + "; every a clipped to [−1, 1] first",
+        "message": message,
+    }
+    if level != "velocity":
+        section["thrust"] = (
+            "normalised collective thrust 0..1: a[3] = 0 the airframe's hover thrust "
+            f"({airframe.hover_thrust_fraction:g}), −1 none, +1 full (linear between)"
+        )
+    section["sent_by"] = "quadsitl companion, or quadsitl.envs.setpoints.message"
+    return section
 
 
 def _motors_section(airframe: Airframe) -> dict[str, Any]:

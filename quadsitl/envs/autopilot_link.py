@@ -138,10 +138,35 @@ class Estimate:
     custom_mode: int = 0
     acks: dict[int, int] = field(default_factory=dict)  # command -> result
     texts: list[str] = field(default_factory=list)
+    autopilot: int = mav.MAV_AUTOPILOT_INVALID  # its HEARTBEAT's: PX4, ArduPilot, ...
+    landed_state: int = mav.MAV_LANDED_STATE_UNDEFINED  # EXTENDED_SYS_STATE's
+    outputs_us: tuple[int, ...] = ()  # SERVO_OUTPUT_RAW's channels 1..8 (µs)
 
     @property
     def armed(self) -> bool:
         return bool(self.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+
+    def take(self, msg: Any) -> None:
+        """Keep what ``msg`` (from the autopilot) says of its state."""
+        kind = msg.get_type()
+        if kind == "LOCAL_POSITION_NED":
+            self.position_time_ms = msg.time_boot_ms
+            self.position, self.velocity = (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz)
+        elif kind == "ATTITUDE_QUATERNION":
+            self.attitude_time_ms = msg.time_boot_ms
+            self.quaternion = (msg.q1, msg.q2, msg.q3, msg.q4)
+            self.rates = (msg.rollspeed, msg.pitchspeed, msg.yawspeed)
+        elif kind == "HEARTBEAT" and msg.autopilot != mav.MAV_AUTOPILOT_INVALID:
+            self.base_mode, self.custom_mode = msg.base_mode, msg.custom_mode
+            self.autopilot = msg.autopilot
+        elif kind == "COMMAND_ACK":
+            self.acks[msg.command] = msg.result
+        elif kind == "STATUSTEXT":
+            self.texts.append(msg.text)
+        elif kind == "EXTENDED_SYS_STATE":
+            self.landed_state = msg.landed_state
+        elif kind == "SERVO_OUTPUT_RAW" and msg.port == 0:
+            self.outputs_us = tuple(getattr(msg, f"servo{i}_raw") for i in range(1, 9))
 
     @property
     def time_ms(self) -> int:
@@ -237,20 +262,7 @@ class Autopilot:
     def _take(self, msg: Any) -> None:
         if msg.get_srcSystem() != self.system_id:
             return  # another vehicle's (a port shared by mistake must not mix them)
-        kind, e = msg.get_type(), self.estimate
-        if kind == "LOCAL_POSITION_NED":
-            e.position_time_ms = msg.time_boot_ms
-            e.position, e.velocity = (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz)
-        elif kind == "ATTITUDE_QUATERNION":
-            e.attitude_time_ms = msg.time_boot_ms
-            e.quaternion = (msg.q1, msg.q2, msg.q3, msg.q4)
-            e.rates = (msg.rollspeed, msg.pitchspeed, msg.yawspeed)
-        elif kind == "HEARTBEAT" and msg.autopilot != mav.MAV_AUTOPILOT_INVALID:
-            e.base_mode, e.custom_mode = msg.base_mode, msg.custom_mode
-        elif kind == "COMMAND_ACK":
-            e.acks[msg.command] = msg.result
-        elif kind == "STATUSTEXT":
-            e.texts.append(msg.text)
+        self.estimate.take(msg)
 
 
 class Autopilots:

@@ -47,6 +47,19 @@ ALTITUDE = 5.0  # m above the ground: the task's origin (the vehicle takes off t
 SEEDED = "seeded: a reproducible episode starts from a new autopilot"
 
 
+CONTROL_RATE = 50.0  # Hz: env steps per simulated second, by default
+AIRFRAME = "iris"  # the airframe preset flown, by default (PX4's quad X, with its parameters)
+
+
+def flight_stack_timing(control_rate: float = CONTROL_RATE) -> dict[str, float]:
+    """The task options of an env step through an autopilot: the control period, a whole
+    number of PX4's 4 ms lockstep rounds, and the round as the physics step."""
+    period = round(1.0 / control_rate / (ROUND_US * 1e-6)) * ROUND_US * 1e-6
+    if not 0 < period < 1e3:
+        raise ValueError(f"control_rate {control_rate} is not within (0, 250] Hz")
+    return {"physics_dt": ROUND_US * 1e-6, "control_period": period}
+
+
 @dataclass
 class Offboard:
     """What an env that flies N autopilots is made of: their processes and physics, the
@@ -73,11 +86,8 @@ class Offboard:
     ) -> Offboard:
         level = setpoints.check_level(action_level)
         spec = get_task(task)
-        period = round(1.0 / control_rate / (ROUND_US * 1e-6)) * ROUND_US * 1e-6
-        if not 0 < period < 1e3:
-            raise ValueError(f"control_rate {control_rate} is not within (0, 250] Hz")
         options = TaskOptions.from_kwargs(
-            airframe=airframe, physics_dt=ROUND_US * 1e-6, control_period=period, **task_options
+            airframe=airframe, **flight_stack_timing(control_rate), **task_options
         )
         hover = get_airframe(airframe).hover_thrust_fraction
         command = autopilot_command(autopilot, airframe)
@@ -89,7 +99,7 @@ class Offboard:
             if failed:
                 why = {row: autopilots.pilots[row].failure for row in failed}
                 raise RuntimeError(f"autopilots did not start (row: why): {why}")
-            fleet = OffboardFleet(autopilots, period, ALTITUDE)
+            fleet = OffboardFleet(autopilots, options.control_period, ALTITUDE)
             engine = TaskEngine(spec, n, options, fleet=fleet)  # type: ignore[arg-type]
         except BaseException:
             autopilots.close()
@@ -156,8 +166,8 @@ class OffboardEnv(gym.Env):
         action_level: str = "velocity",
         autopilot: str | os.PathLike[str] | list[str] | None = None,
         instance: int = 0,
-        airframe: str = "iris",
-        control_rate: float = 50.0,
+        airframe: str = AIRFRAME,
+        control_rate: float = CONTROL_RATE,
         sensor_noise: float = 1.0,
         render_mode: str | None = None,
         **task_options: Any,

@@ -24,7 +24,13 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from quadsitl.envs.offboard_env import SEEDED, Offboard, checked_actions
+from quadsitl.envs.offboard_env import (
+    AIRFRAME,
+    CONTROL_RATE,
+    SEEDED,
+    Offboard,
+    checked_actions,
+)
 from quadsitl.envs.vector import episode_columns
 
 
@@ -45,8 +51,8 @@ class OffboardVectorEnv(VectorEnv):
         action_level: str = "velocity",
         autopilot: str | os.PathLike[str] | list[str] | None = None,
         first_instance: int = 0,
-        airframe: str = "iris",
-        control_rate: float = 50.0,
+        airframe: str = AIRFRAME,
+        control_rate: float = CONTROL_RATE,
         sensor_noise: float = 1.0,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
