@@ -52,7 +52,9 @@ def _add_train_parser(commands: argparse._SubParsersAction) -> None:
     train.add_argument(
         "--vehicles-per-sim",
         type=_count(1),
-        help="with --backend mavlink: vehicles (envs) in each simulator process (default: 64)",
+        help="with --backend mavlink: vehicles (envs) in each simulator process; with "
+        "--backend px4 --ray: envs (autopilots) in each Ray actor (default: 64, at most "
+        "--num-envs)",
     )
     train.add_argument(
         "--ray",
@@ -61,7 +63,8 @@ def _add_train_parser(commands: argparse._SubParsersAction) -> None:
         metavar="ADDR",
         help="with --backend mavlink: start the simulators as Ray actors spread over a Ray "
         "cluster (ADDR, e.g. 10.0.0.1:6379; without it: RAY_ADDRESS's cluster, else a "
-        "private local Ray); see docs/distributed.md",
+        "private local Ray), see docs/distributed.md; with --backend px4: the envs and "
+        "their autopilots, see docs/autopilots.md",
     )
     px4 = train.add_argument_group("with --backend px4")
     px4.add_argument(

@@ -113,13 +113,23 @@ class TrainConfig:
 
 
 def flight_stack_options(config: TrainConfig) -> dict[str, Any]:
-    """The env options of a run's backend "px4" (its autopilots and setpoints)."""
-    return {
+    """The env options of a run's backend "px4" (its autopilots and setpoints; with
+    ``ray``, the Ray actors that own them, ``flight_stack_envs_per_actor`` envs each)."""
+    options: dict[str, Any] = {
         "action_level": config.action_level,
         "autopilot": config.px4_build or None,
         "first_instance": config.first_instance,
         "sensor_noise": config.sensor_noise,
     }
+    if config.ray:
+        options["ray"] = config.ray
+        options["nodes"] = config.num_envs // flight_stack_envs_per_actor(config)
+    return options
+
+
+def flight_stack_envs_per_actor(config: TrainConfig) -> int:
+    """With backend "px4" on Ray: the envs (autopilot instances) of each actor."""
+    return min(config.vehicles_per_sim, config.num_envs)
 
 
 def run_name(task: str, algo: str, preset: str, seed: int, backend: str = "inprocess") -> str:
@@ -175,8 +185,8 @@ def _check(config: TrainConfig) -> None:
         raise ValueError(f"unknown algorithm {config.algo!r}; choose one of {ALGORITHMS}")
     if config.backend not in BACKENDS:
         raise ValueError(f"unknown backend {config.backend!r}; choose one of {BACKENDS}")
-    if config.ray and config.backend != "mavlink":
-        raise ValueError("ray places simulators: it needs backend 'mavlink'")
+    if config.ray and config.backend not in ("mavlink", "px4"):
+        raise ValueError("ray places simulators: it needs backend 'mavlink' or 'px4'")
     if config.backend == "px4":
         check_level(config.action_level)
         if config.task not in TASK_NAMES:
@@ -465,7 +475,15 @@ def make_config(
         # training episodes is logged instead (quadsitl eval is not yet wired to PX4).
         values["eval_every"] = 0
     config = TrainConfig(**values)
-    if config.backend == "px4" and config.num_envs > MAX_PX4_INSTANCES:
+    if config.backend == "px4" and config.ray:
+        per = flight_stack_envs_per_actor(config)
+        if config.num_envs % per or per > MAX_PX4_INSTANCES:
+            raise ValueError(
+                f"backend 'px4' on Ray puts {per} envs (--vehicles-per-sim) in each actor: "
+                f"it must divide --num-envs ({config.num_envs}) and be at most "
+                f"{MAX_PX4_INSTANCES} (one PX4 instance each)"
+            )
+    elif config.backend == "px4" and config.num_envs > MAX_PX4_INSTANCES:
         raise ValueError(
             f"backend 'px4' flies one PX4 instance per env; at most {MAX_PX4_INSTANCES} "
             "(instances i and i + 40 share an onboard port: 14540 + i + 40 = 14580 + i)"

@@ -77,11 +77,17 @@ def make_vector_env(
     vector env: every env in one batched call) or any registered Gymnasium env id with
     a Box action space (its envs in a SyncVectorEnv). ``backend="px4"``: the task flown
     through PX4 by its setpoints (:class:`~quadsitl.envs.offboard_vector.OffboardVectorEnv`,
-    whose options ``options`` then include). Seeding: ``reset(seed=s)`` gives
+    whose options ``options`` then include; with ``ray``, its Ray actors':
+    :class:`~quadsitl.envs.ray_offboard.RayOffboardVectorEnv`). Seeding: ``reset(seed=s)`` gives
     env i the seed ``s + i``."""
     if backend == "px4":
         if task not in TASKS:
             raise ValueError(f"backend 'px4' flies a quadsitl task; {task!r} is not one")
+        if options.get("ray"):
+            from quadsitl.envs.ray_offboard import RayOffboardVectorEnv
+
+            mode = AutoresetMode.SAME_STEP
+            return RayOffboardVectorEnv(num_envs, task, autoreset_mode=mode, **options)
         from quadsitl.envs.offboard_vector import OffboardVectorEnv
 
         return OffboardVectorEnv(num_envs, task, autoreset_mode=AutoresetMode.SAME_STEP, **options)
