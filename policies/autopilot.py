@@ -129,6 +129,7 @@ class PolicyAutopilot:
         self.net = net
         self.carrot = carrot
         self.heading = heading  # rad: the yaw shown to the policy stays within ±heading
+        self.turned = 0.0  # rad about up the last observation's frame was turned by
         self.goal_at_origin = goal_at_origin
         self.airframe = airframe
         self.period = options.control_period
@@ -243,6 +244,7 @@ class PolicyAutopilot:
         position, velocity and goal with it, in place."""
         yaw = float(euler_from_quat(local[L.QUAT])[2])
         excess = yaw - float(np.clip(yaw, -self.heading, self.heading))
+        self.turned = excess
         if excess == 0.0:
             return
         turn = quat_from_axis_angle((0.0, 0.0, 1.0), -excess)

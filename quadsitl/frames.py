@@ -25,6 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 Array = NDArray[np.float64]
 
 _SQRT_HALF = np.sqrt(0.5)
+NORTH_YAW_ENU = 0.5 * math.pi  # rad: the ENU yaw of a vehicle facing north
 
 
 def _as_vectors(v: ArrayLike, size: int, name: str) -> Array:

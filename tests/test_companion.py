@@ -160,3 +160,18 @@ def test_an_exported_setpoint_policy_says_its_setpoints_and_timing(controller):
     assert contract["control"]["physics_dt_s"] == pytest.approx(0.004)
     assert contract["motors"]["airframe"] == "iris"
     assert mav.MAV_FRAME_LOCAL_NED == 1  # the frame the message names
+
+
+def test_a_setpoint_given_in_a_turned_frame_is_turned_back_into_the_world():
+    """A vehicle shown to the policy turned by −θ about up: its velocity setpoint's east
+    and north are turned by θ, an attitude's yaw gets θ added (wrapped), rates stay."""
+    from policies.companion.flight import unturned
+
+    quarter = np.pi / 2
+    east = np.array([0.5, 0.0, 0.1, 0.2])
+    np.testing.assert_allclose(unturned(east, "velocity", quarter), [0.0, 0.5, 0.1, 0.2],
+                               atol=1e-12)  # fmt: skip
+    facing = np.array([0.1, 0.0, 0.75, 0.3])  # yaw 0.75 π
+    np.testing.assert_allclose(unturned(facing, "attitude", quarter)[2], -0.75)
+    rates = np.array([0.1, 0.2, 0.3, 0.4])
+    np.testing.assert_array_equal(unturned(rates, "rates", quarter), rates)

@@ -93,6 +93,10 @@ class Companion:
         self.period = task_options.control_period
         self.level = setpoints.check_level(config.action_level)
         trained = trained_range(config)
+        # A vehicle yawed beyond the headings the policy was trained at (the flight-stack
+        # envs' resets hold it facing east, the task's heading) is shown to it at their
+        # edge, the frame turned about up; its world-frame setpoints are turned back
+        # (:func:`unturned`).
         self.pilot = PolicyAutopilot(net, self.airframe, task_options, trained.offset,
                                      goal_at_origin=task.goal_at_origin,
                                      heading=trained.heading or np.pi)  # fmt: skip
@@ -350,7 +354,7 @@ class Companion:
                 if distance > self.options.max_distance:
                     limit = self.options.max_distance
                     return self.hand_back(f"{distance:.1f} m from the goal (limit {limit:g})", 1)
-                action = self.pilot.action(state, goal)
+                action = unturned(self.pilot.action(state, goal), self.level, self.pilot.turned)
                 if not np.all(np.isfinite(action)):
                     return self.hand_back(f"the policy gave a non-finite action {action}", 1)
                 self.send_setpoint(setpoints.message(
@@ -384,6 +388,22 @@ class Companion:
                       "autopilot's offboard-loss failsafe takes it")  # fmt: skip
         self.say(f"{why}: {handed}")
         return status
+
+
+def unturned(action: np.ndarray, level: str, turned: float) -> np.ndarray:
+    """A setpoint action the policy gave in a frame turned by ``-turned`` about up (its
+    observation's), in the world's: a velocity's east and north turned by ``turned``, an
+    attitude's yaw plus ``turned``; body rates stay as they are."""
+    if turned == 0.0:
+        return action
+    a = np.array(action, dtype=np.float64)
+    if level == "velocity":
+        c, s = math.cos(turned), math.sin(turned)
+        a[0], a[1] = c * a[0] - s * a[1], s * a[0] + c * a[1]
+    elif level == "attitude":
+        yaw = float(np.clip(a[2], -1.0, 1.0)) * math.pi + turned
+        a[2] = ((yaw + math.pi) % (2 * math.pi) - math.pi) / math.pi
+    return a
 
 
 def _with_goal(options: CompanionOptions, goal: np.ndarray) -> CompanionOptions:

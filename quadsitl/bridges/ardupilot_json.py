@@ -38,6 +38,7 @@ import numpy as np
 
 from quadsitl.bridges.lockstep import step_vehicles
 from quadsitl.bridges.notices import Notices
+from quadsitl.frames import NORTH_YAW_ENU
 from quadsitl.physics import layout as L
 from quadsitl.physics.airframe import Airframe
 from quadsitl.physics.fleet import Fleet, initial_state
@@ -59,7 +60,6 @@ MAX_STEP = 1 / 400
 # not a number, is replaced (NaN by 0, the rest clamped) and said; the timestamp is exempt.
 REPLY_LIMIT = 1e6
 _SQRT_HALF = math.sqrt(0.5)
-_NORTH_ENU = 0.5 * math.pi  # rad, the ENU heading of north: vehicles start facing it
 
 # ArduPilot's quad frames (libraries/AP_Motors/AP_MotorsMatrix.cpp): motor i (output
 # channel i + 1) at bearing degrees clockwise from the nose, and its spin seen from above
@@ -328,6 +328,7 @@ class JsonPhysics:
         stopped."""
         one = np.zeros(self.fleet.n, bool)
         one[index] = True
-        rest = initial_state(1, position=(0.0, 0.0, self._gear[index]), yaw=_NORTH_ENU)
+        # At rest at home, facing north (as PX4's and ArduPilot's own simulators start)
+        rest = initial_state(1, position=(0.0, 0.0, self._gear[index]), yaw=NORTH_YAW_ENU)
         self.fleet.reset(rest, contact=L.ON_GROUND, mask=one)
         self._commands[index] = 0.0

@@ -36,6 +36,7 @@ import numpy as np
 
 from quadsitl.bridges.lockstep import step_vehicles
 from quadsitl.bridges.notices import Notices
+from quadsitl.frames import NORTH_YAW_ENU
 from quadsitl.geo import Home
 from quadsitl.physics import layout as L
 from quadsitl.physics.fleet import Fleet, initial_state
@@ -63,7 +64,6 @@ SYSTEM_ID, COMPONENT_ID = 1, 1  # of the simulator's messages (PX4 does not chec
 # error wanders over a minute (EKF2 refuses a fix that drifts faster than
 # EKF2_REQ_HDRIFT 0.1 m/s while landed).
 PX4_SENSORS = SensorParams(gps=GpsParams(error_tau=60.0, fix_sigma_factor=1.0))
-_NORTH_ENU = 0.5 * math.pi  # rad, the ENU heading of north: vehicles start facing it
 _SQRT_HALF = math.sqrt(0.5)
 
 
@@ -359,7 +359,8 @@ class HilPhysics:
         """Vehicle ``index`` at rest on the ground at home, nose north, rotors stopped."""
         one = np.zeros(self.fleet.n, bool)
         one[index] = True
-        rest = initial_state(1, position=(0.0, 0.0, self._gear[index]), yaw=_NORTH_ENU)
+        # At rest at home, facing north (as PX4's and ArduPilot's own simulators start)
+        rest = initial_state(1, position=(0.0, 0.0, self._gear[index]), yaw=NORTH_YAW_ENU)
         self.fleet.reset(rest, contact=L.ON_GROUND, mask=one)
         self._commands[index] = 0.0
 
