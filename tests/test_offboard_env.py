@@ -129,6 +129,34 @@ def test_a_reset_flies_to_the_drawn_start_without_restarting(make_env):
         assert np.all(np.abs(start) < 0.35)  # the drawn start: ±0.3 m about the goal
 
 
+def test_a_reset_tilts_the_vehicle_to_the_drawn_attitude_and_faces_the_drawn_yaw(make_env):
+    """Hover's training start draws roll, pitch and yaw (±0.2 rad): the reset flies to
+    the start facing the drawn yaw, then tilts to the drawn attitude by attitude setpoints;
+    the episode starts there (the truth within 0.06 rad of it), not level."""
+    env = make_env(task="hover", action_level="velocity", init_position_noise=0.3,
+                   init_attitude_noise=0.2)  # fmt: skip
+    drawn: list[np.ndarray] = []
+    fly = env.fleet.reset
+
+    def recording(state=None, *args, **kwargs):  # type: ignore[no-untyped-def]
+        drawn.append(np.array(state[0, L.QUAT]))
+        fly(state, *args, **kwargs)
+
+    env.fleet.reset = recording
+    env.reset(seed=3)
+    tilts = []
+    for _ in range(3):
+        _, info = env.reset()
+        truth = env.fleet.physical.state[0, L.QUAT]
+        assert info["reset"]["attitude_error_rad"] < 0.06, info["reset"]
+        angle = 2 * math.acos(min(1.0, abs(float(np.dot(truth, drawn[-1])))))
+        assert angle == pytest.approx(info["reset"]["attitude_error_rad"], abs=1e-9)
+        assert info["reset"]["reached"] and info["reset"]["position_error_m"] < 0.1
+        roll, pitch, _ = frames.euler_from_quat(drawn[-1])
+        tilts.append(max(abs(roll), abs(pitch)))
+    assert max(tilts) > 0.05  # some start was tilted, and was flown to
+
+
 def test_setpoint_messages_say_what_the_action_asks_in_the_wires_frames():
     link = mav.MAVLink(None, srcSystem=255, srcComponent=191)
     hover = get_airframe("iris").hover_thrust_fraction

@@ -23,6 +23,7 @@ from quadsitl import frames
 from quadsitl.bridges.px4_hil import ROUND_US
 from quadsitl.envs import setpoints
 from quadsitl.envs.autopilot_link import AutopilotError, Autopilots
+from quadsitl.physics import get_airframe
 from quadsitl.physics import layout as L
 from quadsitl.wire.dialect import mavlink as mav
 from quadsitl.wire.modes import MAIN_OFFBOARD, Mode
@@ -34,6 +35,10 @@ SETTLED_SPEED = 0.1  # ... and m/s, rad/s: the start is reached ...
 SETTLED_FOR_S = 0.2  # ... for this long
 ARM_LIMIT_S = 60.0  # simulated s a new autopilot may refuse to arm (its estimator converging)
 START_TRIES = 2  # new processes a reset tries before it gives up on an autopilot
+TILT_REACHED = 0.03  # rad from the drawn attitude, by the estimate: the start is reached
+TILT_LIMIT_S = 1.0  # simulated s a reset may tilt before the episode starts anyway
+LEVEL = np.zeros(L.STATE_SIZE)
+LEVEL[L.I_QW] = 1.0  # a start state with no attitude drawn: level, facing east
 
 
 class OffboardFleet:
@@ -97,25 +102,30 @@ class OffboardFleet:
         self, state: ArrayLike | None = None, contact: Any = L.AIRBORNE, mask: Any = None
     ) -> None:
         rows = list(range(self.n)) if mask is None else np.flatnonzero(mask).tolist()
-        starts = np.zeros((len(rows), 3)) if state is None else np.asarray(state)[:, L.POS]
+        drawn = np.tile(LEVEL, (len(rows), 1)) if state is None else np.asarray(state)
+        starts = np.zeros((len(rows), 3)) if state is None else drawn[:, L.POS]
         targets = dict(zip(rows, starts + self.origin, strict=True))
+        attitudes = dict(zip(rows, drawn[:, L.QUAT], strict=True))
         wall = time.monotonic()
         began = {row: self.autopilots.time_us(row) for row in rows}
         restarted = self._restart_failed(rows)
         for row in rows:
             if row in restarted:
                 began[row] = self.autopilots.time_us(row)
-        settled = self._fly_to(targets, began)
+        yaws = {row: float(frames.euler_from_quat(q)[2]) for row, q in attitudes.items()}
+        settled = self._fly_to(targets, began, yaws)
+        tilted = self._tilt_to(attitudes)
         for row in rows:
             position = self.physical.state[row, L.POS]
             self.reports[row] = {
                 "simulated_s": (self.autopilots.time_us(row) - began[row]) * 1e-6,
                 "wall_s": time.monotonic() - wall,
                 "position_error_m": float(np.linalg.norm(position - targets[row])),
+                "attitude_error_rad": _angle(self.physical.state[row, L.QUAT], attitudes[row]),
                 "estimate_error_m": float(
                     np.linalg.norm(self.autopilots.estimated_position(row) - position)
                 ),
-                "reached": settled[row] >= SETTLED_FOR_S,
+                "reached": settled[row] >= SETTLED_FOR_S and tilted[row],
                 "restarted": restarted.get(row),
             }
         self.sync()
@@ -139,16 +149,18 @@ class OffboardFleet:
             raise AutopilotError(f"autopilots could not be started again: {failures}")
         return why
 
-    def _fly_to(self, targets: dict[int, NDArray], began: dict[int, int]) -> dict[int, float]:
-        """Fly each row to its target (the simulator's ENU, m) until settled there; how
-        long each was settled at the end (simulated s)."""
+    def _fly_to(
+        self, targets: dict[int, NDArray], began: dict[int, int], yaws: dict[int, float]
+    ) -> dict[int, float]:
+        """Fly each row to its target (the simulator's ENU, m), facing its yaw (ENU, rad),
+        until settled there; how long each was settled at the end (simulated s)."""
         self._offboard(list(targets))
         settled = dict.fromkeys(targets, 0.0)
         flying = list(targets)
         while flying:
             for row in flying:
                 local = targets[row] - self.autopilots.pilots[row].local_origin
-                self._send(row, setpoints.position_message, local, 0.0)
+                self._send(row, setpoints.position_message, local, yaws[row])
             failed = self.autopilots.advance(self.control_period, flying)
             if failed:
                 failures = {row: self.autopilots.pilots[row].failure for row in failed}
@@ -167,6 +179,35 @@ class OffboardFleet:
                 and (self.autopilots.time_us(row) - began[row]) * 1e-6 < RESET_LIMIT_S
             ]  # fmt: skip
         return settled
+
+    def _tilt_to(self, attitudes: dict[int, NDArray]) -> dict[int, bool]:
+        """Tilt each row settled at its start to its drawn attitude (body FLU in ENU) by
+        attitude setpoints at hover thrust (more as it tilts: its height held) until its
+        estimate is within TILT_REACHED of it, at most TILT_LIMIT_S of simulated time;
+        whether each got there (a level start has nothing to do)."""
+        hover = get_airframe(self.autopilots.airframe).hover_thrust_fraction
+        reached = {row: _tilt(q) < TILT_REACHED for row, q in attitudes.items()}
+        tilting = [row for row in attitudes if not reached[row]]
+        began = {row: self.autopilots.time_us(row) for row in tilting}
+        while tilting:
+            for row in tilting:
+                q = attitudes[row]
+                lift = hover / max(math.cos(_tilt(q)), 0.5)
+                self._send(row, setpoints.attitude_message, q, min(lift, 1.0))
+            failed = self.autopilots.advance(self.control_period, tilting)
+            if failed:
+                failures = {row: self.autopilots.pilots[row].failure for row in failed}
+                raise AutopilotError(f"autopilots failed while a reset tilted them: {failures}")
+            for row in tilting:
+                estimate = np.array(self.autopilots.pilots[row].estimate.quaternion)
+                seen = frames.quat_ned_frd_to_enu_flu(estimate)
+                reached[row] = _angle(seen, attitudes[row]) < TILT_REACHED
+            tilting = [
+                row for row in tilting
+                if not reached[row]
+                and (self.autopilots.time_us(row) - began[row]) * 1e-6 < TILT_LIMIT_S
+            ]  # fmt: skip
+        return reached
 
     def _send(self, row: int, make: Any, *args: Any) -> None:
         pilot = self.autopilots.pilots[row]
@@ -215,3 +256,15 @@ class OffboardFleet:
 
     def set_motor_efficiency(self, efficiency: ArrayLike, mask: Any = None) -> None:
         raise ValueError("motor faults are not available through an autopilot yet")
+
+
+def _tilt(q: NDArray) -> float:
+    """How far (rad) the attitude ``q`` (body FLU in ENU) tilts the body's up from up."""
+    x, y = float(q[L.I_QX - L.I_QW]), float(q[L.I_QY - L.I_QW])
+    up_z = 1.0 - 2.0 * (x * x + y * y)  # the body's up, seen from the world's up
+    return math.acos(min(1.0, max(-1.0, up_z)))
+
+
+def _angle(p: NDArray, q: NDArray) -> float:
+    """The angle (rad) of the rotation between the attitudes ``p`` and ``q``."""
+    return 2.0 * math.acos(min(1.0, abs(float(np.dot(p, q)))))

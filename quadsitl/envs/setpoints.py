@@ -81,9 +81,7 @@ def message(
     collective = thrust(float(a[3]), hover)
     if level == "attitude":
         q_enu = frames.quat_from_euler(a[0] * MAX_TILT, a[1] * MAX_TILT, a[2] * math.pi)
-        q = frames.quat_enu_flu_to_ned_frd(q_enu)
-        ignore = 0b111  # body rates
-        return link.set_attitude_target_encode(time_ms, system, 1, ignore, q, 0, 0, 0, collective)
+        return attitude_message(link, q_enu, collective, time_ms, system)
     check_level(level)
     rates = frames.flu_to_frd(
         np.array([a[0] * MAX_RATE_RP, a[1] * MAX_RATE_RP, a[2] * MAX_RATE_YAW])
@@ -104,3 +102,14 @@ def position_message(
         time_ms, system, 1, mav.MAV_FRAME_LOCAL_NED, _POSITION_AND_YAW,
         north, east, -up, 0, 0, 0, 0, 0, 0, float(frames.yaw_enu_to_ned(yaw_enu)), 0,
     )  # fmt: skip
+
+
+def attitude_message(
+    link: Any, q_enu_flu: np.ndarray, collective: float, time_ms: int, system: int = 1
+) -> Any:
+    """An attitude setpoint (body FLU in world ENU, as quadsitl's state holds it) with
+    collective thrust 0..1: the attitude level's message, and how a reset tilts the
+    vehicle to an episode's drawn attitude."""
+    q = frames.quat_enu_flu_to_ned_frd(np.asarray(q_enu_flu, dtype=np.float64))
+    ignore = 0b111  # body rates
+    return link.set_attitude_target_encode(time_ms, system, 1, ignore, q, 0, 0, 0, collective)
