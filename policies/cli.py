@@ -1,6 +1,5 @@
 """The options of ``quadsitl train``, ``quadsitl eval``, ``quadsitl robustness``,
-``quadsitl plot``, ``quadsitl sweep``, ``quadsitl export`` (policies/export/cli.py) and
-``quadsitl companion`` (policies/companion/cli.py):
+``quadsitl plot``, ``quadsitl sweep`` and ``quadsitl export`` (policies/export/cli.py):
 parsed here, and checked as they are parsed (counts, step budgets); run by
 :mod:`policies.commands`, which imports torch only when one of them runs."""
 
@@ -9,7 +8,6 @@ from __future__ import annotations
 import argparse
 import math
 
-from policies.companion import cli as companion_cli
 from policies.config import ALGORITHMS, MAX_TOTAL_STEPS, TASK_NAMES
 from policies.export import cli as export_cli
 from policies.ladder import AXES
@@ -23,7 +21,6 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
     _add_plot_parser(commands)
     _add_sweep_parser(commands)
     export_cli.add_parser(commands)
-    companion_cli.add_parser(commands)
 
 
 def _add_train_parser(commands: argparse._SubParsersAction) -> None:

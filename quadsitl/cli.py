@@ -59,10 +59,12 @@ def _build_parser() -> argparse.ArgumentParser:
     _add_fly_parser(commands)
     try:  # training needs torch; the simulator does not
         from policies.cli import add_parsers as add_policy_parsers
+        from policies.companion.cli import add_parser as add_companion_parser
     except ImportError:
         pass
     else:
         add_policy_parsers(commands)
+        add_companion_parser(commands)
     replay = commands.add_parser(
         "replay",
         help="turn a flight log (.tlog, PX4 .ulg, ArduPilot .bin) into a Rerun recording "

@@ -7,8 +7,6 @@ import argparse
 import os
 from typing import Any
 
-from quadsitl.envs.autopilot_link import COMPANION_COMPONENT, COMPANION_SYSTEM
-
 DEFAULT_CONNECT = "udpin:127.0.0.1:14540"  # PX4 instance 0's onboard link
 
 
@@ -76,6 +74,7 @@ def run(args: argparse.Namespace, say: Any = print) -> int:
     RefusalError and ValueError are the caller's (exit 2, the vehicle unchanged)."""
     from policies.companion.flight import Companion, CompanionOptions
     from policies.export.runtimes import load_policy
+    from quadsitl.envs.autopilot_link import COMPANION_COMPONENT, COMPANION_SYSTEM
 
     for name in ("takeoff", "duration", "max_distance", "timeout"):
         value = getattr(args, name)
