@@ -36,6 +36,7 @@ from policies.export.contract import trained_options
 from quadsitl.envs import setpoints
 from quadsitl.envs.autopilot_link import Estimate
 from quadsitl.physics import get_airframe
+from quadsitl.physics import layout as L
 from quadsitl.tasks import TASKS
 from quadsitl.wire.dialect import mavlink as mav
 
@@ -102,9 +103,9 @@ class Companion:
                                      heading=trained.heading or np.pi)  # fmt: skip
         # A runtime's first call sets itself up (ONNX Runtime: most of a second): not while
         # the vehicle waits for its first setpoint, whose loss it would take for a failsafe.
-        at_rest = np.zeros(17)
-        at_rest[3] = 1.0  # level
-        self.pilot.action(at_rest, np.zeros(3))
+        level = np.zeros(L.STATE_SIZE)
+        level[L.I_QW] = 1.0
+        self.pilot.action(level, np.zeros(3))
         self.pilot.reset()
         self.estimate = Estimate()
         self.stack: Stack | None = None
