@@ -67,6 +67,25 @@ def test_pack_message_gives_pymavlinks_bytes_for_every_message(seed: int, signed
         assert signer.timestamp == encoder.signing.timestamp  # one tick per frame, as there
 
 
+def test_to_message_decodes_every_message_as_pymavlinks_parser_does() -> None:
+    """The same type, fields, ids, sequence and bytes as pymavlink's parse of the frame."""
+    rng = random.Random(5)
+    encoder = mav.MAVLink(None, srcSystem=9, srcComponent=191)
+    parser = mav.MAVLink(None)
+    for _, cls in sorted(mav.mavlink_map.items()):
+        encoder.seq = rng.randint(0, 255)
+        data = _random_message(cls, rng).pack(encoder)
+        (expected,) = parser.parse_buffer(data)
+        (frame,) = FC.parse(data)
+        got = FC.to_message(frame)
+        assert got.get_type() == expected.get_type()
+        assert got.to_dict() == expected.to_dict(), cls.msgname
+        assert (got.get_srcSystem(), got.get_srcComponent(), got.get_seq()) == (
+            expected.get_srcSystem(), expected.get_srcComponent(), expected.get_seq()
+        )  # fmt: skip
+        assert bytes(got.get_msgbuf()) == bytes(expected.get_msgbuf())
+
+
 def test_datagrams_keep_units_whole_and_within_the_limit() -> None:
     units = [bytes([i]) * size for i, size in enumerate([600, 600, 600, 1500, 10, 10])]
     out = list(FC.datagrams(units, limit=1400))

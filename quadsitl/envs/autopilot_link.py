@@ -52,6 +52,10 @@ HEARTBEAT_S = 1.0  # simulated s between the companion's heartbeats
 STARTING_ROUND_S = 1.0  # wall s between rounds until the autopilot leads in lockstep
 GCS_PORT = 14550  # where every PX4 instance sends its ground-station link
 COMPANION_SYSTEM, COMPANION_COMPONENT = 255, mav.MAV_COMP_ID_ONBOARD_COMPUTER
+# Decoded by the fast codec: what comes every round (the rest is rare, and pymavlink's)
+ESTIMATE_MESSAGES = frozenset(
+    {mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION}
+)
 
 
 class AutopilotError(RuntimeError):
@@ -256,7 +260,7 @@ class Autopilot:
 
     def read(self) -> None:
         """Take what the autopilot sent so far."""
-        for msg in pending_messages(self.link, self.mav):
+        for msg in pending_messages(self.link, self.mav, ESTIMATE_MESSAGES):
             self._take(msg)
 
     def _take(self, msg: Any) -> None:
