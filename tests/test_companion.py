@@ -175,3 +175,13 @@ def test_a_setpoint_given_in_a_turned_frame_is_turned_back_into_the_world():
     np.testing.assert_allclose(unturned(facing, "attitude", quarter)[2], -0.75)
     rates = np.array([0.1, 0.2, 0.3, 0.4])
     np.testing.assert_array_equal(unturned(rates, "rates", quarter), rates)
+
+
+@pytest.mark.parametrize(
+    ("url", "says"),
+    [("foo:bar", "neither a MAVLink URL"), ("udpin:127.0.0.1:99999", "cannot open --connect")],
+)
+def test_a_connection_that_cannot_be_opened_is_a_one_line_error(controller, url, says):
+    done = run_cli("companion", str(controller), "--connect", url, "--timeout", "1")
+    assert done.returncode == 2 and says in done.stderr
+    assert "Traceback" not in done.stderr

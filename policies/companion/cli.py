@@ -86,8 +86,19 @@ def run(args: argparse.Namespace, say: Any = print) -> int:
     os.environ.setdefault("MAVLINK20", "1")  # before pymavlink.mavutil is imported
     from pymavlink import mavutil
 
-    conn = mavutil.mavlink_connection(args.connect, source_system=COMPANION_SYSTEM,
-                                      source_component=COMPANION_COMPONENT)  # fmt: skip
+    scheme = args.connect.partition(":")[0]
+    if scheme not in ("udpin", "udpout", "udp", "tcp", "tcpin") and not os.path.exists(
+        args.connect.partition(",")[0]
+    ):
+        raise ValueError(
+            f"--connect {args.connect!r} is neither a MAVLink URL (udpin:, udpout:, tcp:, "
+            "tcpin: HOST:PORT) nor a serial device that exists"
+        )
+    try:
+        conn = mavutil.mavlink_connection(args.connect, source_system=COMPANION_SYSTEM,
+                                          source_component=COMPANION_COMPONENT)  # fmt: skip
+    except (OSError, ValueError, OverflowError) as error:
+        raise ValueError(f"cannot open --connect {args.connect!r}: {error}") from None
     try:
         companion = Companion(conn, net, config, options, say)
         return companion.run()
