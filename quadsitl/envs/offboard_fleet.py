@@ -35,6 +35,7 @@ SETTLED_SPEED = 0.1  # ... and m/s, rad/s: the start is reached ...
 SETTLED_FOR_S = 0.2  # ... for this long
 ARM_LIMIT_S = 60.0  # simulated s a new autopilot may refuse to arm (its estimator converging)
 START_TRIES = 2  # new processes a reset tries before it gives up on an autopilot
+CLIMB_BEFORE_TURN_M = 0.5  # m below its start: a reset's flight holds the heading it had
 TILT_REACHED = 0.03  # rad from the drawn attitude, by the estimate: the start is reached
 TILT_LIMIT_S = 1.0  # simulated s a reset may tilt before the episode starts anyway
 LEVEL = np.zeros(L.STATE_SIZE)
@@ -157,10 +158,16 @@ class OffboardFleet:
         self._offboard(list(targets))
         settled = dict.fromkeys(targets, 0.0)
         flying = list(targets)
+        heading = {row: self._estimated_yaw(row) for row in flying}  # held while climbing
         while flying:
             for row in flying:
                 local = targets[row] - self.autopilots.pilots[row].local_origin
-                self._send(row, setpoints.position_message, local, yaws[row])
+                # Climb first, then turn: PX4 aligns its heading to the magnetometer again
+                # once airborne, and a vehicle turning fast meanwhile (90°/s) was left with
+                # a heading 7° off, which its in-flight fusion did not take back.
+                below = targets[row][2] - self.autopilots.estimated_position(row)[2]
+                yaw = heading[row] if below > CLIMB_BEFORE_TURN_M else yaws[row]
+                self._send(row, setpoints.position_message, local, yaw)
             failed = self.autopilots.advance(self.control_period, flying)
             if failed:
                 failures = {row: self.autopilots.pilots[row].failure for row in failed}
@@ -209,6 +216,11 @@ class OffboardFleet:
             ]  # fmt: skip
         return reached
 
+    def _estimated_yaw(self, row: int) -> float:
+        """The heading row's autopilot estimates (ENU yaw, rad)."""
+        q = np.array(self.autopilots.pilots[row].estimate.quaternion)
+        return float(frames.euler_from_quat(frames.quat_ned_frd_to_enu_flu(q))[2])
+
     def _send(self, row: int, make: Any, *args: Any) -> None:
         pilot = self.autopilots.pilots[row]
         ms = self.autopilots.time_us(row) // 1000
@@ -236,7 +248,7 @@ class OffboardFleet:
             for _ in range(math.ceil(STREAM_FIRST_S / self.control_period)):
                 for row in rows:
                     here = self.physical.state[row, L.POS] - pilots[row].local_origin
-                    self._send(row, setpoints.position_message, here, 0.0)
+                    self._send(row, setpoints.position_message, here, self._estimated_yaw(row))
                 self.autopilots.advance(self.control_period, rows)
             for row in rows:
                 if not pilots[row].estimate.armed:  # at rest on the ground: measure again
