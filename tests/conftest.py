@@ -388,3 +388,20 @@ def free_px4_instances(n: int = 1) -> int:
         if all(free(first + i) for i in range(n)):
             return first
     raise AssertionError(f"no {n} consecutive PX4 instances with free ports")
+
+
+@pytest.fixture(scope="module")
+def two_ray_nodes():  # type: ignore[no-untyped-def]
+    """A two-node Ray cluster on this machine, joined: a head that takes no work, and a
+    second node with 2 CPUs; (cluster, that node)."""
+    ray = pytest.importorskip("ray")
+    from ray.cluster_utils import Cluster
+
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 0})
+    worker = cluster.add_node(num_cpus=2)
+    ray.init(address=cluster.address, include_dashboard=False, log_to_driver=False)
+    try:
+        yield cluster, worker
+    finally:
+        ray.shutdown()
+        cluster.shutdown()

@@ -14,7 +14,6 @@ from quadsitl.envs.ray_offboard import concat_infos
 from tests.conftest import free_px4_instances
 
 ray = pytest.importorskip("ray")
-from ray.cluster_utils import Cluster  # noqa: E402
 
 pytestmark = pytest.mark.xdist_group("ray")  # one Ray at a time (Makefile)
 
@@ -30,22 +29,10 @@ def test_vector_infos_of_groups_are_joined_end_to_end_with_blanks_where_one_lack
     assert joined["final_info"]["r"].tolist() == [1.5, 0.0, 0.0]
 
 
-@pytest.fixture(scope="module")
-def two_nodes():
-    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 0})
-    worker = cluster.add_node(num_cpus=2)
-    ray.init(address=cluster.address, include_dashboard=False, log_to_driver=False)
-    try:
-        yield cluster, worker
-    finally:
-        ray.shutdown()
-        cluster.shutdown()
-
-
-def test_flight_stack_envs_on_the_second_node_fly_as_here_and_survive_a_lost_actor(two_nodes):
+def test_flight_stack_envs_on_the_second_node_fly_as_here_and_survive_a_lost_actor(two_ray_nodes):
     from quadsitl.envs.ray_offboard import RayOffboardVectorEnv
 
-    _, worker = two_nodes
+    _, worker = two_ray_nodes
     options = {"init_position_noise": 0.3, "sensor_noise": 0.0}
     here = OffboardVectorEnv(2, "hover", "velocity", first_instance=free_px4_instances(2),
                              **options)  # fmt: skip

@@ -23,25 +23,12 @@ from quadsitl.lockstep_client.motor_client import SimulatorError
 from tests.conftest import OBS_TOLERANCE, cli, fly_both
 
 ray = pytest.importorskip("ray")
-from ray.cluster_utils import Cluster  # noqa: E402
 
 pytestmark = pytest.mark.xdist_group("ray")  # one Ray at a time (Makefile)
 
 
-@pytest.fixture(scope="module")
-def two_nodes():
-    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 0})
-    worker = cluster.add_node(num_cpus=2)
-    ray.init(address=cluster.address, include_dashboard=False, log_to_driver=False)
-    try:
-        yield cluster, worker
-    finally:
-        ray.shutdown()
-        cluster.shutdown()
-
-
-def test_simulators_on_the_second_node_fly_as_in_process_and_survive_a_lost_actor(two_nodes):
-    _, worker = two_nodes
+def test_simulators_on_the_second_node_fly_as_in_process_and_survive_a_lost_actor(two_ray_nodes):
+    _, worker = two_ray_nodes
     kwargs = {"init_position_noise": 0.3}
     env_id = "QuadSITL/RandomWaypoint-v0"
     local = gym.make_vec(env_id, 4, "vector_entry_point", **kwargs)
@@ -102,7 +89,7 @@ def _released(address: tuple[str, int], wait: float = 120.0) -> bool:
         time.sleep(0.1)
 
 
-def test_ray_options_are_checked(two_nodes):
+def test_ray_options_are_checked(two_ray_nodes):
     for bad, match in (
         ({"ray": ""}, "ray must be True or a Ray cluster address"),
         ({"ray": 3}, "ray must be True or a Ray cluster address"),

@@ -20,6 +20,7 @@ action.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -283,7 +284,9 @@ class Companion:
                 self.stream_position(target, self.period)
             else:
                 self.pump_estimate()
-        self.options = _with_goal(self.options, target)
+        if self.options.goal is None:  # the take-off point is the goal
+            goal = (float(target[0]), float(target[1]), float(target[2]))
+            self.options = dataclasses.replace(self.options, goal=goal)
 
     def stream_position(self, target: np.ndarray, seconds: float) -> None:
         """Position setpoints at ``target`` each control period for ``seconds`` of the
@@ -405,16 +408,6 @@ def unturned(action: np.ndarray, level: str, turned: float) -> np.ndarray:
         yaw = float(np.clip(a[2], -1.0, 1.0)) * math.pi + turned
         a[2] = ((yaw + math.pi) % (2 * math.pi) - math.pi) / math.pi
     return a
-
-
-def _with_goal(options: CompanionOptions, goal: np.ndarray) -> CompanionOptions:
-    """``options`` with the take-off point as the goal, unless one was given."""
-    if options.goal is not None:
-        return options
-    return CompanionOptions(
-        (float(goal[0]), float(goal[1]), float(goal[2])), options.takeoff, options.duration,
-        options.max_distance, options.system, options.timeout,
-    )  # fmt: skip
 
 
 def _result_name(result: int) -> str:

@@ -73,10 +73,7 @@ class OffboardVectorEnv(VectorEnv):
         )  # fmt: skip
         self.engine, self.fleet = self.offboard.engine, self.offboard.fleet
         size = self.engine.obs_size
-        self.single_observation_space = spaces.Box(-np.inf, np.inf, (size,), np.float32)
-        self.single_action_space = spaces.Box(-1.0, 1.0, (4,), np.float32)
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        set_spaces(self, size)
         self._obs = np.zeros((self.num_envs, size), np.float32)
         self._autoreset = np.zeros(self.num_envs, bool)
         self._all = np.ones(self.num_envs, bool)
@@ -156,3 +153,11 @@ class OffboardVectorEnv(VectorEnv):
 
 
 __all__ = ["OffboardVectorEnv"]
+
+
+def set_spaces(env: VectorEnv, obs_size: int) -> None:
+    """A flight-stack vector env's spaces: the task's observations, 4 actions in [−1, 1]."""
+    env.single_observation_space = spaces.Box(-np.inf, np.inf, (obs_size,), np.float32)
+    env.single_action_space = spaces.Box(-1.0, 1.0, (4,), np.float32)
+    env.observation_space = batch_space(env.single_observation_space, env.num_envs)
+    env.action_space = batch_space(env.single_action_space, env.num_envs)

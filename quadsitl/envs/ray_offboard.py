@@ -25,8 +25,10 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 
 from quadsitl.envs.autopilot_link import AutopilotError
 from quadsitl.envs.offboard_env import AIRFRAME, CONTROL_RATE, checked_actions
-from quadsitl.envs.offboard_vector import OffboardVectorEnv
+from quadsitl.envs.offboard_vector import OffboardVectorEnv, set_spaces
 from quadsitl.envs.ray_simulators import PLACE_LIMIT, import_ray, join_ray
+from quadsitl.tasks import TaskOptions, get_task
+from quadsitl.tasks.observation_layout import observation_size
 
 STEP_LIMIT = 600.0  # s for an actor's reset or step: a hang guard (a first reset boots PX4)
 
@@ -97,20 +99,12 @@ class RayOffboardVectorEnv(VectorEnv):
         self.ray = import_ray()
         self.actors: list[Any] = [None] * int(nodes)
         self.nodes: list[str] = [""] * int(nodes)
-        # The spaces, from an env of the same options built here without autopilots.
-        from gymnasium import spaces
-        from gymnasium.vector.utils import batch_space
-
-        from quadsitl.tasks import TaskOptions, get_task
-        from quadsitl.tasks.observation_layout import observation_size
-
-        options = TaskOptions.from_kwargs(airframe=airframe, **task_options)
-        size = observation_size(get_task(task), options)
-        self.single_observation_space = spaces.Box(-np.inf, np.inf, (size,), np.float32)
-        self.single_action_space = spaces.Box(-1.0, 1.0, (4,), np.float32)
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._place([k for k, actor in enumerate(self.actors) if actor is None])
+        task_spec = get_task(task)
+        set_spaces(
+            self,
+            observation_size(task_spec, TaskOptions.from_kwargs(airframe=airframe, **task_options)),
+        )
+        self._place(list(range(int(nodes))))
 
     def _place(self, slots: list[int]) -> None:
         """New actors in ``slots`` (in parallel); AutopilotError when Ray cannot."""
