@@ -271,9 +271,7 @@ class JsonPhysics:
                         f"ArduPilot restarted (frame {frame.frame_count} after "
                         f"{peer.frame_count}); the vehicle is back at its start",
                     )
-                    self._put_on_ground(index)
-                    peer.frame_count = peer.frame_rate = None
-                    peer.time_s = 0.0
+                    self.restart(index)
             if peer.frame_rate is not None and frame.frame_rate != peer.frame_rate:
                 self.notices(
                     index,
@@ -322,6 +320,13 @@ class JsonPhysics:
                 )
             replies[index] = peer.reply
         return replies
+
+    def restart(self, index: int) -> None:
+        """Vehicle ``index`` back at its start, its clock at 0: its ArduPilot starts anew."""
+        self._put_on_ground(index)
+        peer = self.peers[index]
+        peer.frame_count = peer.frame_rate = None
+        peer.time_s = 0.0
 
     def _put_on_ground(self, index: int) -> None:
         """Vehicle ``index`` at rest on the ground at its start, nose north, rotors

@@ -112,6 +112,10 @@ class ArduPilotJsonServer:
         self._index = {sock.fileno(): i for i, sock in enumerate(self.sockets)}
         self._sent_at = 0.0  # perf_counter s of the last answer (one instance)
         self.turnaround = TURNAROUND_CAP  # s, moving average: our answer to its next frame
+        # Frames that would step a vehicle past this simulated time (µs) are not answered
+        # until release(): an env holds its autopilot at a step's end (None: never held).
+        self.hold_at_us: list[int | None] = [None] * physics.fleet.n
+        self._held: dict[int, ServoFrame] = {}
 
     def serve(self, timeout: float = WAIT) -> int:
         """Wait up to ``timeout`` s for frames, answer those that came; the count answered.
@@ -145,7 +149,46 @@ class ArduPilotJsonServer:
             repeat = frame.frame_count == self.physics.peers[index].frame_count
             if repeat and now - self.answered[index] < CROSSING:
                 continue  # sent again just as our answer went out: it has one
+            if not repeat and self._reached_hold(index):
+                self._held[index] = frame  # (a re-send of it replaces it)
+                continue
             frames[index] = frame
+        return self._answer(frames, now)
+
+    def release(self, index: int) -> None:
+        """Answer instance ``index``'s frame held back (hold_at_us), if any."""
+        frame = self._held.pop(index, None)
+        if frame is not None:
+            self._answer({index: frame}, time.monotonic())
+
+    def forget(self, index: int) -> None:
+        """Instance ``index`` is to be flown by a new ArduPilot (its old one ended): the
+        vehicle back at its start, the first sender taken at once, what was queued
+        dropped."""
+        self.addresses[index], self.heard[index] = None, -math.inf
+        self._held.pop(index, None)
+        sock = self.sockets[index]
+        while _readable(sock):
+            try:
+                sock.recvfrom(DATAGRAM)
+            except OSError:
+                break
+        self.physics.restart(index)
+
+    def holding(self, index: int) -> bool:
+        """Whether a frame of instance ``index`` waits for :meth:`release`."""
+        return index in self._held
+
+    def _reached_hold(self, index: int) -> bool:
+        """Whether instance ``index``'s vehicle has flown to its hold (within half a frame:
+        a frame rate that does not divide the hold's time stops as near as it can)."""
+        hold, peer = self.hold_at_us[index], self.physics.peers[index]
+        if hold is None:
+            return False
+        half_frame_us = 0.5e6 / peer.frame_rate if peer.frame_rate else 0.0
+        return peer.time_s * 1e6 + half_frame_us >= hold
+
+    def _answer(self, frames: dict[int, ServoFrame], now: float) -> int:
         if not frames:
             return 0
         replies = self.physics.answer(frames)

@@ -1,19 +1,19 @@
 """Autopilots flown from outside, in lockstep: their simulator, their processes and their
 MAVLink links, owned by the env that trains through them.
 
-The env is the autopilots' simulator (PX4's simulator_mavlink over TCP 4560 + i, served
-here by :class:`~quadsitl.bridges.px4_tcp.Px4TcpServer` around one batched physics), so
-it holds each autopilot's clock: in lockstep PX4 waits for each HIL_SENSOR, and it gets
-the next one only while :meth:`Autopilots.advance` serves rounds. Between env steps the
-autopilots are paused, however long the learner takes; every timeout of an autopilot
-(offboard loss, the setpoint stream's rate, heartbeats) runs on simulated time. The env
-talks to each autopilot as a companion computer does, over its onboard MAVLink link
-(UDP: PX4 sends to 14540 + i and listens on 14580 + i), and reads the autopilot's own
-estimate there.
+The env is the autopilots' simulator (:mod:`.lockstep_sides`: PX4's simulator_mavlink,
+ArduPilot's JSON interface, around one batched physics), so it holds each autopilot's
+clock: in lockstep the autopilot waits for the simulator, and moves on only while
+:meth:`Autopilots.advance` serves it. Between env steps the autopilots are paused,
+however long the learner takes; every timeout of an autopilot (offboard loss, the
+setpoint stream's rate, heartbeats) runs on simulated time. The env talks to each
+autopilot as a companion computer does, over a MAVLink link of its own (UDP: PX4's
+onboard link, 14540 + i and 14580 + i; ArduPilot's SERIAL0 as a UDP client of port
+5760 + 10 i), and reads the autopilot's own estimate there.
 
 An autopilot that exits, disconnects or stops answering is marked failed and no longer
 waited for: the others fly on (:meth:`Autopilots.advance` returns who failed), and
-:meth:`Autopilots.restart` starts it again.
+:meth:`Autopilots.start` starts it again.
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ import os
 import shutil
 import socket
 import subprocess
-import sys
 import tempfile
 import time
 import weakref
@@ -35,9 +34,11 @@ from typing import Any
 import numpy as np
 
 from quadsitl import frames
-from quadsitl.bridges.px4_airframe import parameter_folder
-from quadsitl.bridges.px4_hil import LINK_PORT, PEER_PORT, PORT, ROUND_US, HilPhysics
-from quadsitl.bridges.px4_tcp import Px4TcpServer
+from quadsitl.bridges.ardupilot_json import PORT as JSON_PORT
+from quadsitl.bridges.ardupilot_json import PORT_STRIDE
+from quadsitl.bridges.px4_hil import LINK_PORT, PEER_PORT, PORT
+from quadsitl.envs.autopilot_commands import AutopilotCommand
+from quadsitl.envs.lockstep_sides import SIDES
 from quadsitl.envs.sim_process import terminate
 from quadsitl.physics.fleet import Fleet
 from quadsitl.wire.dialect import mavlink as mav
@@ -49,8 +50,8 @@ ESTIMATE_STEP_S = 0.1  # simulated s between looks for it
 STALL_S = 10.0  # wall s without a round, once in lockstep, before it is called stalled
 ESTIMATE_WAIT_S = 1.0  # wall s to wait for the estimate of a step's end (then the last one)
 HEARTBEAT_S = 1.0  # simulated s between the companion's heartbeats
-STARTING_ROUND_S = 1.0  # wall s between rounds until the autopilot leads in lockstep
 GCS_PORT = 14550  # where every PX4 instance sends its ground-station link
+ARDUPILOT_LINK_PORT = 5760  # UDP port of ArduPilot instance i's SERIAL0: + 10 i (its TCP's)
 COMPANION_SYSTEM, COMPANION_COMPONENT = 255, mav.MAV_COMP_ID_ONBOARD_COMPUTER
 # Decoded by the fast codec: what comes every round (the rest is rare, and pymavlink's)
 ESTIMATE_MESSAGES = frozenset(
@@ -60,72 +61,6 @@ ESTIMATE_MESSAGES = frozenset(
 
 class AutopilotError(RuntimeError):
     """The autopilot exited, disconnected or stalled (the message says which)."""
-
-
-@dataclass(frozen=True)
-class AutopilotCommand:
-    """How an autopilot instance starts: ``argv`` (``{port}`` and ``{instance}`` in it
-    are filled in) with ``environment`` added to this process's; ``own_folder``: it runs
-    in a new folder of its own (PX4 writes its parameters and logs there), where its
-    output goes to ``autopilot.log``; ``streams_us``: message id -> interval (µs) asked
-    for on its onboard link; ``estimate_lag_ms``: how much older than a step's end its
-    estimate may be stamped (a real PX4 stamps its estimator's output)."""
-
-    argv: list[str]
-    environment: dict[str, str] = field(default_factory=dict)
-    own_folder: bool = False
-    streams_us: dict[int, int] = field(default_factory=dict)
-    estimate_lag_ms: int = 0
-
-
-def autopilot_command(autopilot: Any, airframe: str = "iris") -> AutopilotCommand:
-    """``autopilot`` as a command: None, the in-repository fake PX4; a folder, a PX4 SITL
-    build (``build/px4_sitl_default``); a list, the argv of anything else; or an
-    :class:`AutopilotCommand` as it is."""
-    if autopilot is None:
-        return fake_px4_command(airframe)
-    if isinstance(autopilot, AutopilotCommand):
-        return autopilot
-    if isinstance(autopilot, (str, os.PathLike)):
-        return px4_build_command(autopilot, airframe)
-    return AutopilotCommand([str(a) for a in autopilot])
-
-
-def fake_px4_command(airframe: str = "iris") -> AutopilotCommand:
-    """The in-repository fake (:mod:`quadsitl.fake_stacks.offboard_px4`) as a process."""
-    module = "quadsitl.fake_stacks.offboard_px4"
-    return AutopilotCommand([sys.executable, "-m", module, "-i", "{instance}", "--port",
-                             "{port}", "--airframe", airframe])  # fmt: skip
-
-
-# What a real PX4 sends its onboard link by default is too slow for 50 Hz control (its
-# "onboard" MAVLink mode: LOCAL_POSITION_NED at 30 Hz); the env asks for every round's.
-PX4_STREAMS_US = {
-    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: ROUND_US,
-    mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: ROUND_US,
-}
-PX4_ESTIMATE_LAG_MS = 12  # PX4 publishes its estimate a few rounds after the IMU's
-
-
-def px4_build_command(build: str | os.PathLike[str], airframe: str = "iris") -> AutopilotCommand:
-    """A real PX4 from its SITL build folder, on quadsitl's parameter file for
-    ``airframe`` (airframe none_iris: PX4's quad X without a simulator of its own), as
-    docs/autopilots.md starts it by hand."""
-    build = Path(build).expanduser().resolve()
-    binary, etc = build / "bin" / "px4", build / "etc"
-    if not (binary.is_file() and etc.is_dir()):
-        raise ValueError(f"{build} is not a PX4 SITL build (no bin/px4 and etc/ in it)")
-    folder = parameter_folder(airframe)
-    if folder is None:
-        raise ValueError(f"no PX4 parameter file ships for airframe {airframe!r}")
-    path = f"{folder}{os.pathsep}{os.environ.get('PATH', '')}"
-    return AutopilotCommand(
-        [str(binary), "-d", "-i", "{instance}", str(etc)],
-        {"PATH": path, "PX4_SIM_MODEL": "none_iris"},
-        own_folder=True,
-        streams_us=dict(PX4_STREAMS_US),
-        estimate_lag_ms=PX4_ESTIMATE_LAG_MS,
-    )
 
 
 @dataclass
@@ -179,20 +114,32 @@ class Estimate:
 
 
 class Autopilot:
-    """One autopilot instance: its process and its onboard MAVLink link."""
+    """One autopilot instance of ``stack``: its process and its MAVLink link."""
 
-    def __init__(self, instance: int) -> None:
-        if not 0 <= instance < 255 or PEER_PORT + instance == GCS_PORT:
-            raise ValueError(
-                f"PX4 instance {instance} cannot be flown from here: instances are 0 .. 254 "
-                f"(system id i + 1), and instance {GCS_PORT - PEER_PORT}'s onboard port is "
-                f"{GCS_PORT}, where every PX4 sends to its ground station"
-            )
-        self.instance = instance
+    def __init__(self, instance: int, stack: str = "px4") -> None:
+        if stack == "ardupilot":
+            # ArduPilot's -I i: JSON on 9002 + 10 i; SERIAL0 sends to the env's port
+            if not 0 <= instance < (65535 - JSON_PORT) // PORT_STRIDE:
+                raise ValueError(f"ArduPilot instance {instance} is not 0 .. 6000")
+            port, peer, system_id = ARDUPILOT_LINK_PORT + PORT_STRIDE * instance, None, 1
+        else:
+            if not 0 <= instance < 255 or PEER_PORT + instance == GCS_PORT:
+                raise ValueError(
+                    f"PX4 instance {instance} cannot be flown from here: instances are 0 .. 254 "
+                    f"(system id i + 1), and instance {GCS_PORT - PEER_PORT}'s onboard port is "
+                    f"{GCS_PORT}, where every PX4 sends to its ground station"
+                )
+            port, peer = PEER_PORT + instance, ("127.0.0.1", LINK_PORT + instance)
+            system_id = instance + 1  # PX4's MAV_SYS_ID (px4-rc.mavlink), and the fake's
+        self.instance, self.stack = instance, stack
+        self.link_port = port
         self.link = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.link.bind(("127.0.0.1", PEER_PORT + instance))
+        self.link.bind(("127.0.0.1", port))
         self.link.setblocking(False)
-        self.peer = ("127.0.0.1", LINK_PORT + instance)
+        # where its link listens: PX4's is known; ArduPilot's (a UDP client) is where it
+        # sends from, learned from its first datagram
+        self.known_peer: tuple[str, int] | None = peer
+        self.peer = peer
         self.mav = mav.MAVLink(None, srcSystem=COMPANION_SYSTEM, srcComponent=COMPANION_COMPONENT)
         self.mav.robust_parsing = True
         self.estimate = Estimate()
@@ -200,14 +147,19 @@ class Autopilot:
         self.folder: str | None = None
         self.failure: str | None = None  # why it is no longer flown (None: it flies)
         self.flown = False  # has flown since its process started (it is not fresh)
-        self.system_id = instance + 1  # PX4's MAV_SYS_ID (px4-rc.mavlink), and the fake's
+        self.system_id = system_id  # ArduPilot's SYSID_THISMAV: 1 (a link of its own)
         self.next_heartbeat_us = 0
         self.local_origin = np.zeros(3)  # its local frame's origin in the simulator's (ENU)
 
     def start_process(self, command: AutopilotCommand) -> None:
         self.stop_process()
         self.read()  # what the old one sent and did not deliver is dropped
-        filled = [a.format(port=PORT, instance=self.instance) for a in command.argv]
+        self.peer = self.known_peer
+        sim_port = JSON_PORT if self.stack == "ardupilot" else PORT
+        filled = [
+            a.format(port=sim_port, instance=self.instance, link=self.link_port)
+            for a in command.argv
+        ]
         folder, output = None, None
         if command.own_folder:
             folder = tempfile.mkdtemp(prefix=f"quadsitl-autopilot{self.instance}-")
@@ -255,11 +207,16 @@ class Autopilot:
 
     # --- the MAVLink link ---------------------------------------------------------
     def send(self, msg: Any) -> None:
+        if self.peer is None:
+            return  # it has not spoken yet: nothing listens for us
         with contextlib.suppress(OSError):
             self.link.sendto(msg.pack(self.mav), self.peer)
 
     def read(self) -> None:
         """Take what the autopilot sent so far."""
+        if self.peer is None:
+            with contextlib.suppress(OSError):
+                self.peer = self.link.recvfrom(1, socket.MSG_PEEK)[1]
         for msg in pending_messages(self.link, self.mav, ESTIMATE_MESSAGES):
             self._take(msg)
 
@@ -270,29 +227,25 @@ class Autopilot:
 
 
 class Autopilots:
-    """Autopilot instances ``first_instance`` .. ``first_instance + n - 1`` started with
-    ``command``, each flying a vehicle of ``airframe`` on one batched physics, sensed with
-    the sensor models' noise scaled by ``sensor_noise`` (0: the truth)."""
+    """Autopilot instances ``first_instance`` .. ``first_instance + n - 1`` of ``stack``
+    (``px4`` or ``ardupilot``) started with ``command``, each flying a vehicle of
+    ``airframe`` on one batched physics (PX4's sensed with the sensor models' noise scaled
+    by ``sensor_noise``, 0: the truth)."""
 
     def __init__(
         self, command: AutopilotCommand, n: int = 1, first_instance: int = 0,
-        airframe: str = "iris", sensor_noise: float = 1.0,
+        airframe: str = "iris", sensor_noise: float = 1.0, stack: str = "px4",
     ) -> None:  # fmt: skip
-        self.start_command, self.airframe = command, airframe
+        self.start_command, self.airframe, self.stack = command, airframe, stack
         self.notices: list[str] = []
-        fleet = Fleet(n, airframe)
-        self.physics = HilPhysics(fleet, noise_scale=sensor_noise, notice=self.notices.append)
-        self.fleet = self.physics.fleet
-        self.server = Px4TcpServer(self.physics, "127.0.0.1", PORT + first_instance)
-        # One round when an autopilot connects, then only those it answers: the rounds
-        # before it leads in lockstep are then the same every time (the fake answers the
-        # first; a real PX4 that does not is sent another each second).
-        self.server.wall_round_s = STARTING_ROUND_S
+        self.side = SIDES[stack](Fleet(n, airframe), first_instance, sensor_noise,
+                                 self.notices.append)  # fmt: skip
+        self.fleet = self.side.fleet
         self.pilots: list[Autopilot] = []
         try:
             for i in range(n):
-                self.pilots.append(Autopilot(first_instance + i))
-        except OSError:
+                self.pilots.append(Autopilot(first_instance + i, stack))
+        except (OSError, ValueError):
             self.close()
             raise
         self.estimate_lag_ms = command.estimate_lag_ms
@@ -303,61 +256,63 @@ class Autopilots:
 
     def time_us(self, row: int) -> int:
         """Vehicle ``row``'s simulated time (its autopilot's clock)."""
-        return self.physics.peers[row].time_us
+        return self.side.time_us(row)
 
     # --- the processes --------------------------------------------------------------
     def start(self, rows: Sequence[int] | None = None) -> list[int]:
         """Start the autopilots of ``rows`` (all; a running one is stopped first: a
-        restart) and serve them until each leads in
-        lockstep and its estimate of the vehicle at rest comes; the rows that failed
-        (each one's ``failure`` says why)."""
+        restart) and serve them until each leads in lockstep and its estimate of the
+        vehicle at rest comes; the rows that failed (each one's ``failure`` says why)."""
         rows = list(range(self.n)) if rows is None else list(rows)
-        before = {row: self.physics.peers[row] for row in rows}  # a connection makes anew
+        before = {}
         for row in rows:
-            self.server.hold_at_us[row] = 0  # its rounds wait for advance() from the first
+            self.pilots[row].stop_process()
+            before[row] = self.side.begin(row)  # held from its first round or frame
             self.pilots[row].start_process(self.start_command)
         deadline = time.monotonic() + BOOT_GUARD_S
         waiting = set(rows)
         while waiting:
             for row in list(waiting):
-                pilot, peer = self.pilots[row], self.physics.peers[row]
-                if peer is not before[row] and peer.lockstep:
+                pilot = self.pilots[row]
+                if self.side.leading(row, before[row]):
                     waiting.discard(row)  # it leads from now on
                 elif pilot.exited() or time.monotonic() > deadline:
                     pilot.failure = pilot.exited() or (
                         f"the autopilot did not start within {BOOT_GUARD_S:g} s"
                     )
                     waiting.discard(row)
-            self.server.serve(0.05)
+            self.side.serve(0.05)
         live = [row for row in rows if self.pilots[row].failure is None]
-        self._await_estimates(live)
+        self._await(live, lambda e: e.autopilot != mav.MAV_AUTOPILOT_INVALID, "no heartbeat")
         live = [row for row in live if self.pilots[row].failure is None]
         for message, interval in self.start_command.streams_us.items():
-            # once its MAVLink is up (it sent an estimate): each stream at its rate
+            # once its MAVLink is up (it sent a heartbeat): each stream at its rate
             self.command(live, mav.MAV_CMD_SET_MESSAGE_INTERVAL, message, interval)
+        self._await(live, lambda e: e.time_ms >= 0, "no estimate")
         for row in live:
-            self.measure_origin(row)
-            self.pilots[row].flown = False  # what it flew to start is not an episode
+            if self.pilots[row].failure is None:
+                self.measure_origin(row)
+                self.pilots[row].flown = False  # what it flew to start is not an episode
         return [row for row in rows if self.pilots[row].failure is not None]
 
-    def _await_estimates(self, rows: list[int]) -> None:
-        """Let the autopilots of ``rows`` run, their vehicles at rest, until each reports
-        an estimate (a real PX4 sends one once its estimator has started)."""
+    def _await(self, rows: list[int], came: Any, what: str) -> None:
+        """Let the autopilots of ``rows`` run, their vehicles at rest, until what each
+        reported ``came`` (a real autopilot sends an estimate once its estimator has
+        started), at most ESTIMATE_LIMIT_S of its clock; the late ones are marked failed
+        (``what`` came)."""
         limit = ESTIMATE_LIMIT_S * 1e6
-        waiting = [r for r in rows if self.pilots[r].estimate.time_ms < 0]
+        waiting = [r for r in rows if not came(self.pilots[r].estimate)]
         while waiting:
             for row in self.advance(ESTIMATE_STEP_S, waiting):
                 waiting.remove(row)  # failed: said in its failure
             for row in waiting:
                 if self.time_us(row) > limit:
-                    self.pilots[
-                        row
-                    ].failure = (
-                        f"the autopilot sent no estimate in {ESTIMATE_LIMIT_S:g} simulated s"
+                    self.pilots[row].failure = (
+                        f"the autopilot sent {what} in {ESTIMATE_LIMIT_S:g} simulated s"
                     )
             waiting = [
                 r for r in waiting
-                if self.pilots[r].failure is None and self.pilots[r].estimate.time_ms < 0
+                if self.pilots[r].failure is None and not came(self.pilots[r].estimate)
             ]  # fmt: skip
 
     def estimated_position(self, row: int) -> np.ndarray:
@@ -377,7 +332,7 @@ class Autopilots:
     def close(self) -> None:
         for pilot in self.pilots:
             pilot.close()
-        self.server.close()
+        self.side.close()
 
     # --- time ---------------------------------------------------------------------
     def advance(self, seconds: float, rows: Sequence[int] | None = None) -> list[int]:
@@ -388,14 +343,14 @@ class Autopilots:
         if rows is None:
             rows = range(self.n)
         rows = [row for row in rows if self.pilots[row].failure is None]
-        rounds = round(seconds * 1e6 / ROUND_US)
-        target = {row: self.time_us(row) + rounds * ROUND_US for row in rows}
+        frame_us = self.side.frame_us
+        span = max(1, round(seconds * 1e6 / frame_us)) * frame_us
+        target = {row: self.time_us(row) + span for row in rows}
         for row in rows:
             self.pilots[row].flown = True
             # The round of the last step's end was held back: the autopilot gets it now,
             # after what the env sent since, and the round of this step's end is held.
-            self.server.hold_at_us[row] = target[row]
-            self.server.release(row)
+            self.side.hold(row, target[row])
         flying, failed = set(rows), []
         progress = {row: (self.time_us(row), time.monotonic()) for row in rows}
         while flying:
@@ -405,13 +360,13 @@ class Autopilots:
                     self.pilots[row].failure = why
                     flying.discard(row)
                     failed.append(row)
-                elif self.time_us(row) >= target[row]:
+                elif self.time_us(row) + frame_us // 2 >= target[row]:
                     flying.discard(row)
                 else:
                     self._heartbeat(row)
                     self.pilots[row].read()  # a long advance would overflow its socket
             if flying:
-                self.server.serve(0.05)
+                self.side.serve(0.05)
         # The estimate of the round before the step's end: its telemetry came before the
         # motor outputs that ended the step (the round of the end itself is held).
         self._read_estimates([row for row in rows if row not in failed], ESTIMATE_WAIT_S)
@@ -419,7 +374,7 @@ class Autopilots:
 
     def _fault(self, row: int, progress: dict[int, tuple[int, float]]) -> str | None:
         """Why the autopilot of ``row`` cannot fly on, if it cannot."""
-        if self.server.connections[row] is None:
+        if not self.side.connected(row):
             return self.pilots[row].exited() or "the autopilot disconnected from its simulator"
         now, (last_us, since) = time.monotonic(), progress[row]
         if self.time_us(row) != last_us:
@@ -439,8 +394,7 @@ class Autopilots:
         """Read until each estimate is stamped at the last round its autopilot answered
         or later (it sends its telemetry before its motor outputs, maybe from another
         thread), waiting at most ``wait_s``."""
-        peers = self.physics.peers
-        stamp = {r: peers[r].answered_us // 1000 - self.estimate_lag_ms for r in rows}
+        stamp = {r: self.side.answered_us(r) // 1000 - self.estimate_lag_ms for r in rows}
         deadline = time.monotonic() + wait_s
         waiting = list(rows)
         while True:
@@ -462,11 +416,11 @@ class Autopilots:
             pilot.estimate.acks.pop(command, None)
             pilot.send(pilot.mav.command_long_encode(pilot.system_id, 1, command, 0, *values))
         waiting = list(rows)
-        for _ in range(round(1e6 / ROUND_US)):
+        for _ in range(round(1e6 / self.side.frame_us)):
             waiting = [r for r in waiting if command not in self.pilots[r].estimate.acks]
             if not waiting:
                 break
-            self.advance(ROUND_US * 1e-6, waiting)  # (which reads what they sent)
+            self.advance(self.side.frame_us * 1e-6, waiting)  # (which reads what they sent)
         return {row: self.pilots[row].estimate.acks.get(command, -1) for row in rows}
 
 

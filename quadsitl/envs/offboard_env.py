@@ -35,9 +35,10 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from quadsitl.bridges.px4_hil import ROUND_US
 from quadsitl.envs import setpoints
-from quadsitl.envs.autopilot_link import Autopilots, autopilot_command
+from quadsitl.envs.autopilot_commands import STACKS, autopilot_command
+from quadsitl.envs.autopilot_link import Autopilots
+from quadsitl.envs.lockstep_sides import SIDES
 from quadsitl.envs.offboard_fleet import OffboardFleet
 from quadsitl.physics import get_airframe
 from quadsitl.tasks import TaskEngine, TaskOptions, get_task
@@ -51,13 +52,17 @@ CONTROL_RATE = 50.0  # Hz: env steps per simulated second, by default
 AIRFRAME = "iris"  # the airframe preset flown, by default (PX4's quad X, with its parameters)
 
 
-def flight_stack_timing(control_rate: float = CONTROL_RATE) -> dict[str, float]:
-    """The task options of an env step through an autopilot: the control period, a whole
-    number of PX4's 4 ms lockstep rounds, and the round as the physics step."""
-    period = round(1.0 / control_rate / (ROUND_US * 1e-6)) * ROUND_US * 1e-6
+def flight_stack_timing(control_rate: float = CONTROL_RATE, stack: str = "px4") -> dict[str, float]:
+    """The task options of an env step through an autopilot of ``stack``: the control
+    period, a whole number of its lockstep frames (PX4's 4 ms rounds, ArduPilot's
+    1/800 s physics frames), and the frame as the physics step."""
+    if stack not in STACKS:
+        raise ValueError(f"stack must be one of {', '.join(STACKS)}, got {stack!r}")
+    frame = SIDES[stack].frame_us * 1e-6
+    period = round(1.0 / control_rate / frame) * frame
     if not 0 < period < 1e3:
-        raise ValueError(f"control_rate {control_rate} is not within (0, 250] Hz")
-    return {"physics_dt": ROUND_US * 1e-6, "control_period": period}
+        raise ValueError(f"control_rate {control_rate} is not within (0, {1 / frame:g}] Hz")
+    return {"physics_dt": frame, "control_period": period}
 
 
 @dataclass
@@ -83,17 +88,18 @@ class Offboard:
         control_rate: float,
         task_options: dict[str, Any],
         sensor_noise: float = 1.0,
+        stack: str = "px4",
     ) -> Offboard:
         level = setpoints.check_level(action_level)
         spec = get_task(task)
         options = TaskOptions.from_kwargs(
-            airframe=airframe, **flight_stack_timing(control_rate), **task_options
+            airframe=airframe, **flight_stack_timing(control_rate, stack), **task_options
         )
         hover = get_airframe(airframe).hover_thrust_fraction
-        command = autopilot_command(autopilot, airframe)
+        command = autopilot_command(autopilot, airframe, stack)
         if not (math.isfinite(sensor_noise) and sensor_noise >= 0):
             raise ValueError(f"sensor_noise must be a number ≥ 0, got {sensor_noise!r}")
-        autopilots = Autopilots(command, n, first_instance, airframe, sensor_noise)
+        autopilots = Autopilots(command, n, first_instance, airframe, sensor_noise, stack)
         try:
             failed = autopilots.start()
             if failed:
@@ -148,11 +154,12 @@ def checked_actions(actions: ArrayLike, n: int) -> NDArray[np.float64]:
 
 
 class OffboardEnv(gym.Env):
-    """Task ``task`` flown through PX4 (offboard) at action level ``action_level``
-    (``"velocity"``, ``"attitude"`` or ``"rates"``). ``autopilot``: PX4 instance
-    ``instance``, from a PX4 SITL build folder (``build/px4_sitl_default``); None: the
-    in-repository fake (:mod:`quadsitl.fake_stacks.offboard_px4`); a list: the command
-    that starts one (``{port}`` and ``{instance}`` in it are filled in).
+    """Task ``task`` flown through ``stack``, PX4 (OFFBOARD) or ArduPilot (ArduCopter's
+    GUIDED), at action level ``action_level`` (``"velocity"``, ``"attitude"`` or
+    ``"rates"``). ``autopilot``: instance ``instance`` from a SITL build (PX4's
+    ``build/px4_sitl_default``, ArduPilot's ``build/sitl``); None: the in-repository
+    fake (:mod:`quadsitl.fake_stacks`); a list: the command that starts one (``{port}``,
+    ``{instance}`` and ``{link}`` in it are filled in).
     ``control_rate``: env steps per simulated second. ``sensor_noise``: the scale of the
     sensor models' noise the autopilot's estimator works with (1: a hobby-grade GPS,
     barometer and IMU; 0: exact readings). Other keyword arguments are the task's options
@@ -170,12 +177,14 @@ class OffboardEnv(gym.Env):
         control_rate: float = CONTROL_RATE,
         sensor_noise: float = 1.0,
         render_mode: str | None = None,
+        stack: str = "px4",
         **task_options: Any,
     ) -> None:
         if render_mode is not None:
             raise ValueError(f"render_mode {render_mode!r} is not supported (use None)")
         self.offboard = Offboard.build(task, 1, action_level, autopilot, instance, airframe,
-                                       control_rate, task_options, sensor_noise)  # fmt: skip
+                                       control_rate, task_options, sensor_noise,
+                                       stack)  # fmt: skip
         self.autopilots, self.fleet = self.offboard.autopilots, self.offboard.fleet
         self.engine = self.offboard.engine
         size = self.engine.obs_size

@@ -20,7 +20,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from quadsitl import frames
-from quadsitl.bridges.px4_hil import ROUND_US
 from quadsitl.envs import setpoints
 from quadsitl.envs.autopilot_link import AutopilotError, Autopilots
 from quadsitl.physics import get_airframe
@@ -38,6 +37,8 @@ START_TRIES = 2  # new processes a reset tries before it gives up on an autopilo
 CLIMB_BEFORE_TURN_M = 0.5  # m below its start: a reset's flight holds the heading it had
 TILT_REACHED = 0.03  # rad from the drawn attitude, by the estimate: the start is reached
 TILT_LIMIT_S = 1.0  # simulated s a reset may tilt before the episode starts anyway
+ARDUCOPTER_GUIDED = 4  # ArduCopter's mode number (ArduCopter/mode.h)
+TAKEOFF_BELOW_M = 0.3  # m above its local origin: an ArduCopter lower is taken off first
 LEVEL = np.zeros(L.STATE_SIZE)
 LEVEL[L.I_QW] = 1.0  # a start state with no attitude drawn: level, facing east
 
@@ -82,7 +83,8 @@ class OffboardFleet:
     def step(self, rotor_cmd: ArrayLike, n_substeps: int = 1) -> None:
         """The setpoints were sent (the env's step); the autopilots of the active rows fly
         ``n_substeps`` rounds. The engine's rotor commands are not used: theirs are."""
-        self.autopilots.advance(n_substeps * ROUND_US * 1e-6, np.flatnonzero(self.active).tolist())
+        span = n_substeps * self.autopilots.side.frame_us * 1e-6
+        self.autopilots.advance(span, np.flatnonzero(self.active).tolist())
         self.sync()
 
     # --- the estimate -------------------------------------------------------------------
@@ -156,6 +158,8 @@ class OffboardFleet:
         """Fly each row to its target (the simulator's ENU, m), facing its yaw (ENU, rad),
         until settled there; how long each was settled at the end (simulated s)."""
         self._offboard(list(targets))
+        if self.autopilots.stack == "ardupilot":
+            self._take_off(targets)
         settled = dict.fromkeys(targets, 0.0)
         flying = list(targets)
         heading = {row: self._estimated_yaw(row) for row in flying}  # held while climbing
@@ -227,10 +231,15 @@ class OffboardFleet:
         pilot.send(make(pilot.mav, *args, ms, pilot.system_id))
 
     def _offboard(self, rows: list[int]) -> None:
-        """Armed and in OFFBOARD, holding where each is: a stream of setpoints first, then
-        the mode and arming asked for each simulated second until every autopilot takes
-        them (a PX4 just started refuses until its estimator has converged)."""
-        pilots, custom = self.autopilots.pilots, Mode.OFFBOARD.custom_mode
+        """Armed and in the offboard mode (PX4's OFFBOARD, ArduCopter's GUIDED), holding
+        where each is: a stream of setpoints first (PX4 enters OFFBOARD only while they
+        come), then the mode and arming asked for each simulated second until every
+        autopilot takes them (one just started refuses until its estimator has
+        converged: PX4's in ~15 s, ArduCopter's once it uses GPS, ~45 s)."""
+        pilots = self.autopilots.pilots
+        ardupilot = self.autopilots.stack == "ardupilot"
+        custom = ARDUCOPTER_GUIDED if ardupilot else Mode.OFFBOARD.custom_mode
+        mode_params = (float(ARDUCOPTER_GUIDED), 0.0) if ardupilot else (MAIN_OFFBOARD, 0.0)
         began = {row: self.autopilots.time_us(row) for row in rows}
         accepted = mav.MAV_RESULT_ACCEPTED
         results: dict[int, tuple[int, int]] = {}
@@ -254,11 +263,22 @@ class OffboardFleet:
                 if not pilots[row].estimate.armed:  # at rest on the ground: measure again
                     self.autopilots.measure_origin(row)
             mode = self.autopilots.command(
-                rows, mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, MAIN_OFFBOARD
+                rows, mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, *mode_params
             )
             arm = self.autopilots.command(rows, mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
             results = {r: (mode[r], arm[r]) for r in rows}
             rows = [r for r in rows if results[r] != (accepted, accepted)]
+
+    def _take_off(self, targets: dict[int, NDArray]) -> None:
+        """ArduCopter flies GUIDED's position setpoints only once airborne: each row on
+        the ground (less than TAKEOFF_BELOW_M above its local origin, by its estimate) is
+        sent MAV_CMD_NAV_TAKEOFF to its target's height above home."""
+        for row, target in targets.items():
+            origin = self.autopilots.pilots[row].local_origin
+            height = self.autopilots.estimated_position(row)[2] - origin[2]
+            if height < TAKEOFF_BELOW_M:
+                climb = float(target[2] - origin[2])
+                self.autopilots.command([row], mav.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, climb)
 
     def set_wind(self, *args: Any, **kwargs: Any) -> None:
         raise ValueError("weather is not available through an autopilot yet")

@@ -56,6 +56,7 @@ class OffboardVectorEnv(VectorEnv):
         sensor_noise: float = 1.0,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
+        stack: str = "px4",
         **task_options: Any,
     ) -> None:
         if render_mode is not None:
@@ -69,7 +70,7 @@ class OffboardVectorEnv(VectorEnv):
         self.num_envs, self.render_mode = int(num_envs), render_mode
         self.offboard = Offboard.build(
             task, self.num_envs, action_level, autopilot, first_instance, airframe,
-            control_rate, task_options, sensor_noise,
+            control_rate, task_options, sensor_noise, stack,
         )  # fmt: skip
         self.engine, self.fleet = self.offboard.engine, self.offboard.fleet
         size = self.engine.obs_size
