@@ -390,6 +390,33 @@ def free_px4_instances(n: int = 1) -> int:
     raise AssertionError(f"no {n} consecutive PX4 instances with free ports")
 
 
+# ArduPilot instances for the flight-stack envs' tests: UDP 9002 + 10 i (JSON) and
+# 5760 + 10 i (its MAVLink) must be free; instances 100 .. 139, ten per worker.
+_FIRST_ARDUPILOT = 100 + 10 * _WORKER
+_next_ardupilot = [0]
+
+
+def free_ardupilot_instances(n: int = 1) -> int:
+    """The first of ``n`` consecutive ArduPilot instances whose ports are all free now."""
+    import socket
+
+    def free(instance: int) -> bool:
+        try:
+            for port in (9002, 5760):
+                with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+                    probe.bind(("127.0.0.1", port + 10 * instance))
+        except OSError:
+            return False
+        return True
+
+    for _ in range(100):
+        first = _FIRST_ARDUPILOT + _next_ardupilot[0] % (_PX4_PER_WORKER - n + 1)
+        _next_ardupilot[0] += n
+        if all(free(first + i) for i in range(n)):
+            return first
+    raise AssertionError(f"no {n} consecutive ArduPilot instances with free ports")
+
+
 @pytest.fixture(scope="module")
 def two_ray_nodes():  # type: ignore[no-untyped-def]
     """A two-node Ray cluster on this machine, joined: a head that takes no work, and a

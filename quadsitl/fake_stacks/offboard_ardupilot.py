@@ -12,7 +12,7 @@ What it does as ArduCopter does (``ArduCopter/mode_guided.cpp``, ``GCS_Common.cp
   1: HEARTBEAT once a simulated second (MAV_AUTOPILOT_ARDUPILOTMEGA, ArduCopter's mode
   number as custom_mode), COMMAND_ACK for each command, and only the streams asked for by
   MAV_CMD_SET_MESSAGE_INTERVAL (LOCAL_POSITION_NED, ATTITUDE_QUATERNION), once its
-  "EKF" has an origin (EKF_READY_S after start; no local position before).
+  "EKF" has an origin (EKF_ORIGIN_S after start; no local position before).
 * Commands: MAV_CMD_DO_SET_MODE (custom: STABILIZE 0, GUIDED 4, LOITER 5; others
   denied), arming (refused, with ArduCopter's "PreArm: Need Position Estimate", until
   the EKF is ready), MAV_CMD_NAV_TAKEOFF (GUIDED, armed, on the ground: it climbs to
@@ -49,7 +49,8 @@ from quadsitl.wire.udp_messages import pending_messages
 FRAME_RATE = 800  # Hz, SIM_RATE_HZ of quadsitl's offboard.parm
 LINK_PORT = 5760  # UDP port its SERIAL0 sends to, instance i: + 10 i
 HEARTBEAT_S = 1.0
-EKF_READY_S = 3.0  # simulated s before it has a position estimate (ArduCopter: ~45 s)
+EKF_ORIGIN_S = 1.0  # simulated s before its local position (ArduCopter: ~20 s) ...
+EKF_READY_S = 3.0  # ... and before it may arm (ArduCopter: once it uses GPS, ~45 s)
 GUID_TIMEOUT_S = 3.0  # GUID_TIMEOUT's default
 STABILIZE, GUIDED, LOITER = 0, 4, 5  # ArduCopter's mode numbers (mode.h)
 WAIT_S = 1.0  # wall s for an answer before the frame is sent again (SIM_JSON.cpp)
@@ -233,7 +234,7 @@ class FakeOffboardArduPilot:
                 mav.MAV_STATE_ACTIVE,
             )  # fmt: skip
             self._send(heartbeat)
-        if now < EKF_READY_S * 1e6:
+        if now < EKF_ORIGIN_S * 1e6:
             return  # no origin yet: no local position
         ms, s, due = now // 1000, self.state, []
         for message, interval in self.streams.items():
