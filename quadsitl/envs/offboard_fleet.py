@@ -39,6 +39,7 @@ TILT_REACHED = 0.03  # rad from the drawn attitude, by the estimate: the start i
 TILT_LIMIT_S = 1.0  # simulated s a reset may tilt before the episode starts anyway
 ARDUCOPTER_GUIDED = 4  # ArduCopter's mode number (ArduCopter/mode.h)
 TAKEOFF_BELOW_M = 0.3  # m above its local origin: an ArduCopter lower is taken off first
+TAKEOFF_NEAR_M = 0.5  # m below the take-off height: GUIDED's setpoints may come from there
 LEVEL = np.zeros(L.STATE_SIZE)
 LEVEL[L.I_QW] = 1.0  # a start state with no attitude drawn: level, facing east
 
@@ -270,15 +271,36 @@ class OffboardFleet:
             rows = [r for r in rows if results[r] != (accepted, accepted)]
 
     def _take_off(self, targets: dict[int, NDArray]) -> None:
-        """ArduCopter flies GUIDED's position setpoints only once airborne: each row on
-        the ground (less than TAKEOFF_BELOW_M above its local origin, by its estimate) is
-        sent MAV_CMD_NAV_TAKEOFF to its target's height above home."""
+        """ArduCopter flies GUIDED's position setpoints only once airborne, and a setpoint
+        sent while it takes off ends the take-off on the ground: each row on the ground
+        (less than TAKEOFF_BELOW_M above its local origin, by its estimate) is sent
+        MAV_CMD_NAV_TAKEOFF to its target's height above home, and flown without
+        setpoints until it is within TAKEOFF_NEAR_M of that height (at most
+        RESET_LIMIT_S)."""
+        climbs: dict[int, float] = {}
         for row, target in targets.items():
             origin = self.autopilots.pilots[row].local_origin
-            height = self.autopilots.estimated_position(row)[2] - origin[2]
-            if height < TAKEOFF_BELOW_M:
-                climb = float(target[2] - origin[2])
-                self.autopilots.command([row], mav.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, climb)
+            if self.autopilots.estimated_position(row)[2] - origin[2] < TAKEOFF_BELOW_M:
+                climbs[row] = float(target[2] - origin[2])
+                self.autopilots.command([row], mav.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, climbs[row])
+        began = {row: self.autopilots.time_us(row) for row in climbs}
+        rising = list(climbs)
+        while rising:
+            failed = self.autopilots.advance(self.control_period, rising)
+            if failed:
+                failures = {row: self.autopilots.pilots[row].failure for row in failed}
+                raise AutopilotError(f"autopilots failed while taking off: {failures}")
+            rising = [
+                row for row in rising
+                if self._height(row) < climbs[row] - TAKEOFF_NEAR_M
+                and (self.autopilots.time_us(row) - began[row]) * 1e-6 < RESET_LIMIT_S
+            ]  # fmt: skip
+
+    def _height(self, row: int) -> float:
+        """Row's height above its local origin, by its autopilot's estimate (m)."""
+        return float(
+            self.autopilots.estimated_position(row)[2] - self.autopilots.pilots[row].local_origin[2]
+        )
 
     def set_wind(self, *args: Any, **kwargs: Any) -> None:
         raise ValueError("weather is not available through an autopilot yet")
