@@ -50,7 +50,7 @@ def _add_train_parser(commands: argparse._SubParsersAction) -> None:
         "--vehicles-per-sim",
         type=_count(1),
         help="with --backend mavlink: vehicles (envs) in each simulator process; with "
-        "--backend px4 --ray: envs (autopilots) in each Ray actor (default: 64, at most "
+        "--backend px4|ardupilot --ray: envs (autopilots) in each Ray actor (default: 64, at most "
         "--num-envs)",
     )
     train.add_argument(
@@ -60,14 +60,14 @@ def _add_train_parser(commands: argparse._SubParsersAction) -> None:
         metavar="ADDR",
         help="with --backend mavlink: start the simulators as Ray actors spread over a Ray "
         "cluster (ADDR, e.g. 10.0.0.1:6379; without it: RAY_ADDRESS's cluster, else a "
-        "private local Ray), see docs/distributed.md; with --backend px4: the envs and "
+        "private local Ray), see docs/distributed.md; with --backend px4|ardupilot: the envs and "
         "their autopilots, see docs/autopilots.md",
     )
-    px4 = train.add_argument_group("with --backend px4")
+    px4 = train.add_argument_group("with --backend px4 or ardupilot")
     px4.add_argument(
         "--action-level",
         choices=("velocity", "attitude", "rates"),
-        help="the setpoints the policy sends PX4 (default: velocity)",
+        help="the setpoints the policy sends the autopilot (default: velocity)",
     )
     px4.add_argument(
         "--px4-build",
@@ -76,14 +76,21 @@ def _add_train_parser(commands: argparse._SubParsersAction) -> None:
         "fake PX4",
     )
     px4.add_argument(
+        "--ardupilot-build",
+        metavar="PATH",
+        help="ArduCopter's SITL build (build/sitl, or its bin/arducopter); default: the "
+        "in-repository fake ArduCopter",
+    )
+    px4.add_argument(
         "--first-instance",
         type=_count(0),
-        help="the envs fly PX4 instances I .. I + num-envs - 1 (default: 0)",
+        help="the envs fly autopilot instances I .. I + num-envs - 1 (default: 0)",
     )
     px4.add_argument(
         "--sensor-noise",
         type=float,
-        help="scale of the sensor noise PX4's estimator sees, 0 .. 100 (default: 1)",
+        help="scale of the sensor noise PX4's estimator sees, 0 .. 100 (default: 1; "
+        "ArduPilot models its own sensors: 1 only)",
     )
     train.add_argument(
         "--steps",
@@ -173,9 +180,10 @@ def _add_backend_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--backend",
         default="inprocess",
-        choices=("inprocess", "mavlink", "px4"),
+        choices=("inprocess", "mavlink", "px4", "ardupilot"),
         help="physics in-process, in quadsitl sim processes over MAVLink, or flown through "
-        "PX4 by its setpoints (docs/autopilots.md, 'Training through the flight stack')",
+        "PX4 (OFFBOARD) or ArduCopter (GUIDED) by their setpoints (docs/autopilots.md, "
+        "'Training through the flight stack')",
     )
 
 

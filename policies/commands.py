@@ -11,7 +11,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from policies.config import TASK_NAMES, TrainConfig
+from policies.config import FLIGHT_STACKS, TASK_NAMES, TrainConfig
 from policies.export import cli as export_cli
 from policies.folders import check_writable, os_error_sentence
 from policies.interrupt import second_interrupt_stops
@@ -124,6 +124,7 @@ def _train(args: argparse.Namespace) -> int:
         ray=args.ray,
         action_level=args.action_level,
         px4_build=args.px4_build,
+        ardupilot_build=args.ardupilot_build,
         first_instance=args.first_instance,
         sensor_noise=args.sensor_noise,
         total_steps=args.steps,
@@ -183,7 +184,7 @@ def _next_steps(config: TrainConfig, run_dir: Path, best_success: float) -> list
         ]
         chosen = best
     if config.task in TASK_NAMES and chosen.is_file():
-        backend = " --backend px4" if config.backend == "px4" else ""
+        backend = f" --backend {config.backend}" if config.backend in FLIGHT_STACKS else ""
         lines.append(f"next: quadsitl eval {shlex.quote(str(chosen))}{backend}")
     return lines
 

@@ -23,7 +23,8 @@ from quadsitl.envs.setpoints import check_level
 from quadsitl.perturbations.randomization import DEFAULT_AIRFRAME_SPREAD
 from quadsitl.tasks import TASKS
 
-BACKENDS = ("inprocess", "mavlink", "px4")
+BACKENDS = ("inprocess", "mavlink", "px4", "ardupilot")
+FLIGHT_STACKS = ("px4", "ardupilot")  # the backends whose policy flies an autopilot
 TASK_NAMES = tuple(TASKS)  # the tasks' registry, in its order
 # The largest step budget of a run: 10 billion steps, about 10 days at the fast preset's
 # 10,000-20,000 steps/s on two cores (the longest preset budget is 12 million). Beyond
@@ -43,10 +44,12 @@ class TrainConfig:
     backend: str = "inprocess"  # or "mavlink": the vehicles fly in simulator processes
     vehicles_per_sim: int = 64  # with backend "mavlink": vehicles in each simulator process
     ray: str = ""  # with backend "mavlink": simulators as Ray actors ("local" or an address)
-    # With backend "px4" (the policy flies PX4 by its setpoints, docs/autopilots.md):
+    # With backend "px4" or "ardupilot" (the policy flies the autopilot by its setpoints,
+    # docs/autopilots.md):
     action_level: str = "velocity"  # "velocity", "attitude" or "rates"
     px4_build: str = ""  # a PX4 SITL build folder ("": the in-repository fake PX4)
-    first_instance: int = 0  # PX4 instances first_instance .. + num_envs - 1
+    ardupilot_build: str = ""  # an ArduCopter SITL build ("": the in-repository fake)
+    first_instance: int = 0  # autopilot instances first_instance .. + num_envs - 1
     sensor_noise: float = 1.0  # scale of the sensor models' noise PX4's estimator sees
     num_envs: int = 1  # parallel envs collecting each batch
     steps_per_env: int = 256  # rollout length; batch = num_envs * steps_per_env
@@ -113,11 +116,14 @@ class TrainConfig:
 
 
 def flight_stack_options(config: TrainConfig) -> dict[str, Any]:
-    """The env options of a run's backend "px4" (its autopilots and setpoints; with
-    ``ray``, the Ray actors that own them, ``flight_stack_envs_per_actor`` envs each)."""
+    """The env options of a run's backend "px4" or "ardupilot" (its autopilots and
+    setpoints; with ``ray``, the Ray actors that own them,
+    ``flight_stack_envs_per_actor`` envs each)."""
+    build = config.px4_build if config.backend == "px4" else config.ardupilot_build
     options: dict[str, Any] = {
+        "stack": config.backend,
         "action_level": config.action_level,
-        "autopilot": config.px4_build or None,
+        "autopilot": build or None,
         "first_instance": config.first_instance,
         "sensor_noise": config.sensor_noise,
     }
@@ -128,7 +134,7 @@ def flight_stack_options(config: TrainConfig) -> dict[str, Any]:
 
 
 def flight_stack_envs_per_actor(config: TrainConfig) -> int:
-    """With backend "px4" on Ray: the envs (autopilot instances) of each actor."""
+    """With a flight-stack backend on Ray: the envs (autopilot instances) of each actor."""
     return min(config.vehicles_per_sim, config.num_envs)
 
 
@@ -177,7 +183,7 @@ def _check(config: TrainConfig) -> None:
     """A clear ValueError for any value a run cannot use (types included: a checkpoint's
     config comes from a file)."""
     for name in ("task", "algo", "preset", "backend", "ray", "init_from", "action_level",
-                 "px4_build"):  # fmt: skip
+                 "px4_build", "ardupilot_build"):  # fmt: skip
         if not isinstance(getattr(config, name), str):
             raise ValueError(f"{name} must be a string, got {getattr(config, name)!r}")
     check_task(config.task)
@@ -185,14 +191,18 @@ def _check(config: TrainConfig) -> None:
         raise ValueError(f"unknown algorithm {config.algo!r}; choose one of {ALGORITHMS}")
     if config.backend not in BACKENDS:
         raise ValueError(f"unknown backend {config.backend!r}; choose one of {BACKENDS}")
-    if config.ray and config.backend not in ("mavlink", "px4"):
-        raise ValueError("ray places simulators: it needs backend 'mavlink' or 'px4'")
-    if config.backend == "px4":
+    if config.ray and config.backend not in ("mavlink", *FLIGHT_STACKS):
+        raise ValueError("ray places simulators: it needs backend 'mavlink', 'px4' or 'ardupilot'")
+    if config.backend in FLIGHT_STACKS:
         check_level(config.action_level)
         if config.task not in TASK_NAMES:
-            raise ValueError(f"backend 'px4' flies a quadsitl task; {config.task!r} is not one")
-    elif config.px4_build:
+            raise ValueError(
+                f"backend {config.backend!r} flies a quadsitl task; {config.task!r} is not one"
+            )
+    if config.px4_build and config.backend != "px4":
         raise ValueError("px4_build is the autopilot of backend 'px4'")
+    if config.ardupilot_build and config.backend != "ardupilot":
+        raise ValueError("ardupilot_build is the autopilot of backend 'ardupilot'")
     for name in (*_POSITIVE_INTS, *_NON_NEGATIVE_INTS):
         value = getattr(config, name)
         least = 1 if name in _POSITIVE_INTS else 0
@@ -365,7 +375,7 @@ MAX_SIMULATORS = 16  # simulator processes a run through the wire may start
 # Options with a command-line option of their own, not given through ``--set``.
 OWN_OPTIONS = ("task", "algo", "preset", "seed", "backend", "total_steps", "num_envs",
                "init_from", "ray", "vehicles_per_sim", "action_level", "px4_build",
-               "first_instance", "sensor_noise", "task_options")  # fmt: skip
+               "ardupilot_build", "first_instance", "sensor_noise", "task_options")  # fmt: skip
 
 
 def typed_option(key: str, text: str) -> Any:
@@ -470,17 +480,17 @@ def make_config(
                 f"simulator would start {processes} simulator processes; at most "
                 f"{MAX_SIMULATORS} (raise --vehicles-per-sim)"
             )
-    if values.get("backend") == "px4":
+    if values.get("backend") in FLIGHT_STACKS:
         # A periodic evaluation would need autopilots of its own; the success rate of the
         # training episodes is logged instead (quadsitl eval is not yet wired to PX4).
         values["eval_every"] = 0
     config = TrainConfig(**values)
-    if config.backend == "px4" and config.ray:
+    if config.backend in FLIGHT_STACKS and config.ray:
         per = flight_stack_envs_per_actor(config)
         if config.num_envs % per or per > MAX_PX4_INSTANCES:
             raise ValueError(
-                f"backend 'px4' on Ray puts {per} envs (--vehicles-per-sim) in each actor: "
-                f"it must divide --num-envs ({config.num_envs}) and be at most "
+                f"backend {config.backend!r} on Ray puts {per} envs (--vehicles-per-sim) in "
+                f"each actor: it must divide --num-envs ({config.num_envs}) and be at most "
                 f"{MAX_PX4_INSTANCES} (one PX4 instance each)"
             )
     elif config.backend == "px4" and config.num_envs > MAX_PX4_INSTANCES:

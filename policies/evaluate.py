@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from policies import checkpoint
-from policies.config import TrainConfig, flight_stack_options
+from policies.config import FLIGHT_STACKS, TrainConfig, flight_stack_options
 from policies.networks import DeterministicPolicy
 from policies.rollout import SEED_SPACING, make_vector_env
 from quadsitl.physics import layout as L
@@ -108,11 +108,16 @@ def evaluate(
     if task not in TASK_METRICS:
         raise ValueError(f"evaluation needs a quadsitl task ({sorted(TASK_METRICS)}), got {task!r}")
     options = {**config.task_options, **(env_options or {})}
-    if config.backend == "px4" and backend != "px4":
-        raise ValueError("this policy flies PX4 by its setpoints: evaluate it with backend 'px4'")
-    if backend == "px4":  # through the run's own autopilots, as many as it trained with
-        if config.backend != "px4":
-            raise ValueError("backend 'px4' flies a policy trained through PX4's setpoints")
+    if config.backend in FLIGHT_STACKS and backend != config.backend:
+        raise ValueError(
+            f"this policy flies {config.backend} by its setpoints: evaluate it with backend "
+            f"{config.backend!r}"
+        )
+    if backend in FLIGHT_STACKS:  # through the run's own autopilots, as many as it trained with
+        if config.backend != backend:
+            raise ValueError(
+                f"backend {backend!r} flies a policy trained through {backend}'s setpoints"
+            )
         options.update(flight_stack_options(config))
         num_envs = min(num_envs, config.num_envs)
     env = make_vector_env(task, num_envs, backend, **options)

@@ -75,14 +75,15 @@ def make_vector_env(
     SAME_STEP autoreset (an episode that ends is reset in the same step; its last
     observation is ``info["final_obs"]``). ``task``: a quadsitl task name (its native
     vector env: every env in one batched call) or any registered Gymnasium env id with
-    a Box action space (its envs in a SyncVectorEnv). ``backend="px4"``: the task flown
-    through PX4 by its setpoints (:class:`~quadsitl.envs.offboard_vector.OffboardVectorEnv`,
-    whose options ``options`` then include; with ``ray``, its Ray actors':
-    :class:`~quadsitl.envs.ray_offboard.RayOffboardVectorEnv`). Seeding: ``reset(seed=s)`` gives
-    env i the seed ``s + i``."""
-    if backend == "px4":
+    a Box action space (its envs in a SyncVectorEnv). ``backend="px4"`` or
+    ``"ardupilot"``: the task flown through the autopilot by its setpoints
+    (:class:`~quadsitl.envs.offboard_vector.OffboardVectorEnv`, whose options ``options``
+    then include; with ``ray``, its Ray actors':
+    :class:`~quadsitl.envs.ray_offboard.RayOffboardVectorEnv`). Seeding:
+    ``reset(seed=s)`` gives env i the seed ``s + i``."""
+    if backend in ("px4", "ardupilot"):
         if task not in TASKS:
-            raise ValueError(f"backend 'px4' flies a quadsitl task; {task!r} is not one")
+            raise ValueError(f"backend {backend!r} flies a quadsitl task; {task!r} is not one")
         if options.get("ray"):
             from quadsitl.envs.ray_offboard import RayOffboardVectorEnv
 

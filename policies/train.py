@@ -32,7 +32,7 @@ import torch
 
 from policies import checkpoint
 from policies.algos.base import Algorithm, algorithm_class
-from policies.config import TrainConfig, flight_stack_options
+from policies.config import FLIGHT_STACKS, TrainConfig, flight_stack_options
 from policies.evaluate import VALIDATION_SEED, evaluate
 from policies.fine_tune import start_from
 from policies.folders import check_writable
@@ -129,7 +129,7 @@ def train(
     wire: dict[str, Any] = {}
     if config.backend == "mavlink":
         wire = {"vehicles_per_sim": config.vehicles_per_sim, "ray": config.ray or None}
-    if config.backend == "px4":
+    if config.backend in FLIGHT_STACKS:
         wire = flight_stack_options(config)
     env = make_vector_env(
         config.task, config.num_envs, config.backend, **wire, **config.task_options

@@ -32,7 +32,7 @@ import numpy as np
 from policies.autopilot import PolicyAutopilot, trained_range
 from policies.companion import vehicle_state as VS
 from policies.companion.stacks import GUIDED_THRUST_AS_THRUST, Stack, stack_of
-from policies.config import TrainConfig
+from policies.config import FLIGHT_STACKS, TrainConfig
 from policies.export.contract import trained_options
 from quadsitl.envs import setpoints
 from quadsitl.envs.autopilot_link import Estimate
@@ -79,11 +79,11 @@ class Companion:
         self, conn: Any, net: Any, config: TrainConfig, options: CompanionOptions,
         say: Callable[[str], None] = print,
     ) -> None:  # fmt: skip
-        if config.backend != "px4":
+        if config.backend not in FLIGHT_STACKS:
             raise ValueError(
                 "this policy commands rotor speeds (it was trained on quadsitl's own "
                 f"physics, backend {config.backend!r}): fly it with quadsitl sim --autopilot. "
-                "The companion flies setpoint policies (trained with --backend px4)"
+                "The companion flies setpoint policies (trained with --backend px4 or ardupilot)"
             )
         task = TASKS[config.task]
         if task.carrot is None:

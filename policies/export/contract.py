@@ -15,7 +15,7 @@ import importlib
 from pathlib import Path
 from typing import Any
 
-from policies.config import TrainConfig
+from policies.config import FLIGHT_STACKS, TrainConfig
 from quadsitl.frames import __doc__ as FRAMES_DOC
 from quadsitl.physics import Airframe, get_airframe
 from quadsitl.physics import layout as L
@@ -42,12 +42,14 @@ def sha256(path: Path) -> str:
 
 def trained_options(config: TrainConfig) -> TaskOptions:
     """The task options a policy was trained with, less its start noise (init_*); through
-    an autopilot (backend px4), its env step's timing (quadsitl/envs/offboard_env.py)."""
+    an autopilot (backend px4 or ardupilot), its env step's timing
+    (quadsitl/envs/offboard_env.py)."""
     options = {k: v for k, v in config.task_options.items() if not k.startswith("init_")}
-    if config.backend == "px4":
+    if config.backend in FLIGHT_STACKS:
         from quadsitl.envs.offboard_env import AIRFRAME, flight_stack_timing
 
-        options = {"airframe": AIRFRAME, **flight_stack_timing(), **options}
+        timing = flight_stack_timing(stack=config.backend)
+        options = {"airframe": AIRFRAME, **timing, **options}
     return TaskOptions.from_kwargs(**options)
 
 
@@ -91,7 +93,7 @@ def build_contract(config: TrainConfig, checkpoint: Path, act_size: int) -> dict
         "observation": _observation_section(task, config, options, obs_size),
         "action": (
             _setpoint_section(config.action_level, airframe, act_size)
-            if config.backend == "px4"
+            if config.backend in FLIGHT_STACKS
             else _action_section(airframe, options, act_size)
         ),
         "motors": _motors_section(airframe),

@@ -37,7 +37,9 @@ class AutopilotCommand:
     estimate_lag_ms: int = 0
 
 
-def autopilot_command(autopilot: Any, airframe: str = "iris", stack: str = "px4") -> AutopilotCommand:
+def autopilot_command(
+    autopilot: Any, airframe: str = "iris", stack: str = "px4"
+) -> AutopilotCommand:
     """``autopilot`` as a command for ``stack``: None, the in-repository fake; a path, a
     SITL build (PX4's ``build/px4_sitl_default``; ArduPilot's ``build/sitl`` or its
     ``arducopter``); a list, the argv of anything else; or an :class:`AutopilotCommand`

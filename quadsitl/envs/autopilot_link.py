@@ -307,9 +307,9 @@ class Autopilots:
                 waiting.remove(row)  # failed: said in its failure
             for row in waiting:
                 if self.time_us(row) > limit:
-                    self.pilots[row].failure = (
-                        f"the autopilot sent {what} in {ESTIMATE_LIMIT_S:g} simulated s"
-                    )
+                    self.pilots[
+                        row
+                    ].failure = f"the autopilot sent {what} in {ESTIMATE_LIMIT_S:g} simulated s"
             waiting = [
                 r for r in waiting
                 if self.pilots[r].failure is None and not came(self.pilots[r].estimate)

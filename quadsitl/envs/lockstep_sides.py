@@ -137,4 +137,4 @@ class ArduPilotSide:
         self.server.close()
 
 
-SIDES = {"px4": Px4Side, "ardupilot": ArduPilotSide}
+SIDES: dict[str, type[Px4Side] | type[ArduPilotSide]] = {"px4": Px4Side, "ardupilot": ArduPilotSide}
