@@ -48,7 +48,7 @@ bench: venv
 	$(BIN)/python benchmarks/ardupilot.py
 	$(BIN)/python benchmarks/px4.py
 	$(BIN)/python benchmarks/flight_stack_env.py
-	$(BIN)/python benchmarks/flight_stack_px4.py
+	$(BIN)/python benchmarks/flight_stack_real.py
 	$(BIN)/python benchmarks/mavlink_env.py
 	$(BIN)/python benchmarks/mavlink_training.py
 	$(BIN)/python benchmarks/sb3_vs_ppo.py

@@ -1,7 +1,9 @@
 """Training through a flight stack: :class:`~quadsitl.envs.offboard_env.OffboardEnv`
 and :class:`~quadsitl.envs.offboard_vector.OffboardVectorEnv` flying the in-repository
 fake PX4 (:mod:`quadsitl.fake_stacks.offboard_px4`, a process per instance speaking
-PX4's 250 Hz simulator_mavlink and its onboard MAVLink link) in lockstep.
+PX4's 250 Hz simulator_mavlink and its onboard MAVLink link) in lockstep, then the fake
+ArduCopter (:mod:`quadsitl.fake_stacks.offboard_ardupilot`: ArduPilot's JSON interface
+at 800 Hz, its MAVLink as a UDP client), the same figures named ``flight_stack_ardupilot_...``.
 
 Reports
 
@@ -39,8 +41,14 @@ VECTOR = 8  # instances 20..27 behind one vector env
 
 
 def main() -> None:
+    for stack in ("px4", "ardupilot"):
+        figures(stack)
+
+
+def figures(stack: str) -> None:
+    prefix = "flight_stack" if stack == "px4" else "flight_stack_ardupilot"
     env = OffboardEnv("hover", "velocity", instance=INSTANCE, init_position_noise=0.3,
-                      episode_seconds=3600.0)  # fmt: skip
+                      episode_seconds=3600.0, stack=stack)  # fmt: skip
     try:
         env.reset(seed=0)
         action = np.zeros(4, np.float32)
@@ -51,23 +59,23 @@ def main() -> None:
             return STEPS
 
         rate = best_rate(run, repeats=3)
-        report("flight_stack_env_steps_per_s", rate, 1_000, "env steps/s (1 instance, 50 Hz)")
-        figure("flight_stack_env_realtime_factor", rate * 0.02, "x real time", "1 instance")
+        report(f"{prefix}_env_steps_per_s", rate, 1_000, "env steps/s (1 instance, 50 Hz)")
+        figure(f"{prefix}_env_realtime_factor", rate * 0.02, "x real time", "1 instance")
         walls, simulated = [], []
         for _ in range(10):
             _, info = env.reset()
             walls.append(info["reset"]["wall_s"])
             simulated.append(info["reset"]["simulated_s"])
         wall = statistics.median(walls)
-        print(f"flight_stack_reset_wall_s: {wall:.3f} s (median of 10, target < 0.5)")
-        print(f"flight_stack_reset_simulated_s: {statistics.median(simulated):.2f} s (median)")
+        print(f"{prefix}_reset_wall_s: {wall:.3f} s (median of 10, target < 0.5)")
+        print(f"{prefix}_reset_simulated_s: {statistics.median(simulated):.2f} s (median)")
     finally:
         env.close()
-    vector_figures()
+    vector_figures(stack, prefix)
 
 
-def vector_figures() -> None:
-    env = OffboardVectorEnv(VECTOR, "hover", "velocity", first_instance=20,
+def vector_figures(stack: str, prefix: str) -> None:
+    env = OffboardVectorEnv(VECTOR, "hover", "velocity", first_instance=20, stack=stack,
                             init_position_noise=0.3, episode_seconds=3600.0)  # fmt: skip
     try:
         env.reset(seed=0)
@@ -80,8 +88,8 @@ def vector_figures() -> None:
 
         rate = best_rate(run, repeats=3)
         label = f"env steps/s ({VECTOR} instances, 50 Hz, summed)"
-        report("flight_stack_env8_steps_per_s", rate, 1_000, label)
-        figure("flight_stack_env8_realtime_factor", rate * 0.02, "x real time", "summed")
+        report(f"{prefix}_env8_steps_per_s", rate, 1_000, label)
+        figure(f"{prefix}_env8_realtime_factor", rate * 0.02, "x real time", "summed")
     finally:
         env.close()
 
