@@ -156,3 +156,26 @@ def test_loiter_is_a_mode_the_fake_takes_and_others_are_denied(make_env):
     assert results == {0: mav.MAV_RESULT_ACCEPTED}
     results = env.autopilots.command([0], mav.MAV_CMD_DO_SET_MODE, flag, 99.0)
     assert results == {0: mav.MAV_RESULT_DENIED}
+
+
+def test_a_policy_trains_and_is_evaluated_through_the_fake_arducopter(tmp_path):
+    """``quadsitl train --backend ardupilot``'s path: PPO through two fake ArduCopters,
+    a checkpoint whose config names the backend, evaluated on it and refused elsewhere."""
+    from policies import checkpoint
+    from policies.config import make_config
+    from policies.evaluate import evaluate
+    from policies.train import train
+
+    first = free_ardupilot_instances(2)
+    config = make_config("hover", "ppo", "fast", backend="ardupilot", num_envs=2,
+                         steps_per_env=64, total_steps=256, first_instance=first,
+                         task_options={"episode_seconds": 1.0})  # fmt: skip
+    train(config, tmp_path / "run", progress=False)
+    net, saved, _ = checkpoint.load(tmp_path / "run" / "checkpoints" / "last.pt")
+    assert saved.backend == "ardupilot" and saved.ardupilot_build == ""
+    result = evaluate(net, saved, episodes=2, backend="ardupilot")
+    assert result.episodes == 2
+    with pytest.raises(ValueError, match="evaluate it with backend 'ardupilot'"):
+        evaluate(net, saved, episodes=2, backend="px4")
+    with pytest.raises(ValueError, match="ardupilot_build is the autopilot of backend"):
+        make_config("hover", "ppo", "fast", backend="px4", ardupilot_build="/somewhere")

@@ -11,7 +11,7 @@ import pytest
 from quadsitl.envs.autopilot_link import AutopilotError
 from quadsitl.envs.offboard_vector import OffboardVectorEnv
 from quadsitl.envs.ray_offboard import concat_infos
-from tests.conftest import free_px4_instances
+from tests.conftest import free_ardupilot_instances, free_px4_instances
 
 ray = pytest.importorskip("ray")
 
@@ -63,6 +63,24 @@ def test_flight_stack_envs_on_the_second_node_fly_as_here_and_survive_a_lost_act
         remote.close()
 
 
+def test_arducopter_envs_fly_on_the_second_node(two_ray_nodes):
+    from quadsitl.envs.ray_offboard import RayOffboardVectorEnv
+
+    _, worker = two_ray_nodes
+    remote = RayOffboardVectorEnv(2, "hover", "velocity", stack="ardupilot", nodes=1,
+                                  first_instance=free_ardupilot_instances(2))  # fmt: skip
+    try:
+        assert remote.nodes == [worker.node_id]
+        _, info = remote.reset(seed=3)
+        assert all(r["reached"] for r in info["reset"]), info["reset"]
+        before = [r["simulated_s"] for r in info["reset"]]
+        obs, _, terminated, truncated, _ = remote.step(np.zeros((2, 4), np.float32))
+        assert not (terminated.any() or truncated.any()) and np.all(np.isfinite(obs))
+        assert all(s > 0 for s in before)  # each took off and flew to its start there
+    finally:
+        remote.close()
+
+
 def test_a_training_run_through_the_flight_stack_on_ray_splits_its_envs_over_actors():
     from policies.config import flight_stack_options, make_config
 
@@ -73,5 +91,5 @@ def test_a_training_run_through_the_flight_stack_on_ray_splits_its_envs_over_act
     with pytest.raises(ValueError, match="must divide --num-envs"):
         make_config("hover", "ppo", "fast", backend="px4", ray="local", num_envs=4,
                     vehicles_per_sim=3)  # fmt: skip
-    with pytest.raises(ValueError, match="needs backend 'mavlink' or 'px4'"):
+    with pytest.raises(ValueError, match="needs backend 'mavlink', 'px4' or 'ardupilot'"):
         make_config("hover", "ppo", "fast", ray="local")

@@ -28,7 +28,8 @@ class AutopilotCommand:
     parameters and logs there), where its output goes to ``autopilot.log``;
     ``streams_us``: message id -> interval (µs) asked for on its MAVLink link;
     ``estimate_lag_ms``: how much older than a step's end its estimate may be stamped (a
-    real autopilot stamps its estimator's output)."""
+    real PX4 stamps its estimator's output; ArduPilot's is read once its held frame has
+    come, :meth:`~quadsitl.envs.lockstep_sides.ArduPilotSide.sent_all`)."""
 
     argv: list[str]
     environment: dict[str, str] = field(default_factory=dict)
@@ -64,9 +65,7 @@ def fake_command(airframe: str = "iris", stack: str = "px4") -> AutopilotCommand
     argv = [sys.executable, "-m", module, "-i", "{instance}", "--port", "{port}",
             "--airframe", airframe]  # fmt: skip
     if stack == "ardupilot":
-        # its estimate of a step's end: the last of the stream, at most an interval old
-        lag_ms = max(ARDUPILOT_STREAMS_US.values()) // 1000
-        return AutopilotCommand(argv, streams_us=dict(ARDUPILOT_STREAMS_US), estimate_lag_ms=lag_ms)
+        return AutopilotCommand(argv, streams_us=dict(ARDUPILOT_STREAMS_US))
     return AutopilotCommand(argv)
 
 
@@ -106,8 +105,6 @@ ARDUPILOT_STREAMS_US = {
     mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 5000,
     mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 5000,
 }
-# Measured: ArduCopter stamps its estimate 6-11 ms before the physics time it was sent at
-ARDUPILOT_ESTIMATE_LAG_MS = 12
 ARDUPILOT_SPEEDUP = 1000  # --speedup: no wall-clock pacing (lockstep paces it)
 
 
@@ -130,5 +127,4 @@ def arducopter_command(build: str | os.PathLike[str], airframe: str = "iris") ->
          "--serial0", "udpclient:127.0.0.1:{link}", "--serial1", "none", "--serial2", "none"],
         own_folder=True,
         streams_us=dict(ARDUPILOT_STREAMS_US),
-        estimate_lag_ms=ARDUPILOT_ESTIMATE_LAG_MS,
     )  # fmt: skip

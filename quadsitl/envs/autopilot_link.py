@@ -360,7 +360,7 @@ class Autopilots:
                     self.pilots[row].failure = why
                     flying.discard(row)
                     failed.append(row)
-                elif self.time_us(row) + frame_us // 2 >= target[row]:
+                elif self.side.reached(row, target[row]):
                     flying.discard(row)
                 else:
                     self._heartbeat(row)
@@ -401,7 +401,10 @@ class Autopilots:
             for row in waiting:
                 self.pilots[row].read()
             # (one that has sent none yet is not waited for: its estimator is starting)
-            waiting = [r for r in waiting if 0 <= self.pilots[r].estimate.time_ms < stamp[r]]
+            waiting = [
+                r for r in waiting
+                if not self.side.sent_all(r) and 0 <= self.pilots[r].estimate.time_ms < stamp[r]
+            ]  # fmt: skip
             if not waiting or time.monotonic() > deadline:
                 return
             time.sleep(0.0002)

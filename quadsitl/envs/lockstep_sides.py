@@ -76,6 +76,15 @@ class Px4Side:
         self.server.hold_at_us[row] = until_us
         self.server.release(row)
 
+    def reached(self, row: int, until_us: int) -> bool:
+        """Whether ``row`` has flown to ``until_us`` of its clock and waits there."""
+        return self.time_us(row) + self.frame_us // 2 >= until_us
+
+    def sent_all(self, row: int) -> bool:
+        """Whether everything the autopilot sends before its clock moves on has come
+        (PX4's modules run in threads of their own: never known; its stamps say)."""
+        return False
+
     def connected(self, row: int) -> bool:
         return self.server.connections[row] is not None
 
@@ -126,6 +135,15 @@ class ArduPilotSide:
     def hold(self, row: int, until_us: int) -> None:
         self.server.hold_at_us[row] = until_us
         self.server.release(row)
+
+    def reached(self, row: int, until_us: int) -> bool:
+        # its next frame, held: it has run its loop at the hold's time and waits
+        return self.server.holding(row) and self.time_us(row) + self.frame_us // 2 >= until_us
+
+    def sent_all(self, row: int) -> bool:
+        # ArduPilot's SITL writes its MAVLink in its one main loop, before the servo frame
+        # that ends the loop: once that frame is held, what it sent is in the socket
+        return self.server.holding(row)
 
     def connected(self, row: int) -> bool:
         return True  # UDP: an ArduPilot that is gone is seen by its exit or its stall

@@ -80,6 +80,7 @@ class RayOffboardVectorEnv(VectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         nodes: int = 2,
         ray: str = "local",
+        stack: str = "px4",
         **task_options: Any,
     ) -> None:
         if not isinstance(nodes, (int, np.integer)) or nodes < 1 or num_envs % nodes:
@@ -92,7 +93,7 @@ class RayOffboardVectorEnv(VectorEnv):
         self._kwargs = {
             "task": task, "action_level": action_level, "autopilot": autopilot,
             "airframe": airframe, "control_rate": control_rate, "sensor_noise": sensor_noise,
-            "autoreset_mode": self.autoreset_mode, **task_options,
+            "autoreset_mode": self.autoreset_mode, "stack": stack, **task_options,
         }  # fmt: skip
         self._first = first_instance
         join_ray(ray)
