@@ -89,8 +89,8 @@ def _add_train_parser(commands: argparse._SubParsersAction) -> None:
     px4.add_argument(
         "--sensor-noise",
         type=float,
-        help="scale of the sensor noise PX4's estimator sees, 0 .. 100 (default: 1; "
-        "ArduPilot models its own sensors: 1 only)",
+        help="scale of the sensor noise the autopilot's estimator sees, 0 .. 100 (default: "
+        "1; ArduPilot: its SITL barometers' noise, 0.2 m at 1)",
     )
     train.add_argument(
         "--steps",

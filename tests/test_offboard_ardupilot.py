@@ -179,3 +179,18 @@ def test_a_policy_trains_and_is_evaluated_through_the_fake_arducopter(tmp_path):
         evaluate(net, saved, episodes=2, backend="px4")
     with pytest.raises(ValueError, match="ardupilot_build is the autopilot of backend"):
         make_config("hover", "ppo", "fast", backend="px4", ardupilot_build="/somewhere")
+
+
+def test_a_real_arducopter_is_started_on_the_envs_ports_with_its_noise_scaled(tmp_path):
+    from quadsitl.envs.autopilot_commands import arducopter_command
+
+    (tmp_path / "bin").mkdir()
+    (tmp_path / "bin" / "arducopter").write_text("")
+    command = arducopter_command(tmp_path, "iris", sensor_noise=0.5)
+    argv = " ".join(command.argv)
+    assert "--model JSON" in argv and "-I {instance}" in argv
+    assert "--serial0 udpclient:127.0.0.1:{link}" in argv and "--serial1 none" in argv
+    assert argv.split("--defaults ")[1].split()[0].endswith("offboard.parm,noise.parm")
+    assert command.files["noise.parm"] == "SIM_BARO_RND 0.1\nSIM_BAR2_RND 0.1\n"
+    with pytest.raises(ValueError, match="not an ArduCopter SITL build"):
+        arducopter_command(tmp_path / "nowhere")

@@ -27,6 +27,7 @@ class AutopilotCommand:
     this process's; ``own_folder``: it runs in a new folder of its own (it writes its
     parameters and logs there), where its output goes to ``autopilot.log``;
     ``streams_us``: message id -> interval (µs) asked for on its MAVLink link;
+    ``files``: name -> text, written into its own folder before it starts;
     ``estimate_lag_ms``: how much older than a step's end its estimate may be stamped (a
     real PX4 stamps its estimator's output; ArduPilot's is read once its held frame has
     come, :meth:`~quadsitl.envs.lockstep_sides.ArduPilotSide.sent_all`)."""
@@ -36,15 +37,16 @@ class AutopilotCommand:
     own_folder: bool = False
     streams_us: dict[int, int] = field(default_factory=dict)
     estimate_lag_ms: int = 0
+    files: dict[str, str] = field(default_factory=dict)
 
 
 def autopilot_command(
-    autopilot: Any, airframe: str = "iris", stack: str = "px4"
+    autopilot: Any, airframe: str = "iris", stack: str = "px4", sensor_noise: float = 1.0
 ) -> AutopilotCommand:
     """``autopilot`` as a command for ``stack``: None, the in-repository fake; a path, a
     SITL build (PX4's ``build/px4_sitl_default``; ArduPilot's ``build/sitl`` or its
-    ``arducopter``); a list, the argv of anything else; or an :class:`AutopilotCommand`
-    as it is."""
+    ``arducopter``, its own sensor models' noise scaled by ``sensor_noise``); a list, the
+    argv of anything else; or an :class:`AutopilotCommand` as it is."""
     if stack not in STACKS:
         raise ValueError(f"stack must be one of {', '.join(STACKS)}, got {stack!r}")
     if autopilot is None:
@@ -53,7 +55,7 @@ def autopilot_command(
         return autopilot
     if isinstance(autopilot, (str, os.PathLike)):
         if stack == "ardupilot":
-            return arducopter_command(autopilot, airframe)
+            return arducopter_command(autopilot, airframe, sensor_noise)
         return px4_build_command(autopilot, airframe)
     return AutopilotCommand([str(a) for a in autopilot])
 
@@ -108,12 +110,20 @@ ARDUPILOT_STREAMS_US = {
 ARDUPILOT_SPEEDUP = 1000  # --speedup: no wall-clock pacing (lockstep paces it)
 
 
-def arducopter_command(build: str | os.PathLike[str], airframe: str = "iris") -> AutopilotCommand:
+# ArduPilot's SITL models its own sensors from the JSON state; of their noise parameters
+# only the barometers' default is not 0 (SITL_Baro.cpp: SIM_BARO_RND 0.2 m, as SIM_BAR2_).
+BARO_NOISE_M = 0.2
+
+
+def arducopter_command(
+    build: str | os.PathLike[str], airframe: str = "iris", sensor_noise: float = 1.0
+) -> AutopilotCommand:
     """A real ArduCopter from its SITL build (``build/sitl``, or ``bin/arducopter``
     itself) on the JSON interface, with quadsitl's parameter files for ``airframe`` and
-    for training (OFFBOARD_PARAMETERS), its MAVLink on SERIAL0 as a UDP client of the env
-    (``udpclient``), SERIAL1 and SERIAL2 off (their TCP ports are not needed, and a port
-    taken would stall its start)."""
+    for training (OFFBOARD_PARAMETERS) and one scaling its sensors' noise by
+    ``sensor_noise`` (``noise.parm``: the barometers', BARO_NOISE_M at 1), its MAVLink on
+    SERIAL0 as a UDP client of the env (``udpclient``), SERIAL1 and SERIAL2 off (their
+    TCP ports are not needed, and a port taken would stall its start)."""
     path = Path(build).expanduser().resolve()
     binary = path if path.is_file() else path / "bin" / "arducopter"
     if not binary.is_file():
@@ -121,10 +131,13 @@ def arducopter_command(build: str | os.PathLike[str], airframe: str = "iris") ->
     parameters = parameter_file(airframe)
     if parameters is None:
         raise ValueError(f"no ArduCopter parameter file ships for airframe {airframe!r}")
+    noise = BARO_NOISE_M * sensor_noise
+    defaults = f"{parameters},{OFFBOARD_PARAMETERS},noise.parm"  # (the last in its folder)
     return AutopilotCommand(
-        [str(binary), "--model", "JSON", "--defaults", f"{parameters},{OFFBOARD_PARAMETERS}",
+        [str(binary), "--model", "JSON", "--defaults", defaults,
          "-I", "{instance}", "-w", "--speedup", str(ARDUPILOT_SPEEDUP),
          "--serial0", "udpclient:127.0.0.1:{link}", "--serial1", "none", "--serial2", "none"],
         own_folder=True,
         streams_us=dict(ARDUPILOT_STREAMS_US),
+        files={"noise.parm": f"SIM_BARO_RND {noise:g}\nSIM_BAR2_RND {noise:g}\n"},
     )  # fmt: skip

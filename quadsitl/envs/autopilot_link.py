@@ -163,6 +163,8 @@ class Autopilot:
         folder, output = None, None
         if command.own_folder:
             folder = tempfile.mkdtemp(prefix=f"quadsitl-autopilot{self.instance}-")
+            for name, text in command.files.items():
+                (Path(folder) / name).write_text(text)
             output = open(Path(folder) / "autopilot.log", "wb")  # noqa: SIM115
         try:
             self.process = subprocess.Popen(

@@ -97,8 +97,9 @@ class Px4Side:
 
 class ArduPilotSide:
     """ArduPilot instances ``first_instance`` .. on the JSON interface, flying ``fleet``
-    (``sensor_noise``: ArduPilot models its own sensors from the JSON state, by its SIM_
-    parameters; only 1, their own noise, is accepted)."""
+    (``sensor_noise`` is not used here: ArduPilot models its own sensors from the JSON
+    state, their noise set by its SIM_ parameters: see
+    :func:`~quadsitl.envs.autopilot_commands.arducopter_command`)."""
 
     name = "ardupilot"
     frame_us = round(1e6 / FRAME_RATE)
@@ -106,11 +107,6 @@ class ArduPilotSide:
     def __init__(
         self, fleet: Fleet, first_instance: int, sensor_noise: float, notice: Callable[[str], None]
     ) -> None:
-        if sensor_noise != 1.0:
-            raise ValueError(
-                "sensor_noise scales quadsitl's sensor models, which PX4 is sent; ArduPilot "
-                "models its own sensors from the physics' state (its SIM_ parameters)"
-            )
         fleet.dt = 1.0 / FRAME_RATE
         self.physics = JsonPhysics(fleet, notice=notice)
         self.fleet = self.physics.fleet

@@ -96,7 +96,7 @@ class Offboard:
             airframe=airframe, **flight_stack_timing(control_rate, stack), **task_options
         )
         hover = get_airframe(airframe).hover_thrust_fraction
-        command = autopilot_command(autopilot, airframe, stack)
+        command = autopilot_command(autopilot, airframe, stack, sensor_noise)
         if not (math.isfinite(sensor_noise) and sensor_noise >= 0):
             raise ValueError(f"sensor_noise must be a number ≥ 0, got {sensor_noise!r}")
         autopilots = Autopilots(command, n, first_instance, airframe, sensor_noise, stack)
