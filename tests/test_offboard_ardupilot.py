@@ -13,7 +13,7 @@ from quadsitl.envs.offboard_vector import OffboardVectorEnv
 from quadsitl.fake_stacks.offboard_ardupilot import EKF_READY_S, GUIDED, LOITER
 from quadsitl.physics import layout as L
 from quadsitl.wire.dialect import mavlink as mav
-from tests.conftest import free_ardupilot_instances
+from tests.conftest import free_ardupilot_instances, run_cli
 
 pytestmark = pytest.mark.xdist_group("offboard")
 
@@ -177,6 +177,10 @@ def test_a_policy_trains_and_is_evaluated_through_the_fake_arducopter(tmp_path):
     assert result.episodes == 2
     with pytest.raises(ValueError, match="evaluate it with backend 'ardupilot'"):
         evaluate(net, saved, episodes=2, backend="px4")
+    exported = run_cli("export", str(tmp_path / "run" / "checkpoints" / "last.pt"),
+                       "--format", "onnx", "-o", str(tmp_path / "hover.onnx"))  # fmt: skip
+    assert exported.returncode == 0, exported.stderr
+    assert exported.stdout.strip().endswith("hover.onnx --backend ardupilot")  # the hint
     with pytest.raises(ValueError, match="ardupilot_build is the autopilot of backend"):
         make_config("hover", "ppo", "fast", backend="px4", ardupilot_build="/somewhere")
 

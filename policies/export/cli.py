@@ -36,10 +36,15 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from policies.checkpoint import load
+    from policies.config import FLIGHT_STACKS
     from policies.export.writer import export
 
     written = export(args.checkpoint, args.format, args.output)
     for path in written:
         print(path)
-    print(f"next: quadsitl eval {shlex.quote(str(written[0]))}")
+    # a setpoint policy is evaluated through the autopilot it was trained through
+    backend = load(args.checkpoint)[1].backend
+    through = f" --backend {backend}" if backend in FLIGHT_STACKS else ""
+    print(f"next: quadsitl eval {shlex.quote(str(written[0]))}{through}")
     return 0
