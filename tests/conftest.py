@@ -372,22 +372,34 @@ def free_px4_instances(n: int = 1) -> int:
     """The first of ``n`` consecutive PX4 instances whose ports are all free now."""
     import socket
 
+    tcp, udp = socket.SOCK_STREAM, socket.SOCK_DGRAM
+    ports = ((tcp, 4560), (udp, 14540), (udp, 14580), (udp, 14030))
+    return _free_instances(n, _FIRST_PX4, _next_px4, ports, 1, "PX4")
+
+
+def _free_instances(
+    n: int, first_of_worker: int, turn: list[int], ports: tuple, stride: int, stack: str
+) -> int:
+    """The first of ``n`` consecutive instances of this worker's ten, taken in turn,
+    whose ``ports`` ((socket kind, port of instance 0); instance i: + stride · i) are
+    all free now."""
+    import socket
+
     def free(instance: int) -> bool:
         try:
-            for kind, port in ((socket.SOCK_STREAM, 4560), (socket.SOCK_DGRAM, 14540),
-                               (socket.SOCK_DGRAM, 14580), (socket.SOCK_DGRAM, 14030)):  # fmt: skip
+            for kind, port in ports:
                 with socket.socket(socket.AF_INET, kind) as probe:
-                    probe.bind(("127.0.0.1", port + instance))
+                    probe.bind(("127.0.0.1", port + stride * instance))
         except OSError:
             return False
         return True
 
     for _ in range(100):
-        first = _FIRST_PX4 + _next_px4[0] % (_PX4_PER_WORKER - n + 1)
-        _next_px4[0] += n
+        first = first_of_worker + turn[0] % (_PX4_PER_WORKER - n + 1)
+        turn[0] += n
         if all(free(first + i) for i in range(n)):
             return first
-    raise AssertionError(f"no {n} consecutive PX4 instances with free ports")
+    raise AssertionError(f"no {n} consecutive {stack} instances with free ports")
 
 
 # ArduPilot instances for the flight-stack envs' tests: UDP 9002 + 10 i (JSON) and
@@ -400,21 +412,8 @@ def free_ardupilot_instances(n: int = 1) -> int:
     """The first of ``n`` consecutive ArduPilot instances whose ports are all free now."""
     import socket
 
-    def free(instance: int) -> bool:
-        try:
-            for port in (9002, 5760):
-                with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-                    probe.bind(("127.0.0.1", port + 10 * instance))
-        except OSError:
-            return False
-        return True
-
-    for _ in range(100):
-        first = _FIRST_ARDUPILOT + _next_ardupilot[0] % (_PX4_PER_WORKER - n + 1)
-        _next_ardupilot[0] += n
-        if all(free(first + i) for i in range(n)):
-            return first
-    raise AssertionError(f"no {n} consecutive ArduPilot instances with free ports")
+    ports = ((socket.SOCK_DGRAM, 9002), (socket.SOCK_DGRAM, 5760))
+    return _free_instances(n, _FIRST_ARDUPILOT, _next_ardupilot, ports, 10, "ArduPilot")
 
 
 @pytest.fixture(scope="module")

@@ -173,10 +173,7 @@ class OffboardFleet:
                 below = targets[row][2] - self.autopilots.estimated_position(row)[2]
                 yaw = heading[row] if below > CLIMB_BEFORE_TURN_M else yaws[row]
                 self._send(row, setpoints.position_message, local, yaw)
-            failed = self.autopilots.advance(self.control_period, flying)
-            if failed:
-                failures = {row: self.autopilots.pilots[row].failure for row in failed}
-                raise AutopilotError(f"autopilots failed while a reset flew them: {failures}")
+            self._fly_period(flying, "while a reset flew them")
             for row in flying:
                 # There by the autopilot's own estimate (all its position control can
                 # reach), and still in truth.
@@ -206,10 +203,7 @@ class OffboardFleet:
                 q = attitudes[row]
                 lift = hover / max(math.cos(_tilt(q)), 0.5)
                 self._send(row, setpoints.attitude_message, q, min(lift, 1.0))
-            failed = self.autopilots.advance(self.control_period, tilting)
-            if failed:
-                failures = {row: self.autopilots.pilots[row].failure for row in failed}
-                raise AutopilotError(f"autopilots failed while a reset tilted them: {failures}")
+            self._fly_period(tilting, "while a reset tilted them")
             for row in tilting:
                 estimate = np.array(self.autopilots.pilots[row].estimate.quaternion)
                 seen = frames.quat_ned_frd_to_enu_flu(estimate)
@@ -286,15 +280,20 @@ class OffboardFleet:
         began = {row: self.autopilots.time_us(row) for row in climbs}
         rising = list(climbs)
         while rising:
-            failed = self.autopilots.advance(self.control_period, rising)
-            if failed:
-                failures = {row: self.autopilots.pilots[row].failure for row in failed}
-                raise AutopilotError(f"autopilots failed while taking off: {failures}")
+            self._fly_period(rising, "while taking off")
             rising = [
                 row for row in rising
                 if self._height(row) < climbs[row] - TAKEOFF_NEAR_M
                 and (self.autopilots.time_us(row) - began[row]) * 1e-6 < RESET_LIMIT_S
             ]  # fmt: skip
+
+    def _fly_period(self, rows: list[int], doing: str) -> None:
+        """Let ``rows`` fly one control period; AutopilotError naming those that failed
+        ``doing`` it (a reset cannot finish without them)."""
+        failed = self.autopilots.advance(self.control_period, rows)
+        if failed:
+            failures = {row: self.autopilots.pilots[row].failure for row in failed}
+            raise AutopilotError(f"autopilots failed {doing}: {failures}")
 
     def _height(self, row: int) -> float:
         """Row's height above its local origin, by its autopilot's estimate (m)."""
