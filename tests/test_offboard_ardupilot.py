@@ -41,6 +41,31 @@ def test_gymnasium_and_stable_baselines_check_the_env(make_env):
     sb3.check_env(env)
 
 
+def test_a_command_lost_on_the_way_is_sent_again_until_answered(make_env, monkeypatch):
+    """MAVLink's command protocol: a command left unanswered is sent again, its
+    confirmation counted up. The first request of each stream is lost here; the env asks
+    again and the autopilot's estimate comes."""
+    from quadsitl.envs.autopilot_link import Autopilot
+
+    lost: list[int] = []
+    send = Autopilot.send
+
+    def lossy(self, msg) -> None:  # type: ignore[no-untyped-def]
+        first = msg.get_type() == "COMMAND_LONG" and msg.confirmation == 0
+        if first and msg.command == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
+            lost.append(int(msg.param1))
+            return
+        send(self, msg)
+
+    monkeypatch.setattr(Autopilot, "send", lossy)
+    env = make_env(task="hover", action_level="velocity")
+    assert sorted(lost) == sorted(
+        [mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION]
+    )
+    _, info = env.reset(seed=2)
+    assert info["reset"]["reached"] and env.pilot.estimate.time_ms >= 0
+
+
 def test_a_reset_arms_in_guided_takes_off_and_flies_to_the_drawn_start(make_env):
     """ArduCopter refuses to arm until its estimator has a position (the fake: after
     EKF_READY_S), and flies GUIDED's setpoints only once airborne: the first reset asks

@@ -50,6 +50,7 @@ ESTIMATE_STEP_S = 0.1  # simulated s between looks for it
 STALL_S = 10.0  # wall s without a round, once in lockstep, before it is called stalled
 ESTIMATE_WAIT_S = 1.0  # wall s to wait for the estimate of a step's end (then the last one)
 HEARTBEAT_S = 1.0  # simulated s between the companion's heartbeats
+COMMAND_SENDS = 3  # sends of a command left unanswered for a simulated second each
 GCS_PORT = 14550  # where every PX4 instance sends its ground-station link
 ARDUPILOT_LINK_PORT = 5760  # UDP port of ArduPilot instance i's SERIAL0: + 10 i (its TCP's)
 COMPANION_SYSTEM, COMPANION_COMPONENT = 255, mav.MAV_COMP_ID_ONBOARD_COMPUTER
@@ -287,10 +288,18 @@ class Autopilots:
         live = [row for row in rows if self.pilots[row].failure is None]
         self._await(live, lambda e: e.autopilot != mav.MAV_AUTOPILOT_INVALID, "no heartbeat")
         live = [row for row in live if self.pilots[row].failure is None]
+        answers: dict[int, list[int]] = {row: [] for row in live}
         for message, interval in self.start_command.streams_us.items():
             # once its MAVLink is up (it sent a heartbeat): each stream at its rate
-            self.command(live, mav.MAV_CMD_SET_MESSAGE_INTERVAL, message, interval)
+            results = self.command(live, mav.MAV_CMD_SET_MESSAGE_INTERVAL, message, interval)
+            for row, result in results.items():
+                answers[row].append(result)
         self._await(live, lambda e: e.time_ms >= 0, "no estimate")
+        for row in live:
+            pilot = self.pilots[row]
+            unanswered = any(result != mav.MAV_RESULT_ACCEPTED for result in answers[row])
+            if pilot.failure is not None and unanswered:
+                pilot.failure += f" (its stream requests were answered {answers[row]}; -1: none)"
         for row in live:
             if self.pilots[row].failure is None:
                 self.measure_origin(row)
@@ -413,19 +422,33 @@ class Autopilots:
 
     # --- commands -----------------------------------------------------------------
     def command(self, rows: Sequence[int], command: int, *params: float) -> dict[int, int]:
-        """COMMAND_LONG to the autopilots of ``rows``, each answered within a simulated
-        second; each one's result (-1: none came)."""
+        """COMMAND_LONG to the autopilots of ``rows``, sent again (its confirmation counted
+        up) to each that has not answered within a simulated second, COMMAND_SENDS times
+        in all, as MAVLink's command protocol has a sender do: a datagram may be lost.
+        Each one's result (-1: none came)."""
         values = [*params, *[0.0] * (7 - len(params))]
         for row in rows:
-            pilot = self.pilots[row]
-            pilot.estimate.acks.pop(command, None)
-            pilot.send(pilot.mav.command_long_encode(pilot.system_id, 1, command, 0, *values))
+            self.pilots[row].estimate.acks.pop(command, None)
         waiting = list(rows)
-        for _ in range(round(1e6 / self.side.frame_us)):
-            waiting = [r for r in waiting if command not in self.pilots[r].estimate.acks]
+        for confirmation in range(COMMAND_SENDS):
+            for row in waiting:
+                pilot = self.pilots[row]
+                pilot.send(
+                    pilot.mav.command_long_encode(
+                        pilot.system_id, 1, command, confirmation, *values
+                    )
+                )
+            for _ in range(round(1e6 / self.side.frame_us)):
+                waiting = [
+                    r for r in waiting
+                    if command not in self.pilots[r].estimate.acks
+                    and self.pilots[r].failure is None
+                ]  # fmt: skip
+                if not waiting:
+                    break
+                self.advance(self.side.frame_us * 1e-6, waiting)  # (which reads the answers)
             if not waiting:
                 break
-            self.advance(self.side.frame_us * 1e-6, waiting)  # (which reads what they sent)
         return {row: self.pilots[row].estimate.acks.get(command, -1) for row in rows}
 
 

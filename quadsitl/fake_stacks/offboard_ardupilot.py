@@ -163,9 +163,8 @@ class FakeOffboardArduPilot:
 
     # --- the MAVLink link -----------------------------------------------------------
     def _read_link(self, now: int) -> None:
-        with contextlib.suppress(ConnectionRefusedError):  # nobody listens yet
-            for msg in pending_messages(self.link, self.mav):
-                self._handle(msg, now)
+        for msg in pending_messages(self.link, self.mav):
+            self._handle(msg, now)
 
     def _handle(self, msg: object, now: int) -> None:
         kind = msg.get_type()  # type: ignore[attr-defined]
