@@ -10,7 +10,8 @@ touchdown; from the still-air landing policy it lands from the first iteration o
 
 What may differ between the two runs: everything but the network's shape and the
 observation's meaning. The task, the algorithm's network (one shared hidden layer, or
-TRPO's two), its width, and whether it normalises observations must be the same. The
+TRPO's two), its width, whether it normalises observations and what its actions command
+(rotor speeds, or an autopilot's setpoints of one level) must be the same. The
 new run may observe more: blocks its task options append after the checkpoint's
 observation (observe_integral), and a fine view of the goal offset (``fine_offset_scale``)
 where the checkpoint had none. Their first-layer weights start at 0, so the network
@@ -26,7 +27,7 @@ from pathlib import Path
 import torch
 
 from policies import checkpoint
-from policies.config import TrainConfig
+from policies.config import FLIGHT_STACKS, TrainConfig
 from policies.export.contract import trained_options
 from policies.networks import ActorCritic
 from quadsitl.tasks import TASKS
@@ -81,6 +82,8 @@ def _mismatch(
         )
     if old.act_size != net.act_size:
         return f"it has {old.act_size} actions, this run {net.act_size}"
+    if _actions(old_config) != _actions(config):
+        return f"its actions are {_actions(old_config)}, this run's {_actions(config)}"
     if config.task not in TASKS:  # another Gymnasium env: its observation as it is
         return "" if old.obs_size == net.obs_size else "its observation has another size"
     old_options, options = trained_options(old_config), trained_options(config)
@@ -93,6 +96,13 @@ def _mismatch(
             "what the observation holds, not only what it appends)"
         )
     return ""
+
+
+def _actions(config: TrainConfig) -> str:
+    """What a run's actions command: rotor speeds, or a flight stack's setpoints."""
+    if config.backend in FLIGHT_STACKS:
+        return f"{config.action_level} setpoints to an autopilot"
+    return "rotor commands"
 
 
 def _blocks(task: str, options: TaskOptions) -> list[tuple[int, int, str]]:

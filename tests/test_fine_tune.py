@@ -75,6 +75,10 @@ def test_a_run_that_observes_the_integral_starts_computing_what_the_checkpoint_c
         ({"task": "hover"}, "trained for land, this run is hover"),
         ({"normalize_obs": False}, "normalises its observations and the other does not"),
         ({"observe_position": False}, "observes its position and the other does not"),
+        (
+            {"backend": "px4", "action_level": "rates", "num_envs": 4},
+            "its actions are rotor commands, this run's rates setpoints to an autopilot",
+        ),
     ],
 )
 def test_a_checkpoint_that_does_not_fit_is_refused_and_changes_nothing(tmp_path, change, message):
