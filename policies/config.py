@@ -482,7 +482,8 @@ def make_config(
             )
     if values.get("backend") in FLIGHT_STACKS:
         # A periodic evaluation would need autopilots of its own; the success rate of the
-        # training episodes is logged instead (quadsitl eval is not yet wired to PX4).
+        # training episodes is logged instead (quadsitl eval --backend px4|ardupilot flies
+        # a checkpoint afterwards).
         values["eval_every"] = 0
     config = TrainConfig(**values)
     if config.backend in FLIGHT_STACKS and config.ray:
