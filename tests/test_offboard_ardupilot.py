@@ -223,3 +223,17 @@ def test_a_real_arducopter_is_started_on_the_envs_ports_with_its_noise_scaled(tm
     assert command.files["noise.parm"] == "SIM_BARO_RND 0.1\nSIM_BAR2_RND 0.1\n"
     with pytest.raises(ValueError, match="not an ArduCopter SITL build"):
         arducopter_command(tmp_path / "nowhere")
+
+
+def test_an_env_whose_port_is_taken_names_the_arducopter_instance_of_it():
+    """Ports 9002 + 10 i belong to ArduPilot's ``-I i``: the error names i, not the row."""
+    import socket
+
+    first = free_ardupilot_instances(2)
+    taken = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    taken.bind(("127.0.0.1", 9002 + 10 * (first + 1)))
+    try:
+        with pytest.raises(OSError, match=rf"\(ArduPilot instance {first + 1}\) .* in use"):
+            OffboardVectorEnv(2, "hover", "velocity", stack="ardupilot", first_instance=first)
+    finally:
+        taken.close()

@@ -100,11 +100,12 @@ class ArduPilotJsonServer:
         bind: str = "127.0.0.1",
         port: int = PORT,
         silence: float = SILENCE,
+        first_instance: int = 0,
     ) -> None:
         self.physics, self.silence = physics, silence
         self.notices = physics.notices
         self.ports = [port + PORT_STRIDE * i for i in range(physics.fleet.n)]
-        self.sockets = open_ports(self.ports, bind, tcp=False, stack="ArduPilot")
+        self.sockets = open_ports(self.ports, bind, False, "ArduPilot", first_instance)
         self.addresses: list[Any] = [None] * physics.fleet.n  # each one's bound peer
         self.heard = [-math.inf] * physics.fleet.n  # monotonic s of its peer's last frame
         self.refused = [0] * physics.fleet.n  # frames from other senders, refused

@@ -95,14 +95,18 @@ class Connection:
 
 
 class Px4TcpServer:
-    """The ports of N PX4 instances around one :class:`HilPhysics`.
+    """The ports of N PX4 instances (``first_instance`` .., as errors name them) around
+    one :class:`HilPhysics`.
 
     Raises OSError naming the port when a port cannot be opened (in use, say)."""
 
-    def __init__(self, physics: HilPhysics, bind: str = "127.0.0.1", port: int = PORT) -> None:
+    def __init__(
+        self, physics: HilPhysics, bind: str = "127.0.0.1", port: int = PORT,
+        first_instance: int = 0,
+    ) -> None:  # fmt: skip
         self.physics = physics
         self.ports = [port + i for i in range(physics.fleet.n)]
-        self.listeners = open_ports(self.ports, bind, tcp=True, stack="PX4")
+        self.listeners = open_ports(self.ports, bind, True, "PX4", first_instance)
         self.connections: list[Connection | None] = [None] * physics.fleet.n
         self._clock = time.monotonic()  # wall s of the next round on the server's clock
         # Wall s between the server's rounds while no PX4 leads (the first comes at once);

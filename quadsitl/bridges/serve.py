@@ -140,10 +140,13 @@ def bridge_fleet(config: BridgeConfig, dt: float | None = None) -> Fleet:
     return fleet
 
 
-def open_ports(ports: list[int], bind: str, tcp: bool, stack: str) -> list[socket.socket]:
-    """One non-blocking socket per instance, bound to ``bind``:port (TCP: listening for
-    one connection). OSError naming the port when one cannot be opened (in use, say);
-    the ones opened before it are closed."""
+def open_ports(
+    ports: list[int], bind: str, tcp: bool, stack: str, first_instance: int = 0
+) -> list[socket.socket]:
+    """One non-blocking socket per instance (``first_instance`` ..), bound to
+    ``bind``:port (TCP: listening for one connection). OSError naming the port and its
+    instance when one cannot be opened (in use, say); the ones opened before it are
+    closed."""
     sockets: list[socket.socket] = []
     transport = "TCP" if tcp else "UDP"
     try:
@@ -159,7 +162,8 @@ def open_ports(ports: list[int], bind: str, tcp: bool, stack: str) -> list[socke
             except OSError as error:
                 why = "is in use" if error.errno == errno.EADDRINUSE else f"({error})"
                 raise OSError(
-                    f"{transport} port {number} ({stack} instance {index}) on {bind} {why}"
+                    f"{transport} port {number} ({stack} instance {first_instance + index}) "
+                    f"on {bind} {why}"
                 ) from None
             sock.setblocking(False)
     except OSError:

@@ -46,7 +46,7 @@ class Px4Side:
     ) -> None:
         self.physics = HilPhysics(fleet, noise_scale=sensor_noise, notice=notice)
         self.fleet = self.physics.fleet
-        self.server = Px4TcpServer(self.physics, "127.0.0.1", PORT + first_instance)
+        self.server = Px4TcpServer(self.physics, "127.0.0.1", PORT + first_instance, first_instance)
         # One round when an autopilot connects, then only those it answers: the rounds
         # before it leads in lockstep are then the same every time (the fake answers the
         # first; a real PX4 that does not is sent another each second).
@@ -111,7 +111,9 @@ class ArduPilotSide:
         self.physics = JsonPhysics(fleet, notice=notice)
         self.fleet = self.physics.fleet
         port = JSON_PORT + PORT_STRIDE * first_instance
-        self.server = ArduPilotJsonServer(self.physics, "127.0.0.1", port, JSON_SILENCE_S)
+        self.server = ArduPilotJsonServer(
+            self.physics, "127.0.0.1", port, JSON_SILENCE_S, first_instance
+        )
 
     def time_us(self, row: int) -> int:
         return round(self.physics.peers[row].time_s * 1e6)
