@@ -196,3 +196,15 @@ def test_pending_messages_keep_what_came_around_an_icmp_error_of_a_connected_soc
     finally:
         peer.close()
         link.close()
+
+
+def test_messages_packed_together_are_pymavlinks_frames_in_turn_with_the_sequence_wrapping():
+    link = mav.MAVLink(None, srcSystem=7, srcComponent=1)
+    messages = [link.heartbeat_encode(2, 3, 0, k, 4) for k in range(3)]
+    data, seq = FC.pack_messages(messages, 254, 7, 1)
+    assert seq == 1
+    expected = b""
+    for seq, message in zip((254, 255, 0), messages, strict=True):
+        link.seq = seq
+        expected += message.pack(link)
+    assert data == expected

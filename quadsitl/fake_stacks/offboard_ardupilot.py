@@ -254,12 +254,11 @@ class FakeOffboardArduPilot:
 
     def _send(self, *messages: object) -> None:
         """``messages`` in one datagram (the fast codec's framing of pymavlink's bytes)."""
-        data = []
-        for msg in messages:
-            data.append(FC.pack_message(msg, self.seq, self.mav.srcSystem, self.mav.srcComponent))
-            self.seq = (self.seq + 1) & 0xFF
+        data, self.seq = FC.pack_messages(
+            messages, self.seq, self.mav.srcSystem, self.mav.srcComponent
+        )
         with contextlib.suppress(OSError):  # nobody listens yet: ArduPilot sends regardless
-            self.link.send(b"".join(data))
+            self.link.send(data)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -224,12 +224,9 @@ class FakeOffboardPx4:
     def _send(self, *messages: object, payload: bool = False) -> None:
         """``messages`` in one datagram to the onboard link (``payload``: and the payload
         link), framed by the fast codec (pymavlink's bytes, a fraction of its time)."""
-        frames_out = []
-        for msg in messages:
-            frames_out.append(FC.pack_message(msg, self.seq, self.mav.srcSystem,
-                                              self.mav.srcComponent))  # fmt: skip
-            self.seq = (self.seq + 1) & 0xFF
-        data = b"".join(frames_out)
+        data, self.seq = FC.pack_messages(
+            messages, self.seq, self.mav.srcSystem, self.mav.srcComponent
+        )
         for peer in (self.peer, self.payload_peer) if payload else (self.peer,):
             with contextlib.suppress(OSError):  # nobody listens yet: PX4 sends on regardless
                 self.link.sendto(data, peer)

@@ -180,6 +180,16 @@ def pack_message(
     return pack(cls, tuple(values), seq, sysid, compid, signature)
 
 
+def pack_messages(messages: Any, seq: int, sysid: int, compid: int) -> tuple[bytes, int]:
+    """``messages`` framed one after the other from sequence number ``seq`` (one
+    datagram's bytes), and the sequence number after them."""
+    frames = []
+    for message in messages:
+        frames.append(pack_message(message, seq, sysid, compid))
+        seq = (seq + 1) & 0xFF
+    return b"".join(frames), seq
+
+
 _LAYOUTS: dict[type, list[tuple[str, bool]]] = {}  # message class: its fields in wire order
 
 
