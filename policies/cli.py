@@ -87,6 +87,13 @@ def _add_train_parser(commands: argparse._SubParsersAction) -> None:
         help="the envs fly autopilot instances I .. I + num-envs - 1 (default: 0)",
     )
     px4.add_argument(
+        "--control-rate",
+        type=float,
+        metavar="HZ",
+        help="setpoints (env steps) a simulated second, 5 .. 250 for PX4 (its 4 ms rounds), "
+        "5 .. 800 for ArduPilot, a whole number of lockstep frames each (default: 50)",
+    )
+    px4.add_argument(
         "--sensor-noise",
         type=float,
         help="scale of the sensor noise the autopilot's estimator sees, 0 .. 100 (default: "

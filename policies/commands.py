@@ -127,6 +127,7 @@ def _train(args: argparse.Namespace) -> int:
         ardupilot_build=args.ardupilot_build,
         first_instance=args.first_instance,
         sensor_noise=args.sensor_noise,
+        control_rate=args.control_rate,
         total_steps=args.steps,
         num_envs=args.num_envs,
         init_from=args.init,

@@ -51,6 +51,7 @@ class TrainConfig:
     ardupilot_build: str = ""  # an ArduCopter SITL build ("": the in-repository fake)
     first_instance: int = 0  # autopilot instances first_instance .. + num_envs - 1
     sensor_noise: float = 1.0  # scale of the sensor models' noise PX4's estimator sees
+    control_rate: float = 50.0  # setpoints (env steps) a simulated second (offboard_env)
     num_envs: int = 1  # parallel envs collecting each batch
     steps_per_env: int = 256  # rollout length; batch = num_envs * steps_per_env
     total_steps: int = 1_280_000  # environment steps (the paper: 5000 x 256)
@@ -126,6 +127,7 @@ def flight_stack_options(config: TrainConfig) -> dict[str, Any]:
         "autopilot": build or None,
         "first_instance": config.first_instance,
         "sensor_noise": config.sensor_noise,
+        "control_rate": config.control_rate,
     }
     if config.ray:
         options["ray"] = config.ray
@@ -175,6 +177,10 @@ _FLOATS = {  # name: (low, high), inclusive
     "init_log_std": (-20.0, 5.0),
     "fine_offset_scale": (0.0, 100.0),
     "sensor_noise": (0.0, 100.0),
+    # PX4's offboard mode wants setpoints at more than 2 Hz (its docs, "Offboard Mode");
+    # the most is a step per lockstep frame (PX4: 250 Hz, ArduPilot: 800 Hz), checked
+    # with the backend (flight_stack_timing)
+    "control_rate": (5.0, 800.0),
 }
 _BOOLS = ("anneal_lr", "normalize_obs", "normalize_advantages")
 
@@ -221,6 +227,16 @@ def _check(config: TrainConfig) -> None:
     for name in _BOOLS:
         if not isinstance(getattr(config, name), bool):
             raise ValueError(f"{name} must be true or false, got {getattr(config, name)!r}")
+    if config.control_rate != TrainConfig.control_rate:
+        if config.backend not in FLIGHT_STACKS:
+            raise ValueError(
+                "control_rate is the rate of an autopilot's setpoints (backend 'px4' or "
+                "'ardupilot'); a quadsitl task's own control period is its task option "
+                "control_period"
+            )
+        from quadsitl.envs.offboard_env import flight_stack_timing
+
+        flight_stack_timing(config.control_rate, config.backend)  # a whole number of frames
     if config.fine_offset_scale and config.task not in TASK_NAMES:
         raise ValueError(
             f"fine_offset_scale reads a quadsitl task's goal offset; {config.task!r} has none"

@@ -4,6 +4,8 @@ process on real sockets, in lockstep with the env through ArduPilot's JSON inter
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
@@ -194,7 +196,7 @@ def test_a_policy_trains_and_is_evaluated_through_the_fake_arducopter(tmp_path):
     first = free_ardupilot_instances(2)
     config = make_config("hover", "ppo", "fast", backend="ardupilot", num_envs=2,
                          steps_per_env=64, total_steps=256, first_instance=first,
-                         task_options={"episode_seconds": 1.0})  # fmt: skip
+                         control_rate=25.0, task_options={"episode_seconds": 1.0})  # fmt: skip
     train(config, tmp_path / "run", progress=False)
     net, saved, _ = checkpoint.load(tmp_path / "run" / "checkpoints" / "last.pt")
     assert saved.backend == "ardupilot" and saved.ardupilot_build == ""
@@ -206,6 +208,8 @@ def test_a_policy_trains_and_is_evaluated_through_the_fake_arducopter(tmp_path):
                        "--format", "onnx", "-o", str(tmp_path / "hover.onnx"))  # fmt: skip
     assert exported.returncode == 0, exported.stderr
     assert exported.stdout.strip().endswith("hover.onnx --backend ardupilot")  # the hint
+    control = json.loads((tmp_path / "hover.contract.json").read_text())["control"]
+    assert control["rate_hz"] == pytest.approx(25.0) and control["physics_dt_s"] == 0.00125
     with pytest.raises(ValueError, match="ardupilot_build is the autopilot of backend"):
         make_config("hover", "ppo", "fast", backend="px4", ardupilot_build="/somewhere")
 

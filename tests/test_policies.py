@@ -480,6 +480,28 @@ def test_step_budgets_beyond_the_maximum_are_refused(tmp_path, steps, message):
         make_config("hover", "ppo", "fast", total_steps=10**19)
 
 
+def test_control_rate_sets_the_autopilots_setpoint_rate_in_whole_lockstep_frames(tmp_path):
+    from policies.config import TrainConfig, flight_stack_options
+    from policies.export.contract import trained_options
+
+    config = make_config("static_waypoint", "ppo", "fast", backend="px4", num_envs=2,
+                         control_rate=10.0)  # fmt: skip
+    assert trained_options(config).control_period == pytest.approx(0.1)
+    assert flight_stack_options(config)["control_rate"] == 10.0
+    older = config.to_dict()
+    del older["control_rate"]  # a checkpoint saved before the option: PX4's 50 Hz
+    assert TrainConfig.from_dict(older).control_rate == 50.0
+    with pytest.raises(ValueError, match="control_rate is the rate of an autopilot's setpoint"):
+        make_config("hover", "ppo", "fast", control_rate=10.0)  # in process
+    with pytest.raises(ValueError, match=r"control_rate must be a number in \[5, 800\]"):
+        make_config("hover", "ppo", "fast", backend="px4", num_envs=2, control_rate=2.0)
+    train = "train --task hover --algo ppo --preset fast --backend px4 --num-envs 2 --quiet"
+    result = refused_here(*train.split(), "--control-rate", "30", "--runs", str(tmp_path))
+    assert result.returncode == 2, result.stderr
+    assert "not a whole number of PX4's lockstep frames of 4 ms" in result.stderr
+    assert "27.78 and 31.25 Hz" in result.stderr and not any(tmp_path.iterdir())
+
+
 def test_steps_in_scientific_notation_are_whole_numbers_of_steps():
     from policies.cli import _steps
 

@@ -48,7 +48,7 @@ def trained_options(config: TrainConfig) -> TaskOptions:
     if config.backend in FLIGHT_STACKS:
         from quadsitl.envs.offboard_env import AIRFRAME, flight_stack_timing
 
-        timing = flight_stack_timing(stack=config.backend)
+        timing = flight_stack_timing(config.control_rate, config.backend)
         options = {"airframe": AIRFRAME, **timing, **options}
     return TaskOptions.from_kwargs(**options)
 

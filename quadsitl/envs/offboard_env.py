@@ -59,10 +59,18 @@ def flight_stack_timing(control_rate: float = CONTROL_RATE, stack: str = "px4") 
     if stack not in STACKS:
         raise ValueError(f"stack must be one of {', '.join(STACKS)}, got {stack!r}")
     frame = SIDES[stack].frame_us * 1e-6
-    period = round(1.0 / control_rate / frame) * frame
-    if not 0 < period < 1e3:
+    if not (math.isfinite(control_rate) and 1e-3 < control_rate <= 1.0 / frame):
         raise ValueError(f"control_rate {control_rate} is not within (0, {1 / frame:g}] Hz")
-    return {"physics_dt": frame, "control_period": period}
+    frames = 1.0 / control_rate / frame  # lockstep frames a step
+    if abs(frames - round(frames)) > 1e-6 * frames:
+        near = sorted({1.0 / (n * frame) for n in (math.floor(frames), math.ceil(frames))})
+        name = {"px4": "PX4", "ardupilot": "ArduPilot"}[stack]
+        raise ValueError(
+            f"control_rate {control_rate:g} Hz is not a whole number of {name}'s lockstep "
+            f"frames of {frame * 1e3:g} ms ({frames:.2f}); the nearest rates that are: "
+            f"{' and '.join(f'{r:.4g}' for r in near)} Hz"
+        )
+    return {"physics_dt": frame, "control_period": round(frames) * frame}
 
 
 @dataclass
