@@ -168,36 +168,6 @@ def test_a_datagram_scanned_by_compiled_code_gives_the_same_frames() -> None:
     assert found > 300  # (most frames are whole)
 
 
-def test_pending_messages_keep_what_came_around_an_icmp_error_of_a_connected_socket() -> None:
-    """A connected UDP socket (the fakes' links, ArduPilot's udpclient) that sent while
-    its peer was not listening reports "connection refused" on a later read: the messages
-    queued around it are still read, none lost."""
-    import socket
-
-    from quadsitl.wire.udp_messages import pending_messages
-
-    sender = mav.MAVLink(None, srcSystem=1, srcComponent=1)
-    peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    peer.bind(("127.0.0.1", 0))
-    port = peer.getsockname()[1]
-    link = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    link.bind(("127.0.0.1", 0))
-    link.connect(("127.0.0.1", port))
-    link.setblocking(False)
-    try:
-        peer.sendto(sender.heartbeat_encode(2, 3, 0, 1, 4).pack(sender), link.getsockname())
-        peer.close()
-        link.send(b"to nobody")  # answered by ICMP port unreachable
-        peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        peer.bind(("127.0.0.1", port))
-        peer.sendto(sender.heartbeat_encode(2, 3, 0, 2, 4).pack(sender), link.getsockname())
-        got = pending_messages(link, mav.MAVLink(None, srcSystem=2, srcComponent=1))
-        assert [m.custom_mode for m in got] == [1, 2]
-    finally:
-        peer.close()
-        link.close()
-
-
 def test_messages_packed_together_are_pymavlinks_frames_in_turn_with_the_sequence_wrapping():
     link = mav.MAVLink(None, srcSystem=7, srcComponent=1)
     messages = [link.heartbeat_encode(2, 3, 0, k, 4) for k in range(3)]
