@@ -38,7 +38,7 @@ FRAME_RATE = 800  # Hz: the physics frames ArduPilot asks for (SIM_RATE_HZ in of
 class Px4Side:
     """PX4 instances ``first_instance`` .. on simulator_mavlink, flying ``fleet``."""
 
-    name = "px4"
+    name, title = "px4", "PX4"
     frame_us = ROUND_US  # µs: the shortest span an env can hold a vehicle at
 
     def __init__(
@@ -101,7 +101,7 @@ class ArduPilotSide:
     state, their noise set by its SIM_ parameters: see
     :func:`~quadsitl.envs.autopilot_commands.arducopter_command`)."""
 
-    name = "ardupilot"
+    name, title = "ardupilot", "ArduPilot"
     frame_us = round(1e6 / FRAME_RATE)
 
     def __init__(

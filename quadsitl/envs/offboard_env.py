@@ -64,10 +64,9 @@ def flight_stack_timing(control_rate: float = CONTROL_RATE, stack: str = "px4") 
     frames = 1.0 / control_rate / frame  # lockstep frames a step
     if abs(frames - round(frames)) > 1e-6 * frames:
         near = sorted({1.0 / (n * frame) for n in (math.floor(frames), math.ceil(frames))})
-        name = {"px4": "PX4", "ardupilot": "ArduPilot"}[stack]
         raise ValueError(
-            f"control_rate {control_rate:g} Hz is not a whole number of {name}'s lockstep "
-            f"frames of {frame * 1e3:g} ms ({frames:.2f}); the nearest rates that are: "
+            f"control_rate {control_rate:g} Hz is not a whole number of {SIDES[stack].title}'s "
+            f"lockstep frames of {frame * 1e3:g} ms ({frames:.2f}); the nearest rates that are: "
             f"{' and '.join(f'{r:.4g}' for r in near)} Hz"
         )
     return {"physics_dt": frame, "control_period": round(frames) * frame}
